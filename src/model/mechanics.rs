@@ -1,0 +1,281 @@
+//! Motor inertia, transmission (spring bank ∥ Kelvin–Voigt PCL ∥ optional Maxwell branch) and
+//! output link (docs/physics.md §2):
+//!
+//!   J_m θm'' + B_m θm' = τ_motor − τ_t
+//!   J_l θl'' + B_l θl' = τ_t + τ_load + τ_friction + τ_gravity
+//!   τ_t = (K_s r_s² + K'(T)) Δ + C(T) Δ' + K_M (Δ − q),   q' = (Δ − q)/λ,   Δ = θm − θl
+//!
+//! State x = [θm, θm', θl, θl', q]. With every effect linear the system is x' = A x + B u with u
+//! held over a step (FMI co-simulation inputs are), so the step is exact: x⁺ = e^{Ah} x + Γ u, with
+//! both blocks from one matrix exponential cached until a coefficient changes. Friction, backlash
+//! and gravity are nonlinear; then an adaptive Dormand–Prince 5(4) step with error control runs.
+
+use nalgebra::{SMatrix, SVector};
+
+use super::params::{MotorDrive, Params};
+
+pub const N_STATE: usize = 5;
+pub type State = SVector<f64, N_STATE>;
+pub const MOTOR_ANGLE: usize = 0;
+pub const MOTOR_SPEED: usize = 1;
+pub const LINK_ANGLE: usize = 2;
+pub const LINK_SPEED: usize = 3;
+pub const MAXWELL_DEFLECTION: usize = 4;
+
+/// Transmission coefficients at one PCL temperature.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Coefficients {
+    /// E'(T), Pa.
+    pub storage_modulus: f64,
+    /// E''(T), Pa.
+    pub loss_modulus: f64,
+    /// K_s r_s² + K'(T), N·m/rad.
+    pub stiffness: f64,
+    /// C(T) = K''(T)/ω at the excitation frequency, N·m·s/rad.
+    pub damping: f64,
+}
+
+impl Coefficients {
+    pub fn at(p: &Params, pcl_temperature_k: f64) -> Self {
+        let (e1, e2) = p.material_table.moduli_pa(pcl_temperature_k - super::params::ZERO_CELSIUS);
+        let kappa = p.modulus_to_torsion();
+        let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
+        Coefficients {
+            storage_modulus: e1,
+            loss_modulus: e2,
+            stiffness: p.spring_torsional_stiffness() + e1 * kappa,
+            damping: e2 * kappa / omega,
+        }
+    }
+
+    /// Re and Im/ω of the transmission's complex stiffness at the excitation frequency,
+    /// including the Maxwell branch: the K_eff and C_eff the paper estimates.
+    pub fn effective(&self, p: &Params) -> (f64, f64) {
+        let w = 2.0 * std::f64::consts::PI * p.excitation_frequency;
+        let wl = w * p.maxwell_relaxation_time;
+        let d = 1.0 + wl * wl;
+        (
+            self.stiffness + p.maxwell_stiffness * wl * wl / d,
+            self.damping + p.maxwell_stiffness * p.maxwell_relaxation_time / d,
+        )
+    }
+}
+
+/// Inputs held over a step: motor torque and load torque, N·m.
+pub type Drive = SVector<f64, 2>;
+
+const N_AUG: usize = N_STATE + 2;
+
+/// e^{Ah} and Γ = ∫₀ʰ e^{As} ds B for one step length and coefficient set.
+#[derive(Clone, Debug)]
+pub struct Propagator {
+    key: [f64; 10],
+    phi: SMatrix<f64, N_STATE, N_STATE>,
+    gamma: SMatrix<f64, N_STATE, 2>,
+}
+
+fn propagator_key(p: &Params, c: &Coefficients, h: f64) -> [f64; 10] {
+    [
+        h,
+        c.stiffness,
+        c.damping,
+        p.maxwell_stiffness,
+        p.maxwell_relaxation_time,
+        p.motor_inertia,
+        p.motor_damping,
+        p.link_inertia,
+        p.link_damping,
+        p.motor_drive as i32 as f64,
+    ]
+}
+
+/// A and B of the linear system (valid when `Params::mechanics_is_linear`).
+pub fn linear_system(p: &Params, c: &Coefficients) -> (SMatrix<f64, N_STATE, N_STATE>, SMatrix<f64, N_STATE, 2>) {
+    let (k, d, km, lam) = (c.stiffness, c.damping, p.maxwell_stiffness, p.maxwell_relaxation_time);
+    let mut a = SMatrix::<f64, N_STATE, N_STATE>::zeros();
+    let mut b = SMatrix::<f64, N_STATE, 2>::zeros();
+    // τ_t = (k + km) θm + d ωm − (k + km) θl − d ωl − km q
+    let tau_row = [k + km, d, -(k + km), -d, -km];
+    a[(MOTOR_ANGLE, MOTOR_SPEED)] = 1.0;
+    if p.motor_drive == MotorDrive::Torque {
+        for (j, t) in tau_row.iter().enumerate() {
+            a[(MOTOR_SPEED, j)] = -t / p.motor_inertia;
+        }
+        a[(MOTOR_SPEED, MOTOR_SPEED)] -= p.motor_damping / p.motor_inertia;
+        b[(MOTOR_SPEED, 0)] = 1.0 / p.motor_inertia;
+    }
+    a[(LINK_ANGLE, LINK_SPEED)] = 1.0;
+    for (j, t) in tau_row.iter().enumerate() {
+        a[(LINK_SPEED, j)] = t / p.link_inertia;
+    }
+    a[(LINK_SPEED, LINK_SPEED)] -= p.link_damping / p.link_inertia;
+    b[(LINK_SPEED, 1)] = 1.0 / p.link_inertia;
+    a[(MAXWELL_DEFLECTION, MOTOR_ANGLE)] = 1.0 / lam;
+    a[(MAXWELL_DEFLECTION, LINK_ANGLE)] = -1.0 / lam;
+    a[(MAXWELL_DEFLECTION, MAXWELL_DEFLECTION)] = -1.0 / lam;
+    (a, b)
+}
+
+impl Propagator {
+    pub fn new(p: &Params, c: &Coefficients, h: f64) -> Self {
+        let (a, b) = linear_system(p, c);
+        let mut m = SMatrix::<f64, N_AUG, N_AUG>::zeros();
+        m.fixed_view_mut::<N_STATE, N_STATE>(0, 0).copy_from(&(a * h));
+        m.fixed_view_mut::<N_STATE, 2>(0, N_STATE).copy_from(&(b * h));
+        let e = m.exp();
+        Propagator {
+            key: propagator_key(p, c, h),
+            phi: e.fixed_view::<N_STATE, N_STATE>(0, 0).into_owned(),
+            gamma: e.fixed_view::<N_STATE, 2>(0, N_STATE).into_owned(),
+        }
+    }
+
+    pub fn matches(&self, p: &Params, c: &Coefficients, h: f64) -> bool {
+        self.key == propagator_key(p, c, h)
+    }
+
+    pub fn apply(&self, x: &State, u: &Drive) -> State {
+        self.phi * x + self.gamma * u
+    }
+}
+
+/// Transmitted torque τ_t and the Maxwell branch's rate q', with backlash when enabled.
+/// Backlash follows Modelica's ElastoBacklash: no torque inside the play, and the
+/// spring–damper never pulls at its edges.
+pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
+    let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
+    let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
+    let q = x[MAXWELL_DEFLECTION];
+    let lam = p.maxwell_relaxation_time;
+    if p.backlash_width <= 0.0 {
+        let tau = c.stiffness * delta + c.damping * rate + p.maxwell_stiffness * (delta - q);
+        return (tau, (delta - q) / lam);
+    }
+    let half = 0.5 * p.backlash_width;
+    let engaged = if delta > half {
+        delta - half
+    } else if delta < -half {
+        delta + half
+    } else {
+        return (0.0, -q / lam);
+    };
+    let tau = c.stiffness * engaged + c.damping * rate + p.maxwell_stiffness * (engaged - q);
+    let tau = if engaged > 0.0 { tau.max(0.0) } else { tau.min(0.0) };
+    (tau, (engaged - q) / lam)
+}
+
+/// Link friction: Coulomb plus a Stribeck excess that fades above `stribeck_velocity`, with sign
+/// smoothed by tanh over `friction_smoothing_velocity` (keeps the ODE Lipschitz).
+pub fn link_friction(p: &Params, link_speed: f64) -> f64 {
+    if p.coulomb_friction == 0.0 && p.stribeck_friction == 0.0 {
+        return 0.0;
+    }
+    let s = link_speed / p.stribeck_velocity;
+    let level = p.coulomb_friction + p.stribeck_friction * (-s * s).exp();
+    -level * (link_speed / p.friction_smoothing_velocity).tanh()
+}
+
+/// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
+pub fn link_gravity(p: &Params, link_angle: f64) -> f64 {
+    if p.gravity_link_mass == 0.0 {
+        return 0.0;
+    }
+    -p.gravity_torque_amplitude() * (link_angle - p.gravity_offset).sin()
+}
+
+/// Right-hand side of the full (possibly nonlinear) mechanics.
+pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
+    let (tau, q_rate) = transmission(p, c, x);
+    let motor_accel = match p.motor_drive {
+        MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
+        MotorDrive::PrescribedAngle => 0.0,
+    };
+    let link_torque = tau + u[1] - p.link_damping * x[LINK_SPEED]
+        + link_friction(p, x[LINK_SPEED])
+        + link_gravity(p, x[LINK_ANGLE]);
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
+}
+
+/// Adaptive Dormand–Prince 5(4) over `[0, h]`; `step_guess` carries the last accepted step size
+/// from call to call. Returns None when the error control cannot make progress.
+pub fn integrate_adaptive(
+    p: &Params,
+    c: &Coefficients,
+    x: &mut State,
+    u: &Drive,
+    h: f64,
+    step_guess: &mut f64,
+) -> Option<()> {
+    const A: [[f64; 6]; 6] = [
+        [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+        [3.0 / 40.0, 9.0 / 40.0, 0.0, 0.0, 0.0, 0.0],
+        [44.0 / 45.0, -56.0 / 15.0, 32.0 / 9.0, 0.0, 0.0, 0.0],
+        [19372.0 / 6561.0, -25360.0 / 2187.0, 64448.0 / 6561.0, -212.0 / 729.0, 0.0, 0.0],
+        [9017.0 / 3168.0, -355.0 / 33.0, 46732.0 / 5247.0, 49.0 / 176.0, -5103.0 / 18656.0, 0.0],
+        [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
+    ];
+    // 5th-order weights are A[5]; these are 5th minus 4th-order weights.
+    const E: [f64; 7] = [
+        71.0 / 57600.0,
+        0.0,
+        -71.0 / 16695.0,
+        71.0 / 1920.0,
+        -17253.0 / 339200.0,
+        22.0 / 525.0,
+        -1.0 / 40.0,
+    ];
+    let tol = p.solver_tolerance;
+    let mut t = 0.0;
+    let mut dt = if *step_guess > 0.0 { step_guess.min(h) } else { h };
+    let mut k = [State::zeros(); 7];
+    k[0] = derivative(p, c, x, u);
+    let mut rejected_in_a_row = 0;
+    while t < h {
+        let last = t + dt >= h * (1.0 - 1e-12);
+        if last {
+            dt = h - t;
+        }
+        for s in 0..6 {
+            let mut xs = *x;
+            for (j, kj) in k.iter().enumerate().take(s + 1) {
+                if A[s][j] != 0.0 {
+                    xs += kj * (dt * A[s][j]);
+                }
+            }
+            k[s + 1] = derivative(p, c, &xs, u);
+        }
+        let mut x_new = *x;
+        for (j, kj) in k.iter().enumerate().take(6) {
+            x_new += kj * (dt * A[5][j]);
+        }
+        let mut err: f64 = 0.0;
+        for i in 0..N_STATE {
+            let e: f64 = (0..7).map(|j| E[j] * k[j][i]).sum::<f64>() * dt;
+            let scale = tol * (1.0 + x[i].abs().max(x_new[i].abs()));
+            err = err.max((e / scale).abs());
+        }
+        if !err.is_finite() || !x_new.iter().all(|v| v.is_finite()) {
+            err = f64::INFINITY;
+        }
+        if err <= 1.0 {
+            t = if last { h } else { t + dt };
+            *x = x_new;
+            k[0] = k[6]; // first-same-as-last
+            rejected_in_a_row = 0;
+            let grow = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
+            if !last {
+                *step_guess = dt * grow;
+            }
+            dt *= grow;
+        } else {
+            rejected_in_a_row += 1;
+            if rejected_in_a_row > 60 || dt < 1e-14 * h.max(1e-300) {
+                return None;
+            }
+            let shrink = if err.is_finite() { (0.9 * err.powf(-0.2)).clamp(0.1, 0.9) } else { 0.1 };
+            dt *= shrink;
+            *step_guess = dt;
+        }
+    }
+    Some(())
+}

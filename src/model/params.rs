@@ -1,0 +1,146 @@
+//! Model parameters. Defaults, units, ranges and the source of every number live in the one
+//! variable table (`crate::variables`); this struct only holds the values.
+
+use super::material::MaterialTable;
+
+/// How the motor side is driven.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum MotorDrive {
+    /// `motor_torque` drives the motor inertia (the device as built).
+    Torque = 0,
+    /// The motor angle follows `motor_angle_command` with slope `motor_speed_command` over each
+    /// step: measured motor angle as the input to the link, as a calibration needs.
+    PrescribedAngle = 1,
+}
+
+/// How the thermal side is driven.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ThermalDrive {
+    /// `heater_power` drives the two-node heater/housing + PCL network.
+    Heater = 0,
+    /// The housing follows `housing_temperature_command` (a measured thermocouple); the PCL follows
+    /// the housing through `thermal_lag_time_constant` (0: no lag).
+    PrescribedHousing = 1,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct Params {
+    // mechanics
+    pub motor_inertia: f64,
+    pub motor_damping: f64,
+    pub link_inertia: f64,
+    pub link_damping: f64,
+    pub spring_stiffness: f64,
+    pub spring_count: f64,
+    pub spring_radius: f64,
+    pub pcl_radius: f64,
+    pub pcl_shape_factor: f64,
+    pub material_table: MaterialTable,
+    pub excitation_frequency: f64,
+    // effects (all off by default)
+    pub maxwell_stiffness: f64,
+    pub maxwell_relaxation_time: f64,
+    pub coulomb_friction: f64,
+    pub stribeck_friction: f64,
+    pub stribeck_velocity: f64,
+    pub friction_smoothing_velocity: f64,
+    pub backlash_width: f64,
+    pub gravity_link_mass: f64,
+    pub gravity_com_distance: f64,
+    pub gravity_offset: f64,
+    pub thermal_lag_time_constant: f64,
+    // thermal
+    pub pcl_mass: f64,
+    pub pcl_specific_heat_solid: f64,
+    pub pcl_specific_heat_melt: f64,
+    pub pcl_latent_heat: f64,
+    pub pcl_melting_temperature: f64,
+    pub pcl_melting_width: f64,
+    pub housing_heat_capacity: f64,
+    pub heater_pcl_conductance: f64,
+    pub housing_ambient_conductance: f64,
+    // initial state
+    pub initial_motor_angle: f64,
+    pub initial_link_angle: f64,
+    pub initial_housing_temperature: f64,
+    pub initial_pcl_temperature: f64,
+    // modes and numerics
+    pub motor_drive: MotorDrive,
+    pub thermal_drive: ThermalDrive,
+    pub max_internal_step: f64,
+    pub solver_tolerance: f64,
+}
+
+pub const GRAVITY: f64 = 9.80665;
+pub const ZERO_CELSIUS: f64 = 273.15;
+
+impl Default for Params {
+    fn default() -> Self {
+        Params {
+            motor_inertia: 0.005,
+            motor_damping: 0.01,
+            link_inertia: 0.018,
+            link_damping: 0.0,
+            spring_stiffness: 1160.0,
+            spring_count: 12.0,
+            spring_radius: 0.0222,
+            pcl_radius: 0.02075,
+            pcl_shape_factor: 0.064,
+            material_table: MaterialTable::RepairedExperimental,
+            excitation_frequency: 0.5,
+            maxwell_stiffness: 0.0,
+            maxwell_relaxation_time: 0.1,
+            coulomb_friction: 0.0,
+            stribeck_friction: 0.0,
+            stribeck_velocity: 0.05,
+            friction_smoothing_velocity: 1e-3,
+            backlash_width: 0.0,
+            gravity_link_mass: 0.0,
+            gravity_com_distance: 0.14,
+            gravity_offset: 0.0,
+            thermal_lag_time_constant: 0.0,
+            pcl_mass: 3.3e-3,
+            pcl_specific_heat_solid: 1700.0,
+            pcl_specific_heat_melt: 2100.0,
+            pcl_latent_heat: 70e3,
+            pcl_melting_temperature: ZERO_CELSIUS + 58.0,
+            pcl_melting_width: 2.5,
+            housing_heat_capacity: 2.0,
+            heater_pcl_conductance: 0.35,
+            housing_ambient_conductance: 0.02,
+            initial_motor_angle: 0.0,
+            initial_link_angle: 0.0,
+            initial_housing_temperature: ZERO_CELSIUS + 22.0,
+            initial_pcl_temperature: ZERO_CELSIUS + 22.0,
+            motor_drive: MotorDrive::Torque,
+            thermal_drive: ThermalDrive::Heater,
+            max_internal_step: 1e-3,
+            solver_tolerance: 1e-10,
+        }
+    }
+}
+
+impl Params {
+    /// K_s r_s²: torsional stiffness of the spring bank, N·m/rad (Eq. 4).
+    pub fn spring_torsional_stiffness(&self) -> f64 {
+        self.spring_stiffness * self.spring_count * self.spring_radius * self.spring_radius
+    }
+
+    /// κ r_p²: converts a tensile modulus (Pa) into a torsional stiffness (N·m/rad) (Eq. 2, 10, 11).
+    pub fn modulus_to_torsion(&self) -> f64 {
+        self.pcl_shape_factor * self.pcl_radius * self.pcl_radius
+    }
+
+    /// m g d of the gravity effect, N·m.
+    pub fn gravity_torque_amplitude(&self) -> f64 {
+        self.gravity_link_mass * GRAVITY * self.gravity_com_distance
+    }
+
+    /// True when every enabled effect is linear, so the exact exponential step applies.
+    pub fn mechanics_is_linear(&self) -> bool {
+        self.coulomb_friction == 0.0
+            && self.stribeck_friction == 0.0
+            && self.backlash_width == 0.0
+            && self.gravity_link_mass == 0.0
+    }
+}

@@ -1,0 +1,211 @@
+//! Two-node thermal network: heater + housing skin (where the thermocouple sits) and the PCL,
+//! whose state is its enthalpy so that latent heat is conserved exactly (docs/physics.md §5):
+//!
+//!   C_h T_h' = P − G_hp (T_h − T_p) − G_ha (T_h − T_amb)
+//!   H_p'     = G_hp (T_h − T_p),           T_p = h⁻¹(H_p)
+//!
+//! h(T) = m [c_s (T − T_r) + (c_l − c_s) ∫χ + L χ(T)], with melt fraction χ a tanh step of
+//! half-width `pcl_melting_width` around `pcl_melting_temperature`. Heater energy and the loss to
+//! ambient are integrated by the same Runge–Kutta step, which preserves the linear invariant
+//! E_in = ΔU_h + ΔH_p + E_loss to rounding.
+
+use super::params::{Params, ThermalDrive, ZERO_CELSIUS};
+
+/// Reference temperature of the enthalpy scale, K (its value cancels in every balance).
+const ENTHALPY_REFERENCE: f64 = ZERO_CELSIUS;
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ThermalState {
+    pub housing_temperature: f64,
+    pub pcl_enthalpy: f64,
+    /// h⁻¹(pcl_enthalpy), kept in step with it.
+    pub pcl_temperature: f64,
+    pub heater_energy: f64,
+    pub heat_lost: f64,
+}
+
+pub struct ThermalInputs {
+    pub heater_power: f64,
+    pub ambient_temperature: f64,
+    pub housing_temperature_command: f64,
+}
+
+fn ln_cosh(x: f64) -> f64 {
+    let a = x.abs();
+    a + (-2.0 * a).exp().ln_1p() - std::f64::consts::LN_2
+}
+
+/// Melt fraction χ(T) in [0, 1].
+pub fn melt_fraction(p: &Params, t: f64) -> f64 {
+    0.5 * (1.0 + ((t - p.pcl_melting_temperature) / p.pcl_melting_width).tanh())
+}
+
+/// PCL enthalpy relative to 0 °C, J.
+pub fn pcl_enthalpy(p: &Params, t: f64) -> f64 {
+    let w = p.pcl_melting_width;
+    let x = (t - p.pcl_melting_temperature) / w;
+    let xr = (ENTHALPY_REFERENCE - p.pcl_melting_temperature) / w;
+    let melt_integral = 0.5 * (t - ENTHALPY_REFERENCE) + 0.5 * w * (ln_cosh(x) - ln_cosh(xr));
+    p.pcl_mass
+        * (p.pcl_specific_heat_solid * (t - ENTHALPY_REFERENCE)
+            + (p.pcl_specific_heat_melt - p.pcl_specific_heat_solid) * melt_integral
+            + p.pcl_latent_heat * melt_fraction(p, t))
+}
+
+/// Apparent heat capacity dh/dT, J/K (sensible + latent).
+pub fn pcl_heat_capacity(p: &Params, t: f64) -> f64 {
+    let w = p.pcl_melting_width;
+    let sech = 1.0 / ((t - p.pcl_melting_temperature) / w).cosh();
+    let chi = melt_fraction(p, t);
+    p.pcl_mass
+        * (p.pcl_specific_heat_solid
+            + (p.pcl_specific_heat_melt - p.pcl_specific_heat_solid) * chi
+            + p.pcl_latent_heat * 0.5 * sech * sech / w)
+}
+
+/// Inverts the enthalpy by Newton's method kept inside a bracket (h is monotone, h' ≥ m·min c).
+pub fn pcl_temperature_from_enthalpy(p: &Params, enthalpy: f64, guess: f64) -> f64 {
+    let c_min = p.pcl_mass * p.pcl_specific_heat_solid.min(p.pcl_specific_heat_melt);
+    let r0 = enthalpy - pcl_enthalpy(p, guess);
+    if r0 == 0.0 {
+        return guess;
+    }
+    let span = r0.abs() / c_min;
+    let (mut lo, mut hi) = if r0 > 0.0 { (guess, guess + span) } else { (guess - span, guess) };
+    let mut t = guess;
+    for _ in 0..100 {
+        let r = enthalpy - pcl_enthalpy(p, t);
+        if r > 0.0 {
+            lo = t
+        } else {
+            hi = t
+        }
+        let mut next = t + r / pcl_heat_capacity(p, t);
+        if !(next > lo && next < hi) {
+            next = 0.5 * (lo + hi);
+        }
+        if (next - t).abs() <= 1e-13 * t.abs() || hi - lo <= 1e-13 * t.abs() {
+            return next;
+        }
+        t = next;
+    }
+    t
+}
+
+impl ThermalState {
+    pub fn initial(p: &Params) -> Self {
+        let t_p = p.initial_pcl_temperature;
+        ThermalState {
+            housing_temperature: p.initial_housing_temperature,
+            pcl_enthalpy: pcl_enthalpy(p, t_p),
+            pcl_temperature: t_p,
+            heater_energy: 0.0,
+            heat_lost: 0.0,
+        }
+    }
+
+    /// Heat stored in both nodes relative to 0 °C, J.
+    pub fn stored_heat(&self, p: &Params) -> f64 {
+        p.housing_heat_capacity * (self.housing_temperature - ENTHALPY_REFERENCE) + self.pcl_enthalpy
+    }
+
+    /// Advances by `h` seconds (one classical Runge–Kutta step: the network's time constants are
+    /// seconds, the internal step milliseconds).
+    pub fn advance(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
+        match p.thermal_drive {
+            ThermalDrive::Heater => self.advance_network(p, u, h),
+            ThermalDrive::PrescribedHousing => self.advance_prescribed(p, u, h),
+        }
+    }
+
+    fn advance_network(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
+        // flux(T_h, H_p) -> (into housing, into PCL, lost), W
+        let mut guess = self.pcl_temperature;
+        let mut flux = |t_h: f64, h_p: f64| {
+            let t_p = if h_p == self.pcl_enthalpy {
+                self.pcl_temperature
+            } else {
+                pcl_temperature_from_enthalpy(p, h_p, guess)
+            };
+            guess = t_p;
+            let to_pcl = p.heater_pcl_conductance * (t_h - t_p);
+            let lost = p.housing_ambient_conductance * (t_h - u.ambient_temperature);
+            (u.heater_power - to_pcl - lost, to_pcl, lost)
+        };
+        let c = p.housing_heat_capacity;
+        let (t0, h0) = (self.housing_temperature, self.pcl_enthalpy);
+        let k1 = flux(t0, h0);
+        let k2 = flux(t0 + 0.5 * h * k1.0 / c, h0 + 0.5 * h * k1.1);
+        let k3 = flux(t0 + 0.5 * h * k2.0 / c, h0 + 0.5 * h * k2.1);
+        let k4 = flux(t0 + h * k3.0 / c, h0 + h * k3.1);
+        let avg = |a: f64, b: f64, c2: f64, d: f64| (a + 2.0 * b + 2.0 * c2 + d) / 6.0;
+        let housing = avg(k1.0, k2.0, k3.0, k4.0);
+        let pcl = avg(k1.1, k2.1, k3.1, k4.1);
+        let lost = avg(k1.2, k2.2, k3.2, k4.2);
+        self.housing_temperature = t0 + h * housing / c;
+        let new_enthalpy = h0 + h * pcl;
+        if new_enthalpy != self.pcl_enthalpy {
+            self.pcl_temperature = pcl_temperature_from_enthalpy(p, new_enthalpy, guess);
+            self.pcl_enthalpy = new_enthalpy;
+        }
+        self.heater_energy += h * u.heater_power;
+        self.heat_lost += h * lost;
+    }
+
+    fn advance_prescribed(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
+        let t_h = u.housing_temperature_command;
+        self.housing_temperature = t_h;
+        let t_p = if p.thermal_lag_time_constant > 0.0 {
+            t_h + (self.pcl_temperature - t_h) * (-h / p.thermal_lag_time_constant).exp()
+        } else {
+            t_h
+        };
+        if t_p != self.pcl_temperature {
+            self.pcl_temperature = t_p;
+            self.pcl_enthalpy = pcl_enthalpy(p, t_p);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn enthalpy_inversion_round_trips_across_the_melt() {
+        let p = Params::default();
+        for k in 0..200 {
+            let t = ZERO_CELSIUS + 10.0 + 0.4 * k as f64;
+            let back = pcl_temperature_from_enthalpy(&p, pcl_enthalpy(&p, t), t - 7.0);
+            assert!((back - t).abs() < 1e-9, "{t} -> {back}");
+        }
+    }
+
+    #[test]
+    fn heat_capacity_is_the_derivative_of_enthalpy() {
+        let p = Params::default();
+        for t in [300.0, 325.0, 331.15, 333.0, 340.0] {
+            let d = 1e-4;
+            let numeric = (pcl_enthalpy(&p, t + d) - pcl_enthalpy(&p, t - d)) / (2.0 * d);
+            assert!((numeric - pcl_heat_capacity(&p, t)).abs() < 1e-5 * numeric, "{t}");
+        }
+    }
+
+    /// Hand calculation: 3.3 g from 22 to 60 °C costs about 250 J sensible [PAPER] plus
+    /// χ(60 °C)·m·L of latent heat.
+    #[test]
+    fn sensible_and_latent_heat_match_hand_calculation() {
+        let p = Params::default();
+        let t0 = ZERO_CELSIUS + 22.0;
+        let t1 = ZERO_CELSIUS + 60.0;
+        let total = pcl_enthalpy(&p, t1) - pcl_enthalpy(&p, t0);
+        let latent = p.pcl_mass * p.pcl_latent_heat * (melt_fraction(&p, t1) - melt_fraction(&p, t0));
+        let sensible = total - latent;
+        // sensible heat lies between the all-solid and all-melt bounds
+        let lo = p.pcl_mass * p.pcl_specific_heat_solid * 38.0;
+        let hi = p.pcl_mass * p.pcl_specific_heat_melt * 38.0;
+        assert!(sensible > lo && sensible < hi, "{sensible} not in [{lo}, {hi}]");
+        assert!((sensible - 250.0).abs() < 40.0, "sensible {sensible} J vs ~250 J in the paper");
+        assert!(total > 400.0 && total < 500.0, "total {total} J vs 480–500 J in the paper");
+    }
+}
