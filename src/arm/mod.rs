@@ -1,0 +1,13 @@
+//! A two-joint planar arm whose joints are ThermoVIA FMU instances (issue 5).
+
+/// `thermovia arm` options.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ArmArgs {
+    /// Folder for the report and plots.
+    #[arg(long, default_value = "out/arm")]
+    pub out: std::path::PathBuf,
+}
+
+pub fn run(_args: &ArmArgs) -> Result<(), Box<dyn std::error::Error>> {
+    Err("not implemented yet".into())
+}
