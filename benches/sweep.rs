@@ -1,0 +1,1 @@
+fn main() { eprintln!("sweep benchmark: not written yet"); }
