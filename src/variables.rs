@@ -78,7 +78,7 @@ pub struct Variable {
     pub access: Access,
 }
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum BaseType {
     Real,
     Integer,
