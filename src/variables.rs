@@ -311,17 +311,23 @@ pub fn by_name(name: &str) -> Option<&'static Variable> {
 /// The row with this value reference and base type.
 pub fn by_reference(ty: BaseType, vr: u32) -> Option<&'static Variable> {
     use std::sync::OnceLock;
-    // Read-only after first use: a lookup table, not mutable state.
-    static INDEX: OnceLock<Vec<(BaseType, u32, usize)>> = OnceLock::new();
+    // Read-only after first use: one dense row-index table per base type (value references are
+    // small), so the C API's hot get/set path costs an array access, not a search.
+    static INDEX: OnceLock<[Vec<Option<u16>>; 2]> = OnceLock::new();
     let index = INDEX.get_or_init(|| {
-        let mut v: Vec<_> = VARIABLES.iter().enumerate().map(|(i, x)| (x.base_type(), x.value_reference, i)).collect();
-        v.sort_by_key(|&(t, r, _)| (t as u8, r));
-        v
+        let mut tables = [Vec::new(), Vec::new()];
+        for (i, v) in VARIABLES.iter().enumerate() {
+            let t = &mut tables[v.base_type() as usize];
+            let r = v.value_reference as usize;
+            if t.len() <= r {
+                t.resize(r + 1, None);
+            }
+            t[r] = Some(i as u16);
+        }
+        tables
     });
-    index
-        .binary_search_by_key(&(ty as u8, vr), |&(t, r, _)| (t as u8, r))
-        .ok()
-        .map(|i| &VARIABLES[index[i].2])
+    let row = (*index[ty as usize].get(vr as usize)?)?;
+    Some(&VARIABLES[row as usize])
 }
 
 /// The README's variable table (Markdown), generated from `VARIABLES`.

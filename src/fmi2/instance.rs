@@ -388,7 +388,6 @@ impl Instance {
         if let Err(s) = self.check(function, allowed::SET) {
             return s;
         }
-        let mut rows = Vec::with_capacity(vrs.len());
         for (vr, x) in vrs.iter().zip(values) {
             let v = match self.lookup(function, ty, *vr) {
                 Ok(v) => v,
@@ -397,13 +396,13 @@ impl Instance {
             if let Err(s) = self.check_write(function, v, *x) {
                 return s;
             }
-            rows.push((v, *x));
         }
         let mut parameter_written = false;
-        for (v, x) in rows {
+        for (vr, x) in vrs.iter().zip(values) {
+            let v = by_reference(ty, *vr).expect("checked in the first pass");
             match v.access {
-                Access::Real { set: Some(set), .. } => set(&mut self.s.model, x),
-                Access::Integer { set: Some(set), .. } => set(&mut self.s.model, x as i32),
+                Access::Real { set: Some(set), .. } => set(&mut self.s.model, *x),
+                Access::Integer { set: Some(set), .. } => set(&mut self.s.model, *x as i32),
                 _ => unreachable!("outputs refused in check_write"),
             }
             parameter_written |= v.causality == Causality::Parameter;

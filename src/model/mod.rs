@@ -138,7 +138,11 @@ impl Model {
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
-        let substeps = (h / self.params.max_internal_step).ceil().max(1.0) as usize;
+        let substeps = if h <= self.params.max_internal_step {
+            1
+        } else {
+            (h / self.params.max_internal_step).ceil() as usize
+        };
         let hs = h / substeps as f64;
         let before = (self.mechanics, self.thermal.clone(), self.adaptive_step);
         if self.params.motor_drive == MotorDrive::PrescribedAngle {

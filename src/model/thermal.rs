@@ -119,6 +119,13 @@ impl ThermalState {
     }
 
     fn advance_network(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
+        if u.heater_power == 0.0
+            && self.housing_temperature == self.pcl_temperature
+            && self.housing_temperature == u.ambient_temperature
+        {
+            // Exact equilibrium: every flux is zero, so the Runge–Kutta step would change nothing.
+            return;
+        }
         // flux(T_h, H_p) -> (into housing, into PCL, lost), W
         let mut guess = self.pcl_temperature;
         let mut flux = |t_h: f64, h_p: f64| {
