@@ -230,7 +230,13 @@ pub fn integrate_adaptive(
     let mut k = [State::zeros(); 7];
     k[0] = derivative(p, c, x, u);
     let mut rejected_in_a_row = 0;
+    // A tolerance below what rounding allows gives endless tiny steps: cap the work per call.
+    let mut attempts = 0;
     while t < h {
+        attempts += 1;
+        if attempts > 200_000 {
+            return None;
+        }
         let last = t + dt >= h * (1.0 - 1e-12);
         if last {
             dt = h - t;

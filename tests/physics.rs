@@ -1,0 +1,257 @@
+//! Physics of the plain-Rust model against hand calculations and an independent reference
+//! integration (no FMI here: the model crate is what the FMU wraps).
+
+use thermovia::model::mechanics::{self, Coefficients, Drive, State};
+use thermovia::model::params::ZERO_CELSIUS;
+use thermovia::model::{Model, MotorDrive, Params};
+
+fn celsius(t: f64) -> f64 {
+    ZERO_CELSIUS + t
+}
+
+/// A model resting at `temp_c` everywhere (housing, PCL, ambient).
+fn at_temperature(mut p: Params, temp_c: f64) -> Model {
+    p.initial_housing_temperature = celsius(temp_c);
+    p.initial_pcl_temperature = celsius(temp_c);
+    let mut m = Model::new(p);
+    m.inputs.ambient_temperature = celsius(temp_c);
+    m
+}
+
+/// K_s r_s² + E'(T) κ r_p² by hand from Table 1 and the repaired Table 2 row.
+fn hand_stiffness(e_storage_kpa: f64) -> f64 {
+    let springs = 1.16e3 * 12.0 * 0.0222_f64.powi(2);
+    let pcl = e_storage_kpa * 1e3 * 0.064 * 0.02075_f64.powi(2);
+    springs + pcl
+}
+
+#[test]
+fn static_deflection_is_load_torque_over_effective_stiffness() {
+    for (temp, e1) in [(22.0, 985.34), (60.0, 180.0)] {
+        let mut p = Params::default();
+        p.motor_drive = MotorDrive::PrescribedAngle;
+        let mut m = at_temperature(p, temp);
+        m.inputs.load_torque = 0.3;
+        for _ in 0..10_000 {
+            m.step(1e-3).unwrap();
+        }
+        let expected = 0.3 / hand_stiffness(e1);
+        let got = m.link_angle();
+        assert!((got - expected).abs() < 1e-9 * expected.abs().max(1e-3), "{temp} °C: {got} vs {expected}");
+        assert!((m.effective_stiffness() - hand_stiffness(e1)).abs() < 1e-9 * hand_stiffness(e1));
+    }
+}
+
+/// Upward zero crossings of a sampled signal, linearly interpolated.
+fn zero_crossings(t: &[f64], y: &[f64]) -> Vec<f64> {
+    (1..y.len())
+        .filter(|&i| y[i - 1] < 0.0 && y[i] >= 0.0)
+        .map(|i| t[i - 1] + (t[i] - t[i - 1]) * (-y[i - 1]) / (y[i] - y[i - 1]))
+        .collect()
+}
+
+fn measured_frequency(m: &mut Model, seconds: f64) -> f64 {
+    let h = 1e-4;
+    let (mut ts, mut ys) = (Vec::new(), Vec::new());
+    for k in 0..(seconds / h) as usize {
+        m.step(h).unwrap();
+        ts.push((k + 1) as f64 * h);
+        ys.push(m.link_angle() - m.motor_angle());
+    }
+    let z = zero_crossings(&ts, &ys);
+    (z.len() - 1) as f64 / (z[z.len() - 1] - z[0])
+}
+
+#[test]
+fn natural_frequencies_match_hand_calculation() {
+    // Tiny damping: C = K''/ω with ω = 2π·1 kHz.
+    let mut p = Params::default();
+    p.excitation_frequency = 1000.0;
+    p.initial_link_angle = 0.01;
+    p.motor_drive = MotorDrive::PrescribedAngle;
+    let k = hand_stiffness(985.34);
+    let c = 834.45e3 * 0.064 * 0.02075_f64.powi(2) / (2.0 * std::f64::consts::PI * 1000.0);
+    // Link against a held motor: ω_d = √(K/J_l) √(1 − ζ²)
+    let (jl, jm) = (p.link_inertia, p.motor_inertia);
+    let zeta = c / (2.0 * (k * jl).sqrt());
+    let expected = (k / jl).sqrt() * (1.0 - zeta * zeta).sqrt() / (2.0 * std::f64::consts::PI);
+    let mut m = at_temperature(p.clone(), 22.0);
+    let f = measured_frequency(&mut m, 3.0);
+    assert!((f - expected).abs() < 1e-4 * expected, "held motor: {f} Hz vs {expected} Hz");
+    assert!((expected - 6.92).abs() < 0.01, "hand value {expected}: docs/physics.md quotes ≈ 7 Hz cold");
+
+    // Free motor: the relative mode of two inertias, √(K (1/J_m + 1/J_l)).
+    p.motor_drive = MotorDrive::Torque;
+    p.motor_damping = 0.0;
+    let j_eff = jm * jl / (jm + jl);
+    let zeta = c / (2.0 * (k * j_eff).sqrt());
+    let expected = (k / j_eff).sqrt() * (1.0 - zeta * zeta).sqrt() / (2.0 * std::f64::consts::PI);
+    let mut m = at_temperature(p, 22.0);
+    let f = measured_frequency(&mut m, 2.0);
+    assert!((f - expected).abs() < 1e-4 * expected, "free motor: {f} Hz vs {expected} Hz");
+}
+
+/// Held over one 1 ms step: motor torque, or (prescribed motor) angle and speed commands.
+#[derive(Clone, Copy)]
+struct StepInput {
+    torque: f64,
+    angle: f64,
+    speed: f64,
+}
+
+/// Classical RK4 with a fine fixed step on the same right-hand side: an integrator independent of
+/// the model's exact exponential and of its adaptive Dormand–Prince.
+fn reference_link_angles(p: &Params, temp_c: f64, input: impl Fn(f64) -> StepInput, seconds: f64) -> Vec<f64> {
+    let c = Coefficients::at(p, celsius(temp_c));
+    let mut x = State::from([p.initial_motor_angle, 0.0, p.initial_link_angle, 0.0, 0.0]);
+    let h = 1e-5;
+    let mut out = Vec::new();
+    for k in 0..(seconds * 1000.0).round() as usize {
+        let i = input(k as f64 * 1e-3);
+        if p.motor_drive == MotorDrive::PrescribedAngle {
+            x[mechanics::MOTOR_ANGLE] = i.angle;
+            x[mechanics::MOTOR_SPEED] = i.speed;
+        }
+        let u = Drive::new(i.torque, 0.0);
+        for _ in 0..100 {
+            let f = |x: &State| mechanics::derivative(p, &c, x, &u);
+            let k1 = f(&x);
+            let k2 = f(&(x + k1 * (h / 2.0)));
+            let k3 = f(&(x + k2 * (h / 2.0)));
+            let k4 = f(&(x + k3 * h));
+            x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (h / 6.0);
+        }
+        out.push(x[mechanics::LINK_ANGLE]);
+    }
+    out
+}
+
+fn model_link_angles(p: &Params, temp_c: f64, input: impl Fn(f64) -> StepInput, seconds: f64) -> Vec<f64> {
+    let mut m = at_temperature(p.clone(), temp_c);
+    (0..(seconds * 1000.0).round() as usize)
+        .map(|k| {
+            let i = input(k as f64 * 1e-3);
+            m.inputs.motor_torque = i.torque;
+            m.inputs.motor_angle_command = i.angle;
+            m.inputs.motor_speed_command = i.speed;
+            m.step(1e-3).unwrap();
+            m.link_angle()
+        })
+        .collect()
+}
+
+fn torque(f: impl Fn(f64) -> f64) -> impl Fn(f64) -> StepInput {
+    move |t| StepInput { torque: f(t), angle: 0.0, speed: 0.0 }
+}
+
+/// The motor follows θ(t) piecewise-linearly between the 1 ms samples.
+fn prescribed(theta: impl Fn(f64) -> f64) -> impl Fn(f64) -> StepInput {
+    move |t| StepInput { torque: 0.0, angle: theta(t), speed: (theta(t + 1e-3) - theta(t)) / 1e-3 }
+}
+
+fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+}
+
+#[test]
+fn exact_step_matches_fine_reference_over_20_s_cold_and_hot() {
+    let w = 2.0 * std::f64::consts::PI * 0.5;
+    for temp in [22.0, 60.0] {
+        let p = Params::default();
+        let reference = reference_link_angles(&p, temp, torque(|t| 2.0 * (w * t).sin()), 20.0);
+        let model = model_link_angles(&p, temp, torque(|t| 2.0 * (w * t).sin()), 20.0);
+        let err = max_abs_diff(&reference, &model);
+        let amplitude = reference.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
+        assert!(amplitude > 0.1, "the run moves: {amplitude} rad");
+        assert!(err < 1e-6, "{temp} °C: max |Δθl| = {err:e} rad");
+    }
+}
+
+#[test]
+fn adaptive_step_matches_fine_reference_with_nonlinear_effects() {
+    let w = 2.0 * std::f64::consts::PI * 1.0;
+    // Prescribed motor (as in calibration): a driven, damped link, not a chaotic free pendulum.
+    let mut p = Params::default();
+    p.motor_drive = MotorDrive::PrescribedAngle;
+    p.coulomb_friction = 0.05;
+    p.gravity_link_mass = 0.3;
+    p.backlash_width = 0.01;
+    for temp in [22.0, 60.0] {
+        let reference = reference_link_angles(&p, temp, prescribed(|t| 0.5 * (w * t).sin()), 20.0);
+        let model = model_link_angles(&p, temp, prescribed(|t| 0.5 * (w * t).sin()), 20.0);
+        let err = max_abs_diff(&reference, &model);
+        assert!(err < 1e-6, "{temp} °C: max |Δθl| = {err:e} rad");
+    }
+    // Torque-driven with link friction: the free motor makes the run drift, yet no chaos.
+    let mut p = Params::default();
+    p.coulomb_friction = 0.05;
+    p.stribeck_friction = 0.02;
+    for temp in [22.0, 60.0] {
+        let reference = reference_link_angles(&p, temp, torque(|t| 1.5 * (w * t).sin()), 20.0);
+        let model = model_link_angles(&p, temp, torque(|t| 1.5 * (w * t).sin()), 20.0);
+        let err = max_abs_diff(&reference, &model);
+        assert!(err < 1e-6, "torque-driven, {temp} °C: max |Δθl| = {err:e} rad");
+    }
+}
+
+#[test]
+fn stiffest_parameters_stay_exact_and_stable() {
+    // Printed Table 2 at its stiffest (cold), a very slow excitation (C = K''/ω ≈ 370 N·m·s/rad)
+    // and a light motor: the fast pole is near −4e5 1/s, 400× beyond explicit RK4's limit at 1 ms.
+    let mut p = Params::default();
+    p.material_table = thermovia::model::material::MaterialTable::PrintedExperimental;
+    p.excitation_frequency = 0.01;
+    p.motor_inertia = 1e-3;
+    let step = || torque(|t| if t < 1.0 { 1.0 } else { -0.5 });
+    let coarse = model_link_angles(&p, 22.0, step(), 5.0);
+    p.max_internal_step = 1e-5;
+    let fine = model_link_angles(&p, 22.0, step(), 5.0);
+    assert!(coarse.iter().all(|x| x.is_finite()));
+    let err = max_abs_diff(&coarse, &fine);
+    assert!(err < 1e-9, "1 ms vs 10 µs sub-steps differ by {err:e} rad");
+}
+
+#[test]
+fn heating_at_10_w_reaches_60_c_in_the_pcl_within_the_papers_30_to_90_s() {
+    let mut m = at_temperature(Params::default(), 22.0);
+    m.inputs.heater_power = 10.0;
+    let mut t = 0.0;
+    while m.thermal.pcl_temperature < celsius(60.0) && t < 600.0 {
+        m.step(0.01).unwrap();
+        t += 0.01;
+    }
+    let energy = m.thermal.heater_energy;
+    assert!((30.0..=90.0).contains(&t), "PCL reached 60 °C after {t:.1} s");
+    // The paper's budget: 250 J sensible, up to ~500 J with latent heat, plus the heater and losses.
+    assert!((400.0..=900.0).contains(&energy), "{energy:.0} J");
+}
+
+#[test]
+fn heater_energy_equals_stored_plus_lost_to_rounding() {
+    let mut m = at_temperature(Params::default(), 22.0);
+    m.inputs.ambient_temperature = celsius(20.0);
+    let stored0 = m.thermal.stored_heat(m.params());
+    let mut peak_pcl: f64 = 0.0;
+    for k in 0..20_000 {
+        m.inputs.heater_power = if k < 8_000 { 12.0 } else { 0.0 };
+        m.step(0.01).unwrap();
+        peak_pcl = peak_pcl.max(m.thermal.pcl_temperature);
+    }
+    assert!(peak_pcl > celsius(65.0), "the run must pass through the melt: peak {peak_pcl} K");
+    let th = &m.thermal;
+    let balance = th.heater_energy - (th.stored_heat(m.params()) - stored0) - th.heat_lost;
+    assert!(th.heater_energy > 900.0 && th.heat_lost > 100.0, "the run must heat and lose heat");
+    assert!(balance.abs() < 1e-10 * th.heater_energy, "imbalance {balance:e} J of {} J", th.heater_energy);
+}
+
+#[test]
+fn a_step_that_fails_leaves_the_model_unchanged() {
+    let mut p = Params::default();
+    p.coulomb_friction = 0.01;
+    p.solver_tolerance = 1e-30; // unreachable: the adaptive solver must give up, not loop
+    let mut m = at_temperature(p, 22.0);
+    m.inputs.motor_torque = 1.0;
+    let before = m.clone();
+    assert!(m.step(1e-3).is_err());
+    assert!(m == before);
+}
