@@ -188,8 +188,10 @@ impl Instance {
         &self.s.model
     }
 
+    /// Debug messages honour loggingOn and the categories; discards, errors and fatals are always
+    /// passed on, since they explain a return status the importer must act on.
     fn emit(&self, status: Status, category: &str, bit: u8, msg: &str) {
-        if self.logging_on && self.categories & bit != 0 {
+        if status as i32 >= Status::Discard as i32 || (self.logging_on && self.categories & bit != 0) {
             (self.log)(status, category, msg);
         }
     }

@@ -1,0 +1,292 @@
+//! FMI 2.0 behaviour of the packaged FMU, exercised through its C API as an importer would
+//! (the archive is unpacked and the binary loaded with libloading by the harness).
+
+use std::ptr;
+
+use thermovia::fmi2::import::RawInstance;
+use thermovia::fmi2::*;
+use thermovia::harness::{Fmu, HarnessError, Instance};
+
+fn fmu() -> Fmu {
+    Fmu::open_default().expect("package the FMU first: cargo run --release -p fmu-build")
+}
+
+fn vr(inst: &Instance, name: &str) -> u32 {
+    inst.handle(name).unwrap().value_reference
+}
+
+fn last_log(raw: &RawInstance) -> String {
+    raw.take_log().into_iter().map(|r| r.message).collect::<Vec<_>>().join(" | ")
+}
+
+fn initialized(fmu: &Fmu) -> Instance {
+    let mut i = fmu.instantiate(None).unwrap();
+    i.initialize(0.0, None, &[]).unwrap();
+    i
+}
+
+#[test]
+fn platform_version_and_all_symbols() {
+    let f = fmu(); // loading resolves all 34 functions or fails naming the missing one
+    assert_eq!(f.library().version(), "2.0");
+    assert_eq!(f.library().types_platform(), "default");
+}
+
+#[test]
+fn wrong_guid_and_bad_arguments_to_instantiate_return_null_with_a_reason() {
+    let f = fmu();
+    let err = RawInstance::instantiate(f.library(), "a", "{00000000-0000-0000-0000-000000000000}", None, false)
+        .err()
+        .unwrap();
+    assert!(err.contains("GUID"), "{err}");
+    let guid = f.description.guid.clone();
+    let err = RawInstance::instantiate(f.library(), "", &guid, None, false).err().unwrap();
+    assert!(err.contains("instanceName"), "{err}");
+    let err = RawInstance::instantiate(f.library(), "a", &guid, Some("http://example/x"), false).err().unwrap();
+    assert!(err.contains("not a file: URI"), "{err}");
+    for uri in ["file:///tmp/x/resources", "file:/tmp/x/resources/", "file:///tmp/a%20b/resources"] {
+        assert!(RawInstance::instantiate(f.library(), "a", &guid, Some(uri), false).is_ok(), "{uri}");
+    }
+    // No callback struct at all: NULL, no crash.
+    let api = f.library().api;
+    let c = unsafe { (api.instantiate)(c"x".as_ptr(), FMI2_CO_SIMULATION, c"g".as_ptr(), ptr::null(), ptr::null(), 0, 0) };
+    assert!(c.is_null());
+}
+
+#[test]
+fn illegal_call_sequences_are_errors_with_a_reason() {
+    let f = fmu();
+    let mut i = f.instantiate(None).unwrap();
+    let link = vr(&i, "link_angle");
+    let raw = i.raw_mut();
+    assert_eq!(raw.do_step(0.0, 1e-3), FMI2_ERROR, "doStep before initialisation");
+    assert!(last_log(raw).contains("fmi2DoStep: not allowed in state Instantiated"));
+    // After an error only Get*, Reset, FreeInstance and SetFMUstate: initialisation is refused.
+    assert_eq!(raw.enter_initialization_mode(), FMI2_ERROR);
+    assert!(last_log(raw).contains("state Error"));
+    assert_eq!(raw.reset(), FMI2_OK);
+    let mut out = [0.0];
+    assert_eq!(raw.get_real(&[link], &mut out), FMI2_ERROR, "GetReal before initialisation mode");
+    raw.take_log();
+    raw.reset();
+    assert_eq!(raw.setup_experiment(None, 0.0, None), FMI2_OK);
+    assert_eq!(raw.enter_initialization_mode(), FMI2_OK);
+    assert_eq!(raw.get_real(&[link], &mut out), FMI2_OK, "GetReal in initialisation mode");
+    assert_eq!(raw.setup_experiment(None, 0.0, None), FMI2_ERROR, "setup after enter");
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    raw.enter_initialization_mode();
+    raw.exit_initialization_mode();
+    assert_eq!(raw.do_step(0.5, 1e-3), FMI2_ERROR, "t does not match the FMU's time");
+    assert!(last_log(raw).contains("does not match"));
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    raw.enter_initialization_mode();
+    raw.exit_initialization_mode();
+    assert_eq!(raw.do_step(0.0, 0.0), FMI2_ERROR, "h = 0");
+    assert!(last_log(raw).contains("communicationStepSize"));
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    raw.enter_initialization_mode();
+    raw.exit_initialization_mode();
+    assert_eq!(raw.terminate(), FMI2_OK);
+    assert_eq!(raw.do_step(0.0, 1e-3), FMI2_ERROR, "doStep after terminate");
+}
+
+#[test]
+fn null_pointers_nan_unknown_references_and_outputs_are_refused() {
+    let f = fmu();
+    let mut i = initialized(&f);
+    let heater = vr(&i, "heater_power");
+    let inertia = vr(&i, "link_inertia");
+    let link = vr(&i, "link_angle");
+    let raw = i.raw_mut();
+    let (c, api) = raw.raw();
+    let api = *api;
+    unsafe {
+        assert_eq!((api.get_real)(c, [link].as_ptr(), 1, ptr::null_mut()), FMI2_ERROR);
+        assert_eq!((api.set_real)(c, ptr::null(), 1, [1.0].as_ptr()), FMI2_ERROR);
+        assert_eq!((api.do_step)(ptr::null_mut(), 0.0, 1e-3, 0), FMI2_ERROR);
+        assert_eq!((api.get_real_status)(c, FMI2_LAST_SUCCESSFUL_TIME, ptr::null_mut()), FMI2_ERROR);
+        (api.free_instance)(ptr::null_mut()); // must not crash
+        // zero-length requests with null arrays are legal
+        assert_eq!((api.get_boolean)(ptr::null_mut(), ptr::null(), 0, ptr::null_mut()), FMI2_ERROR);
+    }
+    assert!(last_log(raw).contains("null pointer"));
+    for (name, vr, value, expect) in [
+        ("heater_power", heater, f64::NAN, "not a finite number"),
+        ("heater_power", heater, -1.0, "below its minimum"),
+        ("link_inertia", inertia, 0.03, "fixed parameter"),
+        ("link_angle", link, 1.0, "is an output"),
+    ] {
+        raw.reset();
+        raw.setup_experiment(None, 0.0, None);
+        raw.enter_initialization_mode();
+        raw.exit_initialization_mode();
+        raw.take_log();
+        assert_eq!(raw.set_real(&[vr], &[value]), FMI2_ERROR, "{name} = {value}");
+        let log = last_log(raw);
+        assert!(log.contains(name) && log.contains(expect), "{log}");
+    }
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    let mut out = [0.0];
+    raw.enter_initialization_mode();
+    assert_eq!(raw.get_real(&[4242], &mut out), FMI2_ERROR);
+    assert!(last_log(raw).contains("unknown value reference 4242"));
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    // A negative inertia is refused before initialisation too, and nothing is half-set.
+    let v0 = {
+        raw.enter_initialization_mode();
+        let mut v = [0.0];
+        raw.get_real(&[inertia], &mut v);
+        v[0]
+    };
+    assert_eq!(raw.set_real(&[heater, inertia], &[2.0, -0.1]), FMI2_ERROR);
+    assert!(last_log(raw).contains("link_inertia"));
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    raw.enter_initialization_mode();
+    let mut v = [0.0, 0.0];
+    raw.get_real(&[heater, inertia], &mut v);
+    assert_eq!(v, [0.0, v0]);
+}
+
+#[test]
+fn a_percent_sign_in_a_message_is_not_a_format() {
+    let f = fmu();
+    let mut i = initialized(&f);
+    let raw = i.raw_mut();
+    assert_eq!(raw.set_debug_logging(true, &["%s%n%d"]), FMI2_ERROR);
+    assert!(last_log(raw).contains("\"%s%n%d\""));
+}
+
+#[test]
+fn stop_time_discards_the_overshooting_step_and_reports_it() {
+    let f = fmu();
+    let mut i = f.instantiate(None).unwrap();
+    i.initialize(0.0, Some(0.0105), &[]).unwrap();
+    for _ in 0..10 {
+        i.step(1e-3).unwrap();
+    }
+    match i.step(1e-3) {
+        Err(HarnessError::Discarded { time, log }) => {
+            assert!((time - 0.0105).abs() < 1e-15, "{time}");
+            assert!(log.join(" ").contains("stopTime"));
+        }
+        other => panic!("expected a discard, got {other:?}"),
+    }
+    let raw = i.raw_mut();
+    assert_eq!(raw.get_boolean_status_terminated(), (FMI2_OK, true));
+    assert_eq!(raw.get_real_status_last_successful_time(), (FMI2_OK, 0.0105));
+    assert_eq!(raw.terminate(), FMI2_OK);
+}
+
+fn run(i: &mut Instance, steps: usize) -> Vec<f64> {
+    let (torque, heater, link, pcl) = (vr(i, "motor_torque"), vr(i, "heater_power"), vr(i, "link_angle"), vr(i, "pcl_temperature"));
+    let mut out = Vec::new();
+    for k in 0..steps {
+        let t = i.time();
+        i.set_reals(&[torque, heater], &[(3.0 * t).sin(), if k % 700 < 350 { 8.0 } else { 0.0 }]).unwrap();
+        i.step(1e-3).unwrap();
+        let mut v = [0.0, 0.0];
+        i.get_reals(&[link, pcl], &mut v).unwrap();
+        out.extend(v);
+    }
+    out
+}
+
+#[test]
+fn reset_returns_to_the_state_after_instantiation() {
+    let f = fmu();
+    let mut fresh = f.instantiate(None).unwrap();
+    fresh.initialize(0.0, None, &[]).unwrap();
+    let expected = run(&mut fresh, 2000);
+    let mut i = f.instantiate(None).unwrap();
+    i.initialize(0.0, Some(5.0), &[("link_inertia", 0.05), ("material_table", 2.0)]).unwrap();
+    run(&mut i, 1500);
+    i.reset().unwrap();
+    i.initialize(0.0, None, &[]).unwrap();
+    assert_eq!(i.get("link_inertia").unwrap(), 0.018);
+    assert_eq!(i.get("material_table").unwrap(), 1.0);
+    assert_eq!(run(&mut i, 2000), expected, "bit-identical after reset");
+}
+
+#[test]
+fn fmu_state_restores_and_serializes_bit_identically() {
+    let f = fmu();
+    let mut a = initialized(&f);
+    run(&mut a, 1000);
+    let saved = a.save_state().unwrap();
+    let continued = run(&mut a, 1500);
+    a.restore_state(&saved).unwrap();
+    assert_eq!(run(&mut a, 1500), continued, "GetFMUstate/SetFMUstate");
+    let bytes = a.serialize_state(&saved).unwrap();
+
+    let mut b = initialized(&f);
+    let restored = b.deserialize_state(&bytes, saved.time).unwrap();
+    b.restore_state(&restored).unwrap();
+    assert_eq!(run(&mut b, 1500), continued, "serialized into a fresh instance");
+
+    // Truncated, altered and foreign bytes are refused with a reason.
+    for (bad, why) in [
+        (bytes[..bytes.len() - 3].to_vec(), "length"),
+        ({ let mut x = bytes.clone(); let n = x.len(); x[n - 20] ^= 1; x }, "checksum"),
+        (b"not a state at all, just bytes".to_vec(), "magic"),
+        ({ let mut x = bytes.clone(); x[20] ^= 0x20; x }, "GUID"),
+    ] {
+        let err = b.deserialize_state(&bad, 0.0).err().expect(why).to_string();
+        assert!(err.contains(why), "{why}: {err}");
+        b.reset().unwrap();
+    }
+}
+
+#[test]
+fn two_instances_with_different_parameters_in_parallel_threads_do_not_interfere() {
+    let f = fmu();
+    let configs: [&[(&str, f64)]; 2] = [&[("link_inertia", 0.018)], &[("link_inertia", 0.04), ("material_table", 3.0)]];
+    let sequential: Vec<Vec<f64>> = configs
+        .iter()
+        .map(|p| {
+            let mut i = f.instantiate(None).unwrap();
+            i.initialize(0.0, None, p).unwrap();
+            run(&mut i, 3000)
+        })
+        .collect();
+    assert_ne!(sequential[0], sequential[1]);
+    let parallel: Vec<Vec<f64>> = std::thread::scope(|s| {
+        let handles: Vec<_> = configs
+            .iter()
+            .map(|p| {
+                let mut i = f.instantiate(None).unwrap();
+                i.initialize(0.0, None, p).unwrap();
+                s.spawn(move || run(&mut i, 3000))
+            })
+            .collect();
+        handles.into_iter().map(|h| h.join().unwrap()).collect()
+    });
+    assert_eq!(parallel, sequential);
+}
+
+#[test]
+fn unsupported_capabilities_exist_and_say_so() {
+    let f = fmu();
+    let mut i = initialized(&f);
+    let raw = i.raw_mut();
+    let (c, api) = raw.raw();
+    let api = *api;
+    let mut x = 0.0;
+    unsafe {
+        assert_eq!((api.get_directional_derivative)(c, ptr::null(), 0, ptr::null(), 0, ptr::null(), &mut x), FMI2_ERROR);
+    }
+    assert!(last_log(raw).contains("providesDirectionalDerivative"));
+    raw.reset();
+    raw.setup_experiment(None, 0.0, None);
+    raw.enter_initialization_mode();
+    raw.exit_initialization_mode();
+    unsafe {
+        assert_eq!((api.cancel_step)(c), FMI2_ERROR);
+    }
+    assert!(last_log(raw).contains("synchronous"));
+}
