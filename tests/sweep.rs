@@ -159,6 +159,17 @@ fn warm_up_keeps_the_mechanics_at_rest_and_holds_the_housing() {
     let reached = w.housing_reached_s.expect("housing reached the target");
     assert!(reached > 0.0 && w.pcl_reached_s.unwrap_or(f64::INFINITY) > reached, "the PCL lags the housing");
     assert!((w.final_housing_c - 50.0).abs() < 0.01, "{}", w.final_housing_c);
+    // heating study: the PCL lags the housing; at constant power the housing overshoots
+    assert_eq!(r.heating.len(), 2 * a.heating_powers.len());
+    for h in &r.heating {
+        let (th, tp) = (h.housing_reached_s.unwrap(), h.pcl_reached_s.unwrap());
+        assert!(tp > th, "{h:?}");
+        if h.mode == "constant power" {
+            assert!(h.peak_housing_c > 52.0, "{h:?}");
+        } else {
+            assert!(h.peak_housing_c < 50.5, "{h:?}");
+        }
+    }
     // energy: at least the PCL's and housing's sensible heat over 28 K
     let p = Params::default();
     assert!(w.energy_j > 28.0 * (p.pcl_mass * p.pcl_specific_heat_solid + p.housing_heat_capacity));
@@ -167,7 +178,8 @@ fn warm_up_keeps_the_mechanics_at_rest_and_holds_the_housing() {
 #[test]
 fn warm_up_step_does_not_change_the_thermal_result() {
     use thermovia::harness::Fmu;
-    // Constant 10 W for 30 s with 50 ms internal steps vs 1 ms: RK4 on time constants ≥ 5 s.
+    // Constant 10 W for 30 s with the default warm-up step (0.1 s) as internal step vs 1 ms: RK4
+    // on time constants ≥ 5 s.
     let fmu = Fmu::open_default().unwrap();
     let run = |h: f64| {
         let mut i = fmu.instantiate(None).unwrap();
@@ -178,7 +190,7 @@ fn warm_up_step_does_not_change_the_thermal_result() {
         }
         (i.get("housing_temperature").unwrap(), i.get("pcl_temperature").unwrap(), i.get("link_angle").unwrap())
     };
-    let (coarse, fine) = (run(0.05), run(1e-3));
+    let (coarse, fine) = (run(SweepArgs::default().warmup_step), run(1e-3));
     assert!((coarse.0 - fine.0).abs() < 1e-4 && (coarse.1 - fine.1).abs() < 1e-4, "{coarse:?} vs {fine:?}");
     assert!(coarse.0 > 330.0, "heated: {coarse:?}");
     assert_eq!(coarse.2, 0.0);

@@ -266,3 +266,62 @@ pub fn harmonic_run(
     }
     Ok(trace)
 }
+
+/// Heating from the current state at up to `power` W, either holding the housing at the target
+/// (`hold`, the sweep's protocol) or at constant power `heater.p_max` (the housing overshoots),
+/// until the PCL reaches the target or `max_s` passes.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct HeatingResult {
+    pub power_w: f64,
+    pub mode: &'static str,
+    pub target_c: f64,
+    pub housing_reached_s: Option<f64>,
+    pub housing_reached_energy_j: Option<f64>,
+    pub pcl_reached_s: Option<f64>,
+    pub pcl_reached_energy_j: Option<f64>,
+    pub peak_housing_c: f64,
+}
+
+#[allow(clippy::too_many_arguments)]
+pub fn heating_study(
+    inst: &mut Instance,
+    vrs: &Vrs,
+    mut heater: HeaterLoop,
+    hold: bool,
+    tolerance_k: f64,
+    h: f64,
+    max_s: f64,
+) -> Result<HeatingResult, HarnessError> {
+    let (power, target_k) = (heater.p_max, heater.target_k);
+    let mut y = [0.0; 11];
+    sample(inst, vrs, &mut y)?;
+    inst.set_reals(&[vrs.motor_torque], &[0.0])?;
+    let mut r = HeatingResult {
+        power_w: power,
+        mode: if hold { "housing held at the target" } else { "constant power" },
+        target_c: target_k - ZERO_CELSIUS,
+        housing_reached_s: None,
+        housing_reached_energy_j: None,
+        pcl_reached_s: None,
+        pcl_reached_energy_j: None,
+        peak_housing_c: y[O_HOUSING] - ZERO_CELSIUS,
+    };
+    let t0 = inst.time();
+    while r.pcl_reached_s.is_none() && inst.time() - t0 < max_s {
+        let p = if hold { heater.power(y[O_HOUSING], h) } else { power };
+        inst.set_reals(&[vrs.heater_power], &[p])?;
+        inst.step(h)?;
+        sample(inst, vrs, &mut y)?;
+        let t = inst.time() - t0;
+        r.peak_housing_c = r.peak_housing_c.max(y[O_HOUSING] - ZERO_CELSIUS);
+        if r.housing_reached_s.is_none() && y[O_HOUSING] >= target_k - tolerance_k {
+            r.housing_reached_s = Some(t);
+            r.housing_reached_energy_j = Some(y[O_ENERGY]);
+        }
+        if y[O_PCL] >= target_k - tolerance_k {
+            r.pcl_reached_s = Some(t);
+            r.pcl_reached_energy_j = Some(y[O_ENERGY]);
+        }
+    }
+    Ok(r)
+}

@@ -74,7 +74,7 @@ pub struct SweepArgs {
     /// Communication step of the warm-up, s. The motor is at rest with zero torque there, so the
     /// (exactly integrated) mechanics stays at rest; the FMU's `max_internal_step` is set to this
     /// value so the thermal Runge–Kutta takes steps of this size (time constants ≥ 5 s).
-    #[arg(long, default_value_t = 0.05)]
+    #[arg(long, default_value_t = 0.1)]
     pub warmup_step: f64,
     /// How long the housing is held at the target before the runs, s (the PCL inside lags; no
     /// sensor there on the device).
@@ -90,6 +90,10 @@ pub struct SweepArgs {
     /// Largest acceptable predicted relative error of E' or E'' before an estimate is flagged.
     #[arg(long, default_value_t = 0.1)]
     pub error_limit: f64,
+    /// Heater powers of the heating study (22 °C → the highest temperature, housing held vs
+    /// constant power), W (comma-separated; empty to skip).
+    #[arg(long, value_delimiter = ',', default_value = "5,10,15")]
+    pub heating_powers: Vec<f64>,
     /// No progress bar (also hidden when stderr is not a terminal or CI=true).
     #[arg(long)]
     pub quiet: bool,
@@ -166,10 +170,14 @@ pub struct SweepResult {
     pub args: SweepArgs,
     pub conditions: Vec<Condition>,
     pub warmups: Vec<(WarmupResult, Trace)>,
+    pub heating: Vec<master::HeatingResult>,
     pub known: Known,
     pub link_inertia: f64,
     pub ambient_c: f64,
+    /// Wall time of the sweep proper: opening the FMU, warm-ups, runs, analysis.
     pub simulate_seconds: f64,
+    /// Wall time of the heating study (extra instances heated at several powers).
+    pub heating_seconds: f64,
     pub fmu_path: PathBuf,
 }
 
@@ -199,8 +207,8 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
 pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<SweepResult, Box<dyn std::error::Error>> {
     validate(args)?;
     let fmu_path = args.fmu.clone().unwrap_or_else(crate::harness::default_fmu_path);
-    let fmu = Fmu::open(&fmu_path)?;
     let started = Instant::now();
+    let fmu = Fmu::open(&fmu_path)?;
     let mut conditions = Vec::new();
     let mut warmups = Vec::new();
     let mut known = None;
@@ -264,15 +272,34 @@ pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<Swee
         }
     }
     let simulate_seconds = started.elapsed().as_secs_f64();
+    let started = Instant::now();
+    // Heating study from room temperature to the highest target (cheap: coarse step, motor at rest).
+    let mut heating = Vec::new();
+    let top = args.temperatures.iter().cloned().fold(f64::NEG_INFINITY, f64::max);
+    if top > ambient_c + args.reach_tolerance {
+        for &p in &args.heating_powers {
+            for hold in [true, false] {
+                let mut inst = fmu.instantiate(None)?;
+                inst.initialize(0.0, None, &[("max_internal_step", args.warmup_step)])?;
+                let vrs = Vrs::resolve(&inst)?;
+                let heater = HeaterLoop { target_k: top + ZERO_CELSIUS, kp: args.heater_kp, ki: args.heater_ki, p_max: p, integral: 0.0 };
+                heating.push(master::heating_study(&mut inst, &vrs, heater, hold, args.reach_tolerance, args.warmup_step, 1800.0)?);
+            }
+        }
+        progress("heating study");
+    }
+    let heating_seconds = started.elapsed().as_secs_f64();
     normalize_decay(&mut conditions, args.temperatures[0]);
     Ok(SweepResult {
         args: args.clone(),
         conditions,
         warmups,
+        heating,
         known: known.expect("at least one temperature"),
         link_inertia,
         ambient_c,
         simulate_seconds,
+        heating_seconds,
         fmu_path,
     })
 }
@@ -415,7 +442,7 @@ fn normalize_decay(conditions: &mut [Condition], reference_c: f64) {
 
 /// `thermovia sweep`: simulate, then write the outputs atomically.
 pub fn run(args: &SweepArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let total = args.temperatures.len() * (args.frequencies.len() + 1);
+    let total = args.temperatures.len() * (args.frequencies.len() + 1) + usize::from(!args.heating_powers.is_empty());
     let show = !args.quiet
         && std::env::var("CI").map_or(true, |v| v != "true")
         && std::io::IsTerminal::is_terminal(&std::io::stderr());
@@ -437,9 +464,10 @@ pub fn run(args: &SweepArgs) -> Result<(), Box<dyn std::error::Error>> {
     bar.finish_and_clear();
     let written = report::write_all(&result, &args.out)?;
     eprintln!(
-        "sweep: {} conditions simulated in {:.2} s through {}; wrote {} files to {}",
+        "sweep: {} conditions simulated in {:.2} s (+ {:.2} s heating study) through {}; wrote {} files to {}",
         result.conditions.len(),
         result.simulate_seconds,
+        result.heating_seconds,
         result.fmu_path.display(),
         written,
         args.out.display()
