@@ -91,7 +91,7 @@ pub struct SweepArgs {
     #[arg(long, default_value_t = 0.1)]
     pub error_limit: f64,
     /// Heater powers of the heating study (22 °C → the highest temperature, housing held vs
-    /// constant power), W (comma-separated; empty to skip).
+    /// constant power), W (comma-separated).
     #[arg(long, value_delimiter = ',', default_value = "5,10,15")]
     pub heating_powers: Vec<f64>,
     /// No progress bar (also hidden when stderr is not a terminal or CI=true).

@@ -201,7 +201,7 @@ fn warmup(r: &SweepResult, path: &Path) -> R {
     });
     let (y0, y1) = range(temps);
     let mut ch = ChartBuilder::on(&top)
-        .caption("Warm-up: housing (solid, the thermocouple) and PCL (dashed-thin, model estimate)", ("sans-serif", 16))
+        .caption("Warm-up: housing (thick: the thermocouple) and PCL (thin: the model's estimate, no sensor)", ("sans-serif", 16))
         .margin(10)
         .x_label_area_size(32)
         .y_label_area_size(50)

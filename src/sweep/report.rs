@@ -270,7 +270,8 @@ pub fn markdown(r: &SweepResult) -> String {
     let _ = writeln!(s, "## Against the paper\n");
     let _ = writeln!(s, "| claim | paper | model (nominal, untuned) | agrees |\n|---|---|---|---|");
     for c in comparison(r) {
-        let _ = writeln!(s, "| {} | {} | {} | {} |", c.claim, c.paper, c.model, match c.agrees { "no" => "**no**", v => v });
+        let cell = |t: &str| t.replace('|', "\\|");
+        let _ = writeln!(s, "| {} | {} | {} | {} |", cell(&c.claim), cell(&c.paper), cell(&c.model), match c.agrees { "no" => "**no**", v => v });
     }
     let _ = writeln!(s);
     let _ = writeln!(s, "{}\n", findings(r));
@@ -297,7 +298,7 @@ pub fn markdown(r: &SweepResult) -> String {
 
     let _ = writeln!(s, "## Frequency-response check\n");
     let _ = writeln!(s, "Measured H = Θ e^(−iφ)/θ0 against K*/(K* − J_l ω²) at the values the FMU reports (K* = K_eff + iωC_eff).\n");
-    let _ = writeln!(s, "| T °C | f Hz | |H| measured | |H| analytic | rel. diff | phase measured ° | phase analytic ° | diff ° |\n|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "| T °C | f Hz | \\|H\\| measured | \\|H\\| analytic | rel. diff | phase measured ° | phase analytic ° | diff ° |\n|---|---|---|---|---|---|---|---|");
     for c in &r.conditions {
         let h = super::analysis::Complex::new(c.h_re, c.h_im);
         let ha = super::analysis::Complex::new(c.analytic_h_re, c.analytic_h_im);
@@ -351,7 +352,7 @@ pub fn markdown(r: &SweepResult) -> String {
          ({:.2e} rad) of the link amplitude, as on the device. Estimates with a predicted error above {:.0} % are flagged.\n",
         a.h_uncertainty, super::ENCODER_COUNT_RAD, 100.0 * a.error_limit
     );
-    let _ = writeln!(s, "| T °C | f Hz | |H − 1| | amplification | δE'/E', δE''/E'' (simulated) | δE'/E', δE''/E'' (one encoder count) | closed form status |\n|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "| T °C | f Hz | \\|H − 1\\| | amplification | δE'/E', δE''/E'' (simulated) | δE'/E', δE''/E'' (one encoder count) | closed form status |\n|---|---|---|---|---|---|---|");
     for c in &r.conditions {
         let _ = writeln!(
             s,
