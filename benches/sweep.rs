@@ -80,7 +80,10 @@ fn main() {
     let v: serde_json::Value = serde_json::from_slice(&output.stdout).expect("fmpy bench prints JSON");
     let fmpy_med = v["median_s"].as_f64().expect("median_s");
     let times: Vec<f64> = v["times_s"].as_array().unwrap().iter().filter_map(|t| t.as_f64()).collect();
-    println!("same sweep driven by fmpy {} (FMU2Slave, same master), {fmpy_runs} runs:", "0.3.32");
+    println!(
+        "same sweep driven by fmpy {} (FMU2Slave, same master), {fmpy_runs} runs:",
+        v["fmpy_version"].as_str().unwrap_or("?")
+    );
     println!("  median {:.3} s  [{}]", fmpy_med, fmt_list(&times));
     println!("ratio fmpy / Rust harness: {:.1}x", fmpy_med / med);
 

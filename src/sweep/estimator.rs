@@ -126,7 +126,7 @@ impl std::error::Error for EstimateError {}
 pub fn closed_form(h: Complex, omega: f64, k: &Known, dh: f64, limit: f64) -> Result<(Estimate, Conditioning), EstimateError> {
     let hm1 = h - Complex::new(1.0, 0.0);
     // Below 3 standard uncertainties the sign and size of H − 1 are noise.
-    if !(hm1.norm() > 3.0 * dh) || !h.re.is_finite() || !h.im.is_finite() {
+    if !h.re.is_finite() || !h.im.is_finite() || hm1.norm() <= 3.0 * dh {
         return Err(EstimateError::IllConditioned { h_minus_1: hm1.norm(), h_uncertainty: dh });
     }
     let k_star = (h / hm1).scale(k.link_inertia * omega * omega);
@@ -154,7 +154,7 @@ pub struct Iterated {
 /// has no solution.
 pub fn paper_iterative(m: f64, phase_delay: f64, omega: f64, k: &Known, tol: f64, max_iter: usize) -> Result<Iterated, EstimateError> {
     let jw2 = k.link_inertia * omega * omega;
-    if !(m > phase_delay.cos()) {
+    if m.is_nan() || phase_delay.is_nan() || m <= phase_delay.cos() {
         return Err(EstimateError::NoFixedPoint {
             reason: format!("M = {m:.6} ≤ cos φ = {:.6}: Eq. 15 has no stiffness above J_l ω²", phase_delay.cos()),
         });

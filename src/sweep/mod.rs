@@ -186,7 +186,7 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
         return Err("need at least one temperature and one frequency".into());
     }
     for &f in &a.frequencies {
-        if !(f > 0.0) {
+        if f.is_nan() || f <= 0.0 {
             return Err(format!("frequency {f} Hz must be > 0"));
         }
         if analysis::samples_per_period(f, a.step).is_none() {

@@ -14,6 +14,7 @@ import math
 import shutil
 import time
 
+import fmpy
 import numpy as np
 from fmpy import extract, read_model_description
 from fmpy.fmi2 import FMU2Slave
@@ -165,7 +166,8 @@ def main():
         t0 = time.perf_counter()
         results = sweep(args.fmu)
         times.append(time.perf_counter() - t0)
-    print(json.dumps({"median_s": float(np.median(times)), "times_s": times, "conditions": results}))
+    print(json.dumps({"median_s": float(np.median(times)), "times_s": times, "fmpy_version": fmpy.__version__,
+                      "conditions": results}))
 
 
 if __name__ == "__main__":
