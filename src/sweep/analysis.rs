@@ -94,6 +94,18 @@ pub fn non_sinusoidal_fraction(time: &[f64], x: &[f64], omega: f64, start: usize
     (2.0 * rss / len as f64).sqrt() / c.norm()
 }
 
+/// Last time at which `x` departs from its steady sinusoid (mean + first harmonic over the window
+/// `[start, start + len)`, extended back to t = 0) by more than `threshold`: the length of the
+/// start-up transient. 0 if it never does.
+pub fn transient_end(time: &[f64], x: &[f64], omega: f64, start: usize, len: usize, threshold: f64) -> f64 {
+    let c = first_harmonic(time, x, omega, start, len);
+    let mean = x[start..start + len].iter().sum::<f64>() / len as f64;
+    (0..x.len())
+        .rev()
+        .find(|&k| (x[k] - mean - c.norm() * (omega * time[k] + c.arg()).sin()).abs() > threshold)
+        .map_or(0.0, |k| time[k])
+}
+
 /// Mean, min and max of a slice.
 pub fn stats(x: &[f64]) -> (f64, f64, f64) {
     let mean = x.iter().sum::<f64>() / x.len() as f64;

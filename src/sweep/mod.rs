@@ -156,6 +156,8 @@ pub struct Condition {
     pub paper_e_loss_error: Option<f64>,
     /// RMS distance of the steady link angle from a sinusoid, relative to its amplitude.
     pub link_non_sinusoidal: f64,
+    /// Time after which the link stays within 0.1 % of θ0 of its steady sinusoid, s.
+    pub transient_s: f64,
     /// Largest |θm − θ0 sin ωt| over the analysed cycles, rad (motor tracking).
     pub motor_tracking_error_rad: f64,
     #[serde(skip)]
@@ -422,6 +424,7 @@ fn analyse(args: &SweepArgs, k: &Known, temp_c: f64, f: f64, motor: &MotorLoop, 
         paper_e_storage_error: paper.map(|p| rel(p.estimate.e_storage, model_e1)),
         paper_e_loss_error: paper.map(|p| rel(p.estimate.e_loss, model_e2)),
         link_non_sinusoidal: analysis::non_sinusoidal_fraction(t, trace.column(master::O_LINK_ANGLE), omega, start, len),
+        transient_s: analysis::transient_end(t, trace.column(master::O_LINK_ANGLE), omega, start, len, 1e-3 * motor.amplitude),
         motor_tracking_error_rad: tracking,
         trace,
         window: (start, len),

@@ -220,11 +220,15 @@ pub fn comparison(r: &SweepResult) -> Vec<Claim> {
         }
     }
     let worst_distortion = r.conditions.iter().map(|c| c.link_non_sinusoidal).fold(0.0, f64::max);
+    let longest = r.conditions.iter().map(|c| c.transient_s).fold(0.0, f64::max);
     out.push(Claim {
         claim: "steady response".into(),
         paper: "irregular start-up transient, then a sinusoid at the motor's frequency".into(),
-        model: format!("steady link angle departs from a sinusoid by at most {worst_distortion:.1e} (RMS, relative)"),
-        agrees: verdict(worst_distortion < 0.01),
+        model: format!(
+            "a smooth start-up transient (the motor starts from rest at full reference speed) that is within 0.1 % of θ0 of the steady sinusoid after {longest:.1} s at most; then the link departs from a sinusoid by at most {worst_distortion:.1e} (RMS, relative)"
+        ),
+        // the sinusoid is reproduced; the irregularity of the start-up is not (the model's is smooth)
+        agrees: if worst_distortion < 0.01 { "partly" } else { "no" },
     });
     out
 }
@@ -277,12 +281,12 @@ pub fn markdown(r: &SweepResult) -> String {
     let _ = writeln!(s, "{}\n", findings(r));
 
     let _ = writeln!(s, "## Sweep results\n");
-    let _ = writeln!(s, "| T °C | f Hz | PCL °C | motor amp rad | link amp rad | Decay mrad | Decay / Decay(22 °C) | phase delay ° | motor tracking error mrad |");
-    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|");
+    let _ = writeln!(s, "| T °C | f Hz | PCL °C | motor amp rad | link amp rad | Decay mrad | Decay / Decay(22 °C) | phase delay ° | motor tracking error mrad | transient s |");
+    let _ = writeln!(s, "|---|---|---|---|---|---|---|---|---|---|");
     for c in &r.conditions {
         let _ = writeln!(
             s,
-            "| {} | {} | {:.2} | {:.5} | {:.5} | {:+.3} | {} | {:.4} | {:.2} |",
+            "| {} | {} | {:.2} | {:.5} | {:.5} | {:+.3} | {} | {:.4} | {:.2} | {:.2} |",
             c.temperature_c,
             c.frequency_hz,
             c.pcl_temperature_c,
@@ -291,10 +295,15 @@ pub fn markdown(r: &SweepResult) -> String {
             c.decay_rad * 1e3,
             opt(c.decay_normalized, 2),
             c.phase_deg,
-            c.motor_tracking_error_rad * 1e3
+            c.motor_tracking_error_rad * 1e3,
+            c.transient_s
         );
     }
-    let _ = writeln!(s, "\nDecay uses the measured motor amplitude (first harmonic); the commanded one is {:.5} rad.\n", a.amplitude_deg.to_radians());
+    let _ = writeln!(
+        s,
+        "\nDecay uses the measured motor amplitude (first harmonic); the commanded one is {:.5} rad. Transient: time after which the link stays within 0.1 % of θ0 of its steady sinusoid. PCL °C is the model's estimate (no sensor).\n",
+        a.amplitude_deg.to_radians()
+    );
 
     let _ = writeln!(s, "## Frequency-response check\n");
     let _ = writeln!(s, "Measured H = Θ e^(−iφ)/θ0 against K*/(K* − J_l ω²) at the values the FMU reports (K* = K_eff + iωC_eff).\n");
