@@ -251,6 +251,8 @@ fn bad_options_are_rejected_with_a_reason() {
     let a = SweepArgs { step: 3e-3, frequencies: vec![0.7], ..args() };
     let e = sweep::simulate(&a, |_| {}).unwrap_err().to_string();
     assert!(e.contains("--step") && e.contains("0.7"), "{e}");
+    let a = SweepArgs { temperatures: vec![10.0], ..args() };
+    assert!(sweep::simulate(&a, |_| {}).unwrap_err().to_string().contains("heaters only"));
     let a = SweepArgs { fmu: Some("/nonexistent/x.fmu".into()), ..args() };
     assert!(sweep::simulate(&a, |_| {}).unwrap_err().to_string().contains("no such file"));
 }

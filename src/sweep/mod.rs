@@ -242,6 +242,12 @@ pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<Swee
             p_max: args.heater_max_w,
             integral: 0.0,
         };
+        if temp_c < ambient_c - args.reach_tolerance {
+            return Err(format!(
+                "{temp_c} °C is below the ambient {ambient_c:.2} °C: the device has heaters only (no cooling)"
+            )
+            .into());
+        }
         let heated = temp_c > ambient_c + args.reach_tolerance;
         let heater = if heated {
             let (heater, w, trace) =
