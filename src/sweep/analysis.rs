@@ -3,10 +3,10 @@
 //! With uniform samples and a window of whole periods, the DFT bin at ω is exact for a sinusoid and
 //! blind to a constant offset and to the other harmonics, so amplitude and phase need no fitting.
 
-use num_complex_lite::C64;
+use complex::C64;
 
 /// A minimal complex number (no extra crate for four operations).
-pub mod num_complex_lite {
+pub mod complex {
     #[derive(Clone, Copy, Debug, PartialEq)]
     pub struct C64 {
         pub re: f64,
@@ -58,7 +58,7 @@ pub mod num_complex_lite {
     }
 }
 
-pub use num_complex_lite::C64 as Complex;
+pub use complex::C64 as Complex;
 
 /// Samples per period for communication step `h` at `frequency_hz`, if it is a whole number.
 pub fn samples_per_period(frequency_hz: f64, h: f64) -> Option<usize> {
