@@ -40,3 +40,19 @@ def test_fmpy_driven_sweep_matches_the_frequency_response(fmu):
     assert abs(h - h_an) < 5e-3 * abs(h_an - 1)
     assert r["decay_rad"] < 0  # springs + Kelvin–Voigt: the link overshoots below √2 f_n
     assert r["phase_deg"] == pytest.approx(-math.degrees(cmath.phase(h_an)), rel=5e-3)
+
+
+def test_sweep_csvs_load_with_fmpy_read_csv(tmp_path):
+    """The trajectory CSVs of `thermovia sweep` are in fmpy's result layout."""
+    import subprocess
+    from fmpy.util import read_csv
+
+    exe = os.path.join(os.path.dirname(__file__), "..", "..", "target", "release", "thermovia")
+    out = tmp_path / "sweep"
+    subprocess.run([exe, "sweep", "--out", str(out), "--temperatures", "22", "--frequencies", "1",
+                    "--settle-cycles", "1", "--cycles", "1", "--quiet"], check=True)
+    r = read_csv(str(out / "run_22C_1Hz.csv"))
+    assert r.dtype.names[0] == "time"
+    assert {"motor_angle", "link_angle", "motor_torque", "housing_temperature"} <= set(r.dtype.names)
+    assert len(r) == 2001 and r["time"][-1] == pytest.approx(2.0)
+    assert abs(r["link_angle"]).max() > 0.5  # 30° motor amplitude, link follows
