@@ -31,7 +31,9 @@ fn description_xml() -> Vec<u8> {
 }
 
 fn open_err(path: &Path) -> HarnessError {
-    match Fmu::open(path) {
+    let r = Fmu::open(path);
+    let _ = std::fs::remove_file(path);
+    match r {
         Ok(_) => panic!("{} opened", path.display()),
         Err(e) => e,
     }
