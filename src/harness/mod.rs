@@ -4,6 +4,7 @@
 //! Rust model: what is driven is the binary users load.
 
 pub mod description;
+pub mod simulate;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};

@@ -3,7 +3,6 @@
 //! so a failed run never leaves a half-written folder.
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use super::master::Trace;
@@ -21,22 +20,7 @@ pub fn condition_stem(c: &Condition) -> String {
 
 /// Writes a trace as CSV: `time` first, one column per variable (fmpy's `write_csv` layout).
 pub fn write_csv(path: &Path, trace: &Trace) -> std::io::Result<()> {
-    let cols = trace.columns();
-    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-    let header: Vec<String> = cols.iter().map(|(n, _)| format!("\"{n}\"")).collect();
-    writeln!(out, "{}", header.join(","))?;
-    let mut line = String::new();
-    for i in 0..trace.len() {
-        line.clear();
-        for (j, (_, c)) in cols.iter().enumerate() {
-            if j > 0 {
-                line.push(',');
-            }
-            write!(line, "{}", c[i]).expect("string write");
-        }
-        writeln!(out, "{line}")?;
-    }
-    out.flush()
+    crate::harness::simulate::write_csv(path, &trace.columns())
 }
 
 fn summary_json(r: &SweepResult) -> serde_json::Value {

@@ -1,0 +1,161 @@
+//! A plain simulation through any loaded FMU, the way `fmpy.simulate_fmu` runs one: inputs from a
+//! table (linearly interpolated at each communication point, held beyond its ends), parameters set
+//! before initialisation, a fixed communication step, outputs recorded at the start and after every
+//! step, written as CSV in fmpy's result layout.
+
+use std::error::Error;
+use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
+
+use super::{Fmu, HarnessError};
+
+/// Input signals: a strictly increasing `time` and one column per FMU input.
+#[derive(Clone, Debug)]
+pub struct InputTable {
+    pub names: Vec<String>,
+    pub time: Vec<f64>,
+    pub columns: Vec<Vec<f64>>,
+}
+
+impl InputTable {
+    /// Reads `time,<input>,<input>...` (header names may be quoted, as fmpy writes them). Errors
+    /// name the file, line and column.
+    pub fn read_csv(path: &Path) -> Result<InputTable, String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let at = |line: usize, col: usize, what: String| format!("{}:{line}:{col}: {what}", path.display());
+        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
+        let (hline, header) = lines.next().ok_or_else(|| format!("{}: empty file", path.display()))?;
+        let names: Vec<String> = header.split(',').map(|s| s.trim().trim_matches('"').to_string()).collect();
+        if names.first().map(String::as_str) != Some("time") {
+            return Err(at(hline + 1, 1, format!("the first column must be \"time\", found {:?}", names[0])));
+        }
+        let mut time = Vec::new();
+        let mut columns = vec![Vec::new(); names.len() - 1];
+        for (i, line) in lines {
+            let cells: Vec<&str> = line.split(',').collect();
+            if cells.len() != names.len() {
+                return Err(at(i + 1, cells.len().min(names.len()) + 1, format!("{} cells, the header has {}", cells.len(), names.len())));
+            }
+            for (j, cell) in cells.iter().enumerate() {
+                let v: f64 = cell
+                    .trim()
+                    .parse()
+                    .map_err(|_| at(i + 1, j + 1, format!("{:?} is not a number ({})", cell.trim(), names[j])))?;
+                if !v.is_finite() {
+                    return Err(at(i + 1, j + 1, format!("{} is not finite ({})", v, names[j])));
+                }
+                if j == 0 {
+                    if let Some(&last) = time.last() {
+                        if v <= last {
+                            return Err(at(i + 1, 1, format!("time {v} does not increase (previous {last})")));
+                        }
+                    }
+                    time.push(v);
+                } else {
+                    columns[j - 1].push(v);
+                }
+            }
+        }
+        if time.is_empty() {
+            return Err(format!("{}: no data rows", path.display()));
+        }
+        Ok(InputTable { names: names[1..].to_vec(), time, columns })
+    }
+
+    /// Column `j` at time `t`: linear between samples, held beyond the ends.
+    pub fn value_at(&self, j: usize, t: f64) -> f64 {
+        let (ts, ys) = (&self.time, &self.columns[j]);
+        let i = ts.partition_point(|&x| x <= t);
+        if i == 0 {
+            return ys[0];
+        }
+        if i == ts.len() {
+            return ys[ts.len() - 1];
+        }
+        let w = (t - ts[i - 1]) / (ts[i] - ts[i - 1]);
+        ys[i - 1] + w * (ys[i] - ys[i - 1])
+    }
+}
+
+pub struct SimulateOptions {
+    pub start_time: f64,
+    pub stop_time: f64,
+    pub step: f64,
+    pub parameters: Vec<(String, f64)>,
+    pub input: Option<InputTable>,
+    /// Variables to record (any causality).
+    pub outputs: Vec<String>,
+}
+
+/// Recorded columns, `time` first.
+pub struct Trajectory {
+    pub names: Vec<String>,
+    pub columns: Vec<Vec<f64>>,
+}
+
+pub fn simulate(fmu: &Fmu, o: &SimulateOptions) -> Result<Trajectory, Box<dyn Error>> {
+    if !(o.step > 0.0) || !(o.stop_time > o.start_time) {
+        return Err(format!("need step > 0 and stop time > start time (step {}, {} → {})", o.step, o.start_time, o.stop_time).into());
+    }
+    let mut inst = fmu.instantiate(None)?;
+    let params: Vec<(&str, f64)> = o.parameters.iter().map(|(n, v)| (n.as_str(), *v)).collect();
+    inst.initialize(o.start_time, Some(o.stop_time), &params)?;
+    let inputs = match &o.input {
+        Some(table) => table.names.iter().map(|n| inst.handle(n)).collect::<Result<Vec<_>, HarnessError>>()?,
+        None => Vec::new(),
+    };
+    let outputs = o.outputs.iter().map(|n| inst.handle(n)).collect::<Result<Vec<_>, HarnessError>>()?;
+    let mut columns = vec![Vec::new(); outputs.len() + 1];
+    let mut record = |inst: &mut super::Instance, t: f64| -> Result<(), HarnessError> {
+        columns[0].push(t);
+        for (j, h) in outputs.iter().enumerate() {
+            columns[j + 1].push(inst.get_handle(*h)?);
+        }
+        Ok(())
+    };
+    record(&mut inst, o.start_time)?;
+    let n = ((o.stop_time - o.start_time) / o.step - 1e-9).ceil() as usize;
+    for k in 0..n {
+        let t = o.start_time + k as f64 * o.step;
+        if let Some(table) = &o.input {
+            for (j, h) in inputs.iter().enumerate() {
+                inst.set_handle(*h, table.value_at(j, t))?;
+            }
+        }
+        let h = o.step.min(o.stop_time - t);
+        inst.step(h)?;
+        record(&mut inst, t + h)?;
+    }
+    inst.terminate()?;
+    let mut names = vec!["time".to_string()];
+    names.extend(o.outputs.iter().cloned());
+    Ok(Trajectory { names, columns })
+}
+
+/// Writes columns as CSV in fmpy's result layout: quoted names, `time` first, full precision.
+pub fn write_csv(path: &Path, columns: &[(&str, &[f64])]) -> std::io::Result<()> {
+    let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+    let header: Vec<String> = columns.iter().map(|(n, _)| format!("\"{n}\"")).collect();
+    writeln!(out, "{}", header.join(","))?;
+    let rows = columns.first().map_or(0, |(_, c)| c.len());
+    let mut line = String::new();
+    for i in 0..rows {
+        line.clear();
+        for (j, (_, c)) in columns.iter().enumerate() {
+            if j > 0 {
+                line.push(',');
+            }
+            write!(line, "{:?}", c[i]).expect("string write");
+        }
+        writeln!(out, "{line}")?;
+    }
+    out.flush()
+}
+
+impl Trajectory {
+    pub fn write_csv(&self, path: &Path) -> std::io::Result<()> {
+        let cols: Vec<(&str, &[f64])> = self.names.iter().map(String::as_str).zip(self.columns.iter().map(Vec::as_slice)).collect();
+        write_csv(path, &cols)
+    }
+}
