@@ -1,5 +1,10 @@
 //! A two-joint planar arm whose joints are ThermoVIA FMU instances (issue 5).
 
+pub mod dynamics;
+pub mod reference;
+pub mod sim;
+pub mod stability;
+
 /// `thermovia arm` options.
 #[derive(clap::Args, Debug, Clone)]
 pub struct ArmArgs {

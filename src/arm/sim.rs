@@ -1,0 +1,222 @@
+//! The co-simulated arm: two ThermoVIA instances driven by `harness::cosim::Master`, with the
+//! rigid-body arm, contact and controllers in the master's exchange function.
+
+use super::dynamics::{ArmConfig, V2};
+use crate::harness::cosim::{Exchange, Master, Port};
+use crate::harness::Fmu;
+
+pub const ROOM_K: f64 = 295.15;
+pub const ZERO_C: f64 = 273.15;
+
+/// Thermal set-up of one run: each joint's PCL (and housing) temperature, held steady by a heater
+/// power that balances the passive loss (0 W at room temperature).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Scenario {
+    pub name: String,
+    pub pcl_temperature_c: V2,
+}
+
+impl Scenario {
+    pub fn cold() -> Self {
+        Scenario { name: "cold".into(), pcl_temperature_c: [22.0, 22.0] }
+    }
+    pub fn hot() -> Self {
+        Scenario { name: "hot".into(), pcl_temperature_c: [60.0, 60.0] }
+    }
+}
+
+/// What the master and the reference know about a joint, read from an FMU instance at its
+/// temperature (K, C are the FMU's own `effective_stiffness`/`effective_damping` outputs).
+#[derive(Clone, Copy, Debug, serde::Serialize)]
+pub struct JointProps {
+    pub stiffness: f64,
+    pub damping: f64,
+    pub holding_power: f64,
+    pub coupling_inertia: f64,
+}
+
+/// FMU parameters of joint `i` at PCL temperature `temp_c`.
+pub fn joint_parameters(cfg: &ArmConfig, i: usize, temp_c: f64, initial: Option<(V2, V2)>) -> Vec<(&'static str, f64)> {
+    let t = ZERO_C + temp_c;
+    let mut p = vec![
+        ("link_inertia", cfg.coupling_inertia()[i]),
+        ("motor_inertia", cfg.motor_inertia),
+        ("motor_damping", cfg.motor_damping),
+        ("excitation_frequency", cfg.excitation_frequency),
+        ("initial_pcl_temperature", t),
+        ("initial_housing_temperature", t),
+    ];
+    if let Some((q, m)) = initial {
+        p.push(("initial_link_angle", q[i]));
+        p.push(("initial_motor_angle", m[i]));
+    }
+    p
+}
+
+/// Reads K, C and the loss conductance from a throw-away instance at the scenario's temperatures.
+pub fn probe(fmu: &Fmu, cfg: &ArmConfig, scenario: &Scenario) -> Result<[JointProps; 2], String> {
+    let mut out = [JointProps { stiffness: 0.0, damping: 0.0, holding_power: 0.0, coupling_inertia: 0.0 }; 2];
+    let ji = cfg.coupling_inertia();
+    for i in 0..2 {
+        let e = |e: crate::harness::HarnessError| e.to_string();
+        let mut inst = fmu.instantiate(Some("probe")).map_err(e)?;
+        inst.initialize(0.0, None, &joint_parameters(cfg, i, scenario.pcl_temperature_c[i], None)).map_err(e)?;
+        let g = inst.get("housing_ambient_conductance").map_err(e)?;
+        out[i] = JointProps {
+            stiffness: inst.get("effective_stiffness").map_err(e)?,
+            damping: inst.get("effective_damping").map_err(e)?,
+            holding_power: g * (ZERO_C + scenario.pcl_temperature_c[i] - ROOM_K),
+            coupling_inertia: ji[i],
+        };
+    }
+    Ok(out)
+}
+
+/// Time series of one run, at every communication point.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct Trace {
+    pub t: Vec<f64>,
+    pub q: Vec<V2>,
+    pub qd: Vec<V2>,
+    pub motor_angle: Vec<V2>,
+    pub transmitted_torque: Vec<V2>,
+    pub motor_torque: Vec<V2>,
+    pub tip: Vec<V2>,
+    /// Wall force on the tip, N (≥ 0).
+    pub contact_force: Vec<f64>,
+    pub pcl_temperature_c: Vec<V2>,
+}
+
+impl Trace {
+    pub fn push(&mut self, cfg: &ArmConfig, t: f64, q: V2, qd: V2, motor_angle: V2, tau: V2, u: V2, pcl_c: V2) {
+        self.t.push(t);
+        self.q.push(q);
+        self.qd.push(qd);
+        self.motor_angle.push(motor_angle);
+        self.transmitted_torque.push(tau);
+        self.motor_torque.push(u);
+        self.tip.push(cfg.tip(q));
+        self.contact_force.push(-cfg.contact_force(q, qd)[0]);
+        self.pcl_temperature_c.push(pcl_c);
+    }
+}
+
+const OUTPUTS: [&str; 7] =
+    ["link_angle", "link_speed", "motor_angle", "motor_speed", "transmitted_torque", "effective_stiffness", "pcl_temperature"];
+const INPUTS: [&str; 3] = ["motor_torque", "load_torque", "heater_power"];
+
+/// Ports of one joint in the master.
+struct JointPorts {
+    y: [Port; 7],
+    u: [Port; 3],
+}
+
+/// The arm's exchange at one communication point: what each FMU gets to hold over [t_n, t_n + h].
+/// Returns (motor torques, load torques).
+pub fn master_law(cfg: &ArmConfig, props: &[JointProps; 2], t: f64, q: V2, qd: V2, motor_angle: V2, motor_speed: V2, tau: V2, stiffness: V2) -> (V2, V2) {
+    let a = cfg.acceleration(q, qd, tau);
+    // The FMU's link (inertia J_i) would accelerate at a_i if τ_t stayed at its t_n value.
+    let load = [props[0].coupling_inertia * a[0] - tau[0], props[1].coupling_inertia * a[1] - tau[1]];
+    (cfg.motor_torque(t, motor_angle, motor_speed, stiffness), load)
+}
+
+/// Co-simulates the arm with communication step `h`, recording every step. `stability_limit`
+/// (from `stability::limit`) is checked unless None (only the limit's own numerical check passes
+/// None, to run on purpose just above it).
+pub fn cosimulate(
+    fmu: &Fmu,
+    cfg: &ArmConfig,
+    scenario: &Scenario,
+    h: f64,
+    stability_limit: Option<f64>,
+    mut progress: impl FnMut(f64),
+) -> Result<Trace, String> {
+    cfg.validate()?;
+    if !(h.is_finite() && h > 0.0) {
+        return Err(format!("the communication step must be a positive number of seconds, got {h}"));
+    }
+    if let Some(limit) = stability_limit {
+        if h >= limit {
+            return Err(format!(
+                "communication step {:.3} ms is at or above this arm's stability limit {:.3} ms (explicit, one-step-delayed coupling; \
+                 see `thermovia arm --help`): use a smaller --step, or a smaller kd",
+                h * 1e3,
+                limit * 1e3
+            ));
+        }
+    }
+    let props = probe(fmu, cfg, scenario)?;
+    let init = cfg.initial_angles([props[0].stiffness, props[1].stiffness]);
+    let mut master = Master::new(0.0, None);
+    let mut ports = Vec::new();
+    for i in 0..2 {
+        let name = ["shoulder", "elbow"][i];
+        let params = joint_parameters(cfg, i, scenario.pcl_temperature_c[i], Some(init));
+        let p = master.add(fmu, name, &params, &INPUTS, &OUTPUTS).map_err(|e| e.to_string())?;
+        let y = OUTPUTS.map(|n| master.output(p, n).expect("declared"));
+        let u = INPUTS.map(|n| master.input(p, n).expect("declared"));
+        ports.push(JointPorts { y, u });
+    }
+    let n = (cfg.duration / h).round() as u64;
+    let mut trace = Trace::default();
+    let read = |io: &Exchange| -> [V2; 7] {
+        let mut v = [[0.0; 2]; 7];
+        for (j, jp) in ports.iter().enumerate() {
+            for k2 in 0..7 {
+                v[k2][j] = io.get(jp.y[k2]);
+            }
+        }
+        v
+    };
+    let mut exchange = |t: f64, io: &mut Exchange| -> Result<(), String> {
+        let [q, qd, th, thd, tau, stiff, pcl] = read(io);
+        if !q.iter().chain(qd.iter()).all(|v| v.is_finite() && v.abs() < 1e6) {
+            return Err("the arm's state ran away (non-finite or huge joint angles/speeds)".into());
+        }
+        let (u, load) = master_law(cfg, &props, t, q, qd, th, thd, tau, stiff);
+        for i in 0..2 {
+            io.set(ports[i].u[0], u[i]);
+            io.set(ports[i].u[1], load[i]);
+            io.set(ports[i].u[2], props[i].holding_power);
+        }
+        trace.push(cfg, t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
+        Ok(())
+    };
+    let every = (n / 100).max(1);
+    for k in 0..n {
+        master.step(h, &mut exchange).map_err(|e| e.to_string())?;
+        if k % every == 0 {
+            progress(k as f64 / n as f64);
+        }
+    }
+    // the last communication point (outputs only; the inputs it computes are not used)
+    let mut last = Trace::default();
+    {
+        let t = master.time();
+        let mut v = [[0.0; 2]; 7];
+        for (j, jp) in ports.iter().enumerate() {
+            for k2 in 0..7 {
+                v[k2][j] = master.get(jp.y[k2]);
+            }
+        }
+        let [q, qd, th, thd, tau, stiff, pcl] = v;
+        let (u, _) = master_law(cfg, &props, t, q, qd, th, thd, tau, stiff);
+        last.push(cfg, t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
+    }
+    drop(exchange);
+    append(&mut trace, last);
+    progress(1.0);
+    Ok(trace)
+}
+
+fn append(a: &mut Trace, b: Trace) {
+    a.t.extend(b.t);
+    a.q.extend(b.q);
+    a.qd.extend(b.qd);
+    a.motor_angle.extend(b.motor_angle);
+    a.transmitted_torque.extend(b.transmitted_torque);
+    a.motor_torque.extend(b.motor_torque);
+    a.tip.extend(b.tip);
+    a.contact_force.extend(b.contact_force);
+    a.pcl_temperature_c.extend(b.pcl_temperature_c);
+}
