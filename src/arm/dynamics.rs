@@ -41,6 +41,9 @@ pub struct ArmConfig {
     pub move_start: f64,
     pub move_duration: f64,
     pub duration: f64,
+    /// Leave at its default: joint angles of start and goal, cached with the values they come from.
+    #[serde(skip)]
+    pub plan_cache: PlanCache,
 }
 
 impl Default for ArmConfig {
@@ -66,12 +69,19 @@ impl Default for ArmConfig {
             goal_tip: [0.40, 0.02],
             move_start: 0.2,
             move_duration: 0.6,
-            duration: 2.0,
+            duration: 3.0,
+            plan_cache: PlanCache::default(),
         }
     }
 }
 
 pub type V2 = [f64; 2];
+
+/// The plan is evaluated every step; inverse kinematics of start and goal at each call would
+/// dominate the master's work, so they are cached with the lengths and tips they were computed
+/// from (a changed value recomputes them).
+#[derive(Clone, Debug, Default)]
+pub struct PlanCache(std::cell::Cell<Option<([f64; 6], V2, V2)>>);
 pub type M2 = [[f64; 2]; 2];
 
 impl ArmConfig {
@@ -253,8 +263,16 @@ impl ArmConfig {
 
     /// Joint-space plan: minimum-jerk from the start to the goal pose (elbow down).
     pub fn plan(&self, t: f64) -> (V2, V2) {
-        let a = self.inverse_kinematics(self.start_tip).expect("validated");
-        let b = self.inverse_kinematics(self.goal_tip).expect("validated");
+        let key = [self.l1, self.l2, self.start_tip[0], self.start_tip[1], self.goal_tip[0], self.goal_tip[1]];
+        let (a, b) = match self.plan_cache.0.get() {
+            Some((k, a, b)) if k == key => (a, b),
+            _ => {
+                let a = self.inverse_kinematics(self.start_tip).expect("validated");
+                let b = self.inverse_kinematics(self.goal_tip).expect("validated");
+                self.plan_cache.0.set(Some((key, a, b)));
+                (a, b)
+            }
+        };
         let s = ((t - self.move_start) / self.move_duration).clamp(0.0, 1.0);
         let pos = s * s * s * (10.0 - 15.0 * s + 6.0 * s * s);
         let vel = if s <= 0.0 || s >= 1.0 { 0.0 } else { 30.0 * s * s * (1.0 - s) * (1.0 - s) / self.move_duration };

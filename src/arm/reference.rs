@@ -53,7 +53,7 @@ pub fn simulate(cfg: &ArmConfig, props: &[JointProps; 2], dt_out: f64, tolerance
         let (th, thd, q, qd) = ([y[0], y[1]], [y[2], y[3]], [y[4], y[5]], [y[6], y[7]]);
         let tau = [0, 1].map(|i| props[i].stiffness * (th[i] - q[i]) + props[i].damping * (thd[i] - qd[i]));
         let u = cfg.motor_torque(t, th, thd, [props[0].stiffness, props[1].stiffness]);
-        trace.push(cfg, t, q, qd, th, tau, u, [f64::NAN; 2]);
+        trace.push(t, q, qd, th, tau, u, [f64::NAN; 2]);
     };
     record(&mut trace, 0.0, &y);
     let mut dt = 1e-4;
@@ -144,5 +144,6 @@ pub fn simulate(cfg: &ArmConfig, props: &[JointProps; 2], dt_out: f64, tolerance
         }
         record(&mut trace, t1, &y);
     }
+    trace.finish(cfg);
     Ok((trace, accepted))
 }

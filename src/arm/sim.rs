@@ -88,16 +88,20 @@ pub struct Trace {
 }
 
 impl Trace {
-    pub fn push(&mut self, cfg: &ArmConfig, t: f64, q: V2, qd: V2, motor_angle: V2, tau: V2, u: V2, pcl_c: V2) {
+    /// Records one sample; `finish` adds the tip and wall force afterwards (kept out of the loop).
+    pub fn push(&mut self, t: f64, q: V2, qd: V2, motor_angle: V2, tau: V2, u: V2, pcl_c: V2) {
         self.t.push(t);
         self.q.push(q);
         self.qd.push(qd);
         self.motor_angle.push(motor_angle);
         self.transmitted_torque.push(tau);
         self.motor_torque.push(u);
-        self.tip.push(cfg.tip(q));
-        self.contact_force.push(-cfg.contact_force(q, qd)[0]);
         self.pcl_temperature_c.push(pcl_c);
+    }
+
+    pub fn finish(&mut self, cfg: &ArmConfig) {
+        self.tip = self.q.iter().map(|&q| cfg.tip(q)).collect();
+        self.contact_force = self.q.iter().zip(&self.qd).map(|(&q, &v)| -cfg.contact_force(q, v)[0]).collect();
     }
 }
 
@@ -153,6 +157,9 @@ pub fn cosimulate(
         let name = ["shoulder", "elbow"][i];
         let params = joint_parameters(cfg, i, scenario.pcl_temperature_c[i], Some(init));
         let p = master.add(fmu, name, &params, &INPUTS, &OUTPUTS).map_err(|e| e.to_string())?;
+        // thermal quantities change over seconds: read them every 10 ms, not every step
+        let every = ((0.01 / h).round() as u64).max(1);
+        master.read_every(p, &["effective_stiffness", "pcl_temperature"], every).map_err(|e| e.to_string())?;
         let y = OUTPUTS.map(|n| master.output(p, n).expect("declared"));
         let u = INPUTS.map(|n| master.input(p, n).expect("declared"));
         ports.push(JointPorts { y, u });
@@ -179,7 +186,7 @@ pub fn cosimulate(
             io.set(ports[i].u[1], load[i]);
             io.set(ports[i].u[2], props[i].holding_power);
         }
-        trace.push(cfg, t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
+        trace.push(t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
         Ok(())
     };
     let every = (n / 100).max(1);
@@ -201,10 +208,11 @@ pub fn cosimulate(
         }
         let [q, qd, th, thd, tau, stiff, pcl] = v;
         let (u, _) = master_law(cfg, &props, t, q, qd, th, thd, tau, stiff);
-        last.push(cfg, t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
+        last.push(t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
     }
     drop(exchange);
     append(&mut trace, last);
+    trace.finish(cfg);
     progress(1.0);
     Ok(trace)
 }
@@ -216,7 +224,5 @@ fn append(a: &mut Trace, b: Trace) {
     a.motor_angle.extend(b.motor_angle);
     a.transmitted_torque.extend(b.transmitted_torque);
     a.motor_torque.extend(b.motor_torque);
-    a.tip.extend(b.tip);
-    a.contact_force.extend(b.contact_force);
     a.pcl_temperature_c.extend(b.pcl_temperature_c);
 }

@@ -40,6 +40,32 @@ pub struct Participant {
     output_vrs: Vec<u32>,
     inputs: Vec<f64>,
     outputs: Vec<f64>,
+    /// Inputs as last written to the FMU; only changed ones are sent (each value crosses the C API).
+    sent: Vec<f64>,
+    changed_vrs: Vec<u32>,
+    changed_values: Vec<f64>,
+    /// Outputs read after every step (positions in `outputs`, value references), and those read
+    /// only every `slow_every` steps (quantities on a slower time scale, e.g. temperatures).
+    fast: (Vec<usize>, Vec<u32>),
+    slow: (Vec<usize>, Vec<u32>),
+    slow_every: u64,
+    scratch: Vec<f64>,
+}
+
+impl Participant {
+    fn read(&mut self, slow_too: bool) -> Result<(), HarnessError> {
+        for (group, wanted) in [(&self.fast, true), (&self.slow, slow_too)] {
+            if !wanted || group.1.is_empty() {
+                continue;
+            }
+            self.scratch.resize(group.1.len(), 0.0);
+            self.instance.get_reals(&group.1, &mut self.scratch)?;
+            for (k, &pos) in group.0.iter().enumerate() {
+                self.outputs[pos] = self.scratch[k];
+            }
+        }
+        Ok(())
+    }
 }
 
 /// What `exchange` sees at a communication point: every participant's outputs at t_n (read-only)
@@ -113,6 +139,7 @@ impl Master {
         };
         let input_vrs = resolve(inputs)?;
         let output_vrs = resolve(outputs)?;
+        let output_vrs_fast = output_vrs.clone();
         instance.initialize(self.start_time, self.stop_time, parameters)?;
         let mut input_values = vec![0.0; inputs.len()];
         instance.get_reals(&input_vrs, &mut input_values)?; // start values of the inputs
@@ -125,8 +152,15 @@ impl Master {
             output_names: outputs.iter().map(|s| s.to_string()).collect(),
             input_vrs,
             output_vrs,
+            sent: input_values.clone(),
             inputs: input_values,
             outputs: output_values,
+            changed_vrs: Vec::with_capacity(inputs.len()),
+            changed_values: Vec::with_capacity(inputs.len()),
+            fast: ((0..outputs.len()).collect(), output_vrs_fast),
+            slow: (Vec::new(), Vec::new()),
+            slow_every: 1,
+            scratch: Vec::with_capacity(outputs.len()),
         });
         Ok(self.participants.len() - 1)
     }
@@ -152,6 +186,25 @@ impl Master {
     /// Number of communication steps taken.
     pub fn steps(&self) -> u64 {
         self.steps
+    }
+
+    /// Reads the named outputs of participant `p` only every `every` steps (and at the start):
+    /// each value read crosses the C API, and quantities that change on a slow time scale (the
+    /// thermal ones, seconds) need not be fetched every millisecond. `exchange` then sees the
+    /// value from the last read, at most `every − 1` steps old.
+    pub fn read_every(&mut self, p: usize, outputs: &[&str], every: u64) -> Result<(), HarnessError> {
+        let ports: Vec<Port> = outputs.iter().map(|n| self.output(p, n)).collect::<Result<_, _>>()?;
+        let part = &mut self.participants[p];
+        for port in ports {
+            if let Some(k) = part.fast.0.iter().position(|&i| i == port.index) {
+                part.fast.0.remove(k);
+                part.fast.1.remove(k);
+                part.slow.0.push(port.index);
+                part.slow.1.push(part.output_vrs[port.index]);
+            }
+        }
+        part.slow_every = every.max(1);
+        Ok(())
     }
 
     /// Current communication time.
@@ -182,15 +235,25 @@ impl Master {
         exchange(t, &mut Exchange { participants: &mut self.participants })
             .map_err(|reason| CosimError::Exchange { time: t, reason })?;
         for p in &mut self.participants {
-            p.instance
-                .set_reals(&p.input_vrs, &p.inputs)
-                .map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t, source })?;
+            p.changed_vrs.clear();
+            p.changed_values.clear();
+            for i in 0..p.inputs.len() {
+                if p.inputs[i].to_bits() != p.sent[i].to_bits() {
+                    p.changed_vrs.push(p.input_vrs[i]);
+                    p.changed_values.push(p.inputs[i]);
+                }
+            }
+            if !p.changed_vrs.is_empty() {
+                p.instance
+                    .set_reals(&p.changed_vrs, &p.changed_values)
+                    .map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t, source })?;
+                p.sent.copy_from_slice(&p.inputs);
+            }
         }
         for p in &mut self.participants {
             p.instance.step(h).map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t, source })?;
-            p.instance
-                .get_reals(&p.output_vrs, &mut p.outputs)
-                .map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t + h, source })?;
+            let slow_too = (self.steps + 1) % p.slow_every == 0;
+            p.read(slow_too).map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t + h, source })?;
         }
         self.steps += 1;
         self.time += h; // the same sum each instance's clock makes, so both agree exactly
