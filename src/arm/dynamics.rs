@@ -227,8 +227,8 @@ impl ArmConfig {
 
     /// Wall force on the tip (only pushes, along −x).
     pub fn contact_force(&self, q: V2, qd: V2) -> V2 {
-        let p = self.tip(q);
-        let pen = p[0] - self.wall_x;
+        let x = self.l1 * q[0].cos() + self.l2 * (q[0] + q[1]).cos();
+        let pen = x - self.wall_x;
         if pen <= 0.0 {
             return [0.0, 0.0];
         }
@@ -242,9 +242,13 @@ impl ArmConfig {
         let c = self.coriolis(q, qd);
         let g = self.gravity_torque(q);
         let f = self.contact_force(q, qd);
-        let j = self.jacobian(q);
-        let ext = [j[0][0] * f[0] + j[1][0] * f[1], j[0][1] * f[0] + j[1][1] * f[1]];
-        solve(m, [tau[0] - c[0] - g[0] + ext[0], tau[1] - c[1] - g[1] + ext[1]])
+        let mut rhs = [tau[0] - c[0] - g[0], tau[1] - c[1] - g[1]];
+        if f != [0.0, 0.0] {
+            let j = self.jacobian(q);
+            rhs[0] += j[0][0] * f[0] + j[1][0] * f[1];
+            rhs[1] += j[0][1] * f[0] + j[1][1] * f[1];
+        }
+        solve(m, rhs)
     }
 
     /// Smallest effective inertia 1/(M⁻¹)_ii each joint shows over every elbow angle: the constant

@@ -88,6 +88,22 @@ pub struct Trace {
 }
 
 impl Trace {
+    /// An empty trace with room for `n` samples (growing it in the loop costs page faults).
+    pub fn with_capacity(n: usize) -> Self {
+        let v2 = || Vec::with_capacity(n);
+        Trace {
+            t: Vec::with_capacity(n),
+            q: v2(),
+            qd: v2(),
+            motor_angle: v2(),
+            transmitted_torque: v2(),
+            motor_torque: v2(),
+            tip: Vec::new(),
+            contact_force: Vec::new(),
+            pcl_temperature_c: v2(),
+        }
+    }
+
     /// Records one sample; `finish` adds the tip and wall force afterwards (kept out of the loop).
     pub fn push(&mut self, t: f64, q: V2, qd: V2, motor_angle: V2, tau: V2, u: V2, pcl_c: V2) {
         self.t.push(t);
@@ -165,7 +181,7 @@ pub fn cosimulate(
         ports.push(JointPorts { y, u });
     }
     let n = (cfg.duration / h).round() as u64;
-    let mut trace = Trace::default();
+    let mut trace = Trace::with_capacity(n as usize + 1);
     let read = |io: &Exchange| -> [V2; 7] {
         let mut v = [[0.0; 2]; 7];
         for (j, jp) in ports.iter().enumerate() {
@@ -196,6 +212,7 @@ pub fn cosimulate(
             progress(k as f64 / n as f64);
         }
     }
+    progress(1.0);
     // the last communication point (outputs only; the inputs it computes are not used)
     let mut last = Trace::default();
     {
@@ -213,7 +230,6 @@ pub fn cosimulate(
     drop(exchange);
     append(&mut trace, last);
     trace.finish(cfg);
-    progress(1.0);
     Ok(trace)
 }
 
