@@ -9,7 +9,7 @@
 //! exactly the coupling: exchange at communication points, inputs held, one-step delay.
 
 use super::dynamics::ArmConfig;
-use super::sim::{JointProps, Trace};
+use super::sim::{JointOutputs, JointProps, Trace};
 
 type Y = [f64; 8]; // θm1, θm2, θm1', θm2', q1, q2, q1', q2'
 
@@ -52,8 +52,10 @@ pub fn simulate(cfg: &ArmConfig, props: &[JointProps; 2], dt_out: f64, tolerance
     let record = |trace: &mut Trace, t: f64, y: &Y| {
         let (th, thd, q, qd) = ([y[0], y[1]], [y[2], y[3]], [y[4], y[5]], [y[6], y[7]]);
         let tau = [0, 1].map(|i| props[i].stiffness * (th[i] - q[i]) + props[i].damping * (thd[i] - qd[i]));
-        let u = cfg.motor_torque(t, th, thd, [props[0].stiffness, props[1].stiffness]);
-        trace.push(t, q, qd, th, tau, u, [f64::NAN; 2]);
+        let stiffness = [props[0].stiffness, props[1].stiffness];
+        let u = cfg.motor_torque(t, th, thd, stiffness);
+        let y = JointOutputs { q, qd, motor_angle: th, motor_speed: thd, tau, stiffness, pcl_temperature_c: [f64::NAN; 2] };
+        trace.push(t, &y, u);
     };
     record(&mut trace, 0.0, &y);
     let mut dt = 1e-4;

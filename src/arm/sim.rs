@@ -104,15 +104,16 @@ impl Trace {
         }
     }
 
-    /// Records one sample; `finish` adds the tip and wall force afterwards (kept out of the loop).
-    pub fn push(&mut self, t: f64, q: V2, qd: V2, motor_angle: V2, tau: V2, u: V2, pcl_c: V2) {
+    /// Records one sample with the motor torques `u`; `finish` adds the tip and wall force
+    /// afterwards (kept out of the stepping loop).
+    pub fn push(&mut self, t: f64, y: &JointOutputs, u: V2) {
         self.t.push(t);
-        self.q.push(q);
-        self.qd.push(qd);
-        self.motor_angle.push(motor_angle);
-        self.transmitted_torque.push(tau);
+        self.q.push(y.q);
+        self.qd.push(y.qd);
+        self.motor_angle.push(y.motor_angle);
+        self.transmitted_torque.push(y.tau);
         self.motor_torque.push(u);
-        self.pcl_temperature_c.push(pcl_c);
+        self.pcl_temperature_c.push(y.pcl_temperature_c);
     }
 
     pub fn finish(&mut self, cfg: &ArmConfig) {
@@ -131,13 +132,44 @@ struct JointPorts {
     u: [Port; 3],
 }
 
+/// What the master knows about both joints at a communication point (index = joint).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct JointOutputs {
+    pub q: V2,
+    pub qd: V2,
+    pub motor_angle: V2,
+    pub motor_speed: V2,
+    /// Transmitted torque τ_t.
+    pub tau: V2,
+    /// Effective stiffness K_eff (for the controller's deflection compensation).
+    pub stiffness: V2,
+    pub pcl_temperature_c: V2,
+}
+
+impl JointOutputs {
+    /// Gathers the outputs in `OUTPUTS` order from `get`.
+    fn gather(ports: &[JointPorts], get: impl Fn(Port) -> f64) -> Self {
+        let y = |k: usize| [get(ports[0].y[k]), get(ports[1].y[k])];
+        let pcl = y(6);
+        JointOutputs {
+            q: y(0),
+            qd: y(1),
+            motor_angle: y(2),
+            motor_speed: y(3),
+            tau: y(4),
+            stiffness: y(5),
+            pcl_temperature_c: [pcl[0] - ZERO_C, pcl[1] - ZERO_C],
+        }
+    }
+}
+
 /// The arm's exchange at one communication point: what each FMU gets to hold over [t_n, t_n + h].
 /// Returns (motor torques, load torques).
-pub fn master_law(cfg: &ArmConfig, props: &[JointProps; 2], t: f64, q: V2, qd: V2, motor_angle: V2, motor_speed: V2, tau: V2, stiffness: V2) -> (V2, V2) {
-    let a = cfg.acceleration(q, qd, tau);
+pub fn master_law(cfg: &ArmConfig, props: &[JointProps; 2], t: f64, y: &JointOutputs) -> (V2, V2) {
+    let a = cfg.acceleration(y.q, y.qd, y.tau);
     // The FMU's link (inertia J_i) would accelerate at a_i if τ_t stayed at its t_n value.
-    let load = [props[0].coupling_inertia * a[0] - tau[0], props[1].coupling_inertia * a[1] - tau[1]];
-    (cfg.motor_torque(t, motor_angle, motor_speed, stiffness), load)
+    let load = [props[0].coupling_inertia * a[0] - y.tau[0], props[1].coupling_inertia * a[1] - y.tau[1]];
+    (cfg.motor_torque(t, y.motor_angle, y.motor_speed, y.stiffness), load)
 }
 
 /// Co-simulates the arm with communication step `h`, recording every step. `stability_limit`
@@ -169,8 +201,7 @@ pub fn cosimulate(
     let init = cfg.initial_angles([props[0].stiffness, props[1].stiffness]);
     let mut master = Master::new(0.0, None);
     let mut ports = Vec::new();
-    for i in 0..2 {
-        let name = ["shoulder", "elbow"][i];
+    for (i, name) in ["shoulder", "elbow"].into_iter().enumerate() {
         let params = joint_parameters(cfg, i, scenario.pcl_temperature_c[i], Some(init));
         let p = master.add(fmu, name, &params, &INPUTS, &OUTPUTS).map_err(|e| e.to_string())?;
         // thermal quantities change over seconds: read them every 10 ms, not every step
@@ -182,27 +213,18 @@ pub fn cosimulate(
     }
     let n = (cfg.duration / h).round() as u64;
     let mut trace = Trace::with_capacity(n as usize + 1);
-    let read = |io: &Exchange| -> [V2; 7] {
-        let mut v = [[0.0; 2]; 7];
-        for (j, jp) in ports.iter().enumerate() {
-            for k2 in 0..7 {
-                v[k2][j] = io.get(jp.y[k2]);
-            }
-        }
-        v
-    };
     let mut exchange = |t: f64, io: &mut Exchange| -> Result<(), String> {
-        let [q, qd, th, thd, tau, stiff, pcl] = read(io);
-        if !q.iter().chain(qd.iter()).all(|v| v.is_finite() && v.abs() < 1e6) {
+        let y = JointOutputs::gather(&ports, |p| io.get(p));
+        if !y.q.iter().chain(y.qd.iter()).all(|v| v.is_finite() && v.abs() < 1e6) {
             return Err("the arm's state ran away (non-finite or huge joint angles/speeds)".into());
         }
-        let (u, load) = master_law(cfg, &props, t, q, qd, th, thd, tau, stiff);
+        let (u, load) = master_law(cfg, &props, t, &y);
         for i in 0..2 {
             io.set(ports[i].u[0], u[i]);
             io.set(ports[i].u[1], load[i]);
             io.set(ports[i].u[2], props[i].holding_power);
         }
-        trace.push(t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
+        trace.push(t, &y, u);
         Ok(())
     };
     let every = (n / 100).max(1);
@@ -214,31 +236,9 @@ pub fn cosimulate(
     }
     progress(1.0);
     // the last communication point (outputs only; the inputs it computes are not used)
-    let mut last = Trace::default();
-    {
-        let t = master.time();
-        let mut v = [[0.0; 2]; 7];
-        for (j, jp) in ports.iter().enumerate() {
-            for k2 in 0..7 {
-                v[k2][j] = master.get(jp.y[k2]);
-            }
-        }
-        let [q, qd, th, thd, tau, stiff, pcl] = v;
-        let (u, _) = master_law(cfg, &props, t, q, qd, th, thd, tau, stiff);
-        last.push(t, q, qd, th, tau, u, [pcl[0] - ZERO_C, pcl[1] - ZERO_C]);
-    }
-    drop(exchange);
-    append(&mut trace, last);
+    let y = JointOutputs::gather(&ports, |p| master.get(p));
+    let (u, _) = master_law(cfg, &props, master.time(), &y);
+    trace.push(master.time(), &y, u);
     trace.finish(cfg);
     Ok(trace)
-}
-
-fn append(a: &mut Trace, b: Trace) {
-    a.t.extend(b.t);
-    a.q.extend(b.q);
-    a.qd.extend(b.qd);
-    a.motor_angle.extend(b.motor_angle);
-    a.transmitted_torque.extend(b.transmitted_torque);
-    a.motor_torque.extend(b.motor_torque);
-    a.pcl_temperature_c.extend(b.pcl_temperature_c);
 }

@@ -15,7 +15,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::dynamics::{ArmConfig, V2};
-use super::sim::{master_law, JointProps};
+use super::sim::{master_law, JointOutputs, JointProps};
 
 type A8 = SMatrix<f64, 8, 8>;
 
@@ -46,7 +46,9 @@ fn law(cfg: &ArmConfig, props: &[JointProps; 2], t: f64, x: &SVector<f64, 8>) ->
     let q = [x[2], x[6]];
     let qd = [x[3], x[7]];
     let tau = [0, 1].map(|i| props[i].stiffness * (th[i] - q[i]) + props[i].damping * (thd[i] - qd[i]));
-    let (u, l) = master_law(cfg, props, t, q, qd, th, thd, tau, [props[0].stiffness, props[1].stiffness]);
+    let stiffness = [props[0].stiffness, props[1].stiffness];
+    let y = JointOutputs { q, qd, motor_angle: th, motor_speed: thd, tau, stiffness, pcl_temperature_c: [0.0; 2] };
+    let (u, l) = master_law(cfg, props, t, &y);
     SVector::<f64, 4>::from([u[0], l[0], u[1], l[1]])
 }
 
