@@ -3,7 +3,7 @@
 //! step recorded. Median of several runs of 10 simulated seconds (setup included).
 //!
 //! The machine is shared, so wall-clock time includes time spent waiting for a core; the on-CPU
-//! time of this thread (/proc/thread-self/schedstat, ns) is reported alongside. A floor shows what
+//! time of this thread (CLOCK_THREAD_CPUTIME_ID) is reported alongside. A floor shows what
 //! the FMU calls alone cost (two instances: set 2 inputs, doStep, get 5 outputs, no master).
 //!
 //! `cargo run --release -p fmu-build && cargo bench --bench arm`
@@ -19,10 +19,23 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
-/// Nanoseconds this thread has spent on a CPU (None where /proc is not available).
+#[repr(C)]
+struct Timespec {
+    sec: i64,
+    nsec: i64,
+}
+extern "C" {
+    fn clock_gettime(clock: i32, ts: *mut Timespec) -> i32;
+}
+const CLOCK_THREAD_CPUTIME_ID: i32 = 3; // Linux
+
+/// Nanoseconds this thread has spent on a CPU (clock_gettime from the C library std links;
+/// /proc's schedstat is only updated at scheduler ticks, too coarse for runs of milliseconds).
 fn cpu_ns() -> Option<f64> {
-    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
-    s.split_whitespace().next()?.parse().ok()
+    let mut ts = Timespec { sec: 0, nsec: 0 };
+    // SAFETY: clock_gettime writes one timespec (two 64-bit fields on linux x86_64) into `ts`.
+    let rc = unsafe { clock_gettime(CLOCK_THREAD_CPUTIME_ID, &mut ts) };
+    (rc == 0).then(|| ts.sec as f64 * 1e9 + ts.nsec as f64)
 }
 
 /// Runs `f` (which simulates `simulated` seconds) `runs` times: medians of wall and on-CPU RTF.
