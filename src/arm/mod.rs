@@ -268,7 +268,8 @@ pub struct StabilityReport {
     pub estimates_cold: stability::Estimates,
     pub estimates_hot: stability::Estimates,
     /// Nonlinear co-simulation through the FMU (limiting scenario) just below / above the limit:
-    /// growth of the speed amplitude, last 0.5 s over the 0.5 s after the move ends (< 1: decays).
+    /// (step, growth of the speed amplitude: last 0.5 s over the 0.5 s after the move ends, < 1
+    /// decays; infinite, null in JSON, when the run stopped because the state ran away; diverged).
     pub check_below: (f64, f64, bool),
     pub check_above: (f64, f64, bool),
 }
