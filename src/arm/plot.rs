@@ -6,7 +6,7 @@ pub struct Series<'a> {
     pub name: &'a str,
     pub points: Vec<(f64, f64)>,
     pub color: RGBColor,
-    /// Draw markers instead of a line.
+    /// Draw markers instead of a line. An empty name keeps the series out of the legend.
     pub markers: bool,
 }
 
@@ -62,10 +62,10 @@ pub fn chart(path: &std::path::Path, title: &str, xlabel: &str, ylabel: &str, se
     for s in series {
         let color = s.color;
         if s.markers {
-            c.draw_series(s.points.iter().map(|&p| Circle::new(p, 4, color.filled())))
-                .map_err(|x| e(&x))?
-                .label(s.name)
-                .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+            let drawn = c.draw_series(s.points.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|x| e(&x))?;
+            if !s.name.is_empty() {
+                drawn.label(s.name).legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
+            }
         } else {
             c.draw_series(LineSeries::new(s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()), color.stroke_width(2)))
                 .map_err(|x| e(&x))?
