@@ -646,7 +646,8 @@ fn markdown(cfg: &ArmConfig, r: &ArmReport) -> String {
     );
     m += "## Coupling scheme\n\n";
     m += "Jacobi with zero-order hold. At each communication point the master reads from both FMUs the link angle and speed, \
-          the motor angle and speed, the transmitted torque τ_i and the effective stiffness; solves the arm's forward dynamics \
+          the motor angle and speed, the transmitted torque τ_i (every step) and the effective stiffness and PCL temperature \
+          (every 10 ms: they change over seconds); solves the arm's forward dynamics \
           a = M(q)⁻¹(τ − c − g + JᵀF_wall); sends `load_torque_i = J_i a_i − τ_i` (so the FMU's link, of inertia J_i, accelerates \
           as the arm's joint would if τ stayed constant), the PD's `motor_torque_i` and the `heater_power_i`; then steps both FMUs \
           over [t_n, t_n + h] with these inputs held. Delay: one communication step for everything the master computes \
