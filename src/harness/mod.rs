@@ -3,6 +3,7 @@
 //! any number of instances, set/get by name, step, save and restore state. Nothing here links the
 //! Rust model: what is driven is the binary users load.
 
+pub mod cosim;
 pub mod description;
 pub mod simulate;
 
