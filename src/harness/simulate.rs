@@ -123,9 +123,11 @@ pub fn simulate(fmu: &Fmu, o: &SimulateOptions) -> Result<Trajectory, Box<dyn Er
                 inst.set_handle(*h, table.value_at(j, t))?;
             }
         }
-        let h = o.step.min(o.stop_time - t);
-        inst.step(h)?;
-        record(&mut inst, t + h)?;
+        // fmpy's grid: t_k = start + k·step and h = t_(k+1) − t_k, so both drivers pass the FMU
+        // the same (rounded) step sizes.
+        let t_next = (o.start_time + (k + 1) as f64 * o.step).min(o.stop_time);
+        inst.step(t_next - t)?;
+        record(&mut inst, t_next)?;
     }
     inst.terminate()?;
     let mut names = vec!["time".to_string()];
