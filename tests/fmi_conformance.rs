@@ -290,3 +290,31 @@ fn unsupported_capabilities_exist_and_say_so() {
     }
     assert!(last_log(raw).contains("synchronous"));
 }
+
+#[test]
+fn variable_communication_steps_give_the_same_trajectory() {
+    // Inputs held constant: splitting a step changes nothing but rounding, whatever the split.
+    let f = fmu();
+    let trace = |steps: &[f64]| -> Vec<f64> {
+        let mut i = initialized(&f);
+        i.set("motor_torque", 0.7).unwrap();
+        i.set("heater_power", 6.0).unwrap();
+        let mut out = Vec::new();
+        for _ in 0..200 {
+            for &h in steps {
+                i.step(h).unwrap();
+            }
+            out.push(i.get("link_angle").unwrap());
+            out.push(i.get("pcl_temperature").unwrap());
+        }
+        out
+    };
+    let uniform = trace(&[1e-3, 1e-3, 1e-3, 1e-3]);
+    let uneven = trace(&[0.3e-3, 1.7e-3, 0.25e-3, 1.75e-3]);
+    let coarse = trace(&[4e-3]);
+    for other in [&uneven, &coarse] {
+        let err = uniform.iter().zip(other.iter()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(err < 1e-9, "max difference {err:e}");
+    }
+    assert!(uniform[uniform.len() - 2].abs() > 0.1, "the link moved");
+}

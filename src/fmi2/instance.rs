@@ -96,6 +96,21 @@ pub struct Snapshot {
     pub terminated: bool,
 }
 
+impl Snapshot {
+    /// The state right after fmi2Instantiate (and after fmi2Reset).
+    pub fn initial() -> Snapshot {
+        Snapshot {
+            model: Model::default(),
+            phase: Phase::Instantiated,
+            time: 0.0,
+            start_time: 0.0,
+            stop_time: None,
+            last_successful_time: 0.0,
+            terminated: false,
+        }
+    }
+}
+
 pub struct Instance {
     pub name: String,
     log: LogSink,
@@ -167,15 +182,7 @@ impl Instance {
             initial_logging_on: logging_on,
             logging_on,
             categories: LOG_ALL,
-            s: Snapshot {
-                model: Model::default(),
-                phase: Phase::Instantiated,
-                time: 0.0,
-                start_time: 0.0,
-                stop_time: None,
-                last_successful_time: 0.0,
-                terminated: false,
-            },
+            s: Snapshot::initial(),
             last_step_status: Status::Ok,
         })
     }
@@ -270,48 +277,36 @@ impl Instance {
         Status::Ok
     }
 
-    pub fn enter_initialization_mode(&mut self) -> Status {
-        if let Err(s) = self.check("fmi2EnterInitializationMode", allowed::ENTER_INIT) {
+    /// A state-machine transition: check, optionally re-derive initial states, move, log.
+    fn transition(&mut self, function: &str, mask: u8, to: Phase, initialize: bool, event: &str) -> Status {
+        if let Err(s) = self.check(function, mask) {
             return s;
         }
-        self.s.model.initialize();
-        self.s.phase = Phase::InitializationMode;
-        self.log_event("entered initialization mode");
+        if initialize {
+            self.s.model.initialize();
+        }
+        self.s.phase = to;
+        self.log_event(event);
         Status::Ok
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Status {
+        self.transition("fmi2EnterInitializationMode", allowed::ENTER_INIT, Phase::InitializationMode, true, "entered initialization mode")
     }
 
     pub fn exit_initialization_mode(&mut self) -> Status {
-        if let Err(s) = self.check("fmi2ExitInitializationMode", allowed::EXIT_INIT) {
-            return s;
-        }
-        self.s.model.initialize();
-        self.s.phase = Phase::StepComplete;
-        self.log_event("exited initialization mode");
-        Status::Ok
+        self.transition("fmi2ExitInitializationMode", allowed::EXIT_INIT, Phase::StepComplete, true, "exited initialization mode")
     }
 
     pub fn terminate(&mut self) -> Status {
-        if let Err(s) = self.check("fmi2Terminate", allowed::TERMINATE) {
-            return s;
-        }
-        self.s.phase = Phase::Terminated;
-        self.log_event("terminated");
-        Status::Ok
+        self.transition("fmi2Terminate", allowed::TERMINATE, Phase::Terminated, false, "terminated")
     }
 
     pub fn reset(&mut self) -> Status {
         if let Err(s) = self.check("fmi2Reset", allowed::ANY_BUT_FATAL) {
             return s;
         }
-        self.s = Snapshot {
-            model: Model::default(),
-            phase: Phase::Instantiated,
-            time: 0.0,
-            start_time: 0.0,
-            stop_time: None,
-            last_successful_time: 0.0,
-            terminated: false,
-        };
+        self.s = Snapshot::initial();
         self.logging_on = self.initial_logging_on;
         self.categories = LOG_ALL;
         self.last_step_status = Status::Ok;
