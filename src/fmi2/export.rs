@@ -1,5 +1,9 @@
 //! The exported C API. Each function checks its pointers, catches any panic (none may cross the C
 //! boundary: a panic is reported as fmi2Fatal) and delegates to the safe [`Instance`].
+//!
+//! Safety contract of every function: the FMI 2.0 standard's (pointers valid for the sizes given,
+//! a component from this library's fmi2Instantiate, not used concurrently).
+#![allow(clippy::missing_safety_doc)]
 
 use std::ffi::{CStr, CString};
 use std::os::raw::c_char;

@@ -134,9 +134,10 @@ impl Model {
         self.adaptive_step = 0.0;
     }
 
-    /// Transmission coefficients at the current PCL temperature.
+    /// Transmission coefficients at the current PCL temperature (on the same lattice the
+    /// mechanics uses, so outputs and steps share one cached evaluation).
     pub fn coefficients(&mut self) -> Coefficients {
-        self.coefficients_at(self.thermal.pcl_temperature)
+        self.coefficients_at(on_temperature_lattice(self.thermal.pcl_temperature))
     }
 
     fn coefficients_at(&mut self, pcl_temperature: f64) -> Coefficients {
