@@ -10,6 +10,9 @@
 //! - [`harness`]: a safe importer for packaged `.fmu` files.
 //! - [`sweep`], [`calibrate`], [`arm`]: the paper's sweeps, the calibration loop, the arm example.
 
+// `!(x > 0.0)` is used on purpose: it also rejects NaN.
+#![allow(clippy::neg_cmp_op_on_partial_ord)]
+
 pub mod arm;
 pub mod calibrate;
 pub mod fmi2;

@@ -28,8 +28,7 @@ fn hand_stiffness(e_storage_kpa: f64) -> f64 {
 #[test]
 fn static_deflection_is_load_torque_over_effective_stiffness() {
     for (temp, e1) in [(22.0, 985.34), (60.0, 180.0)] {
-        let mut p = Params::default();
-        p.motor_drive = MotorDrive::PrescribedAngle;
+        let p = Params { motor_drive: MotorDrive::PrescribedAngle, ..Params::default() };
         let mut m = at_temperature(p, temp);
         m.inputs.load_torque = 0.3;
         for _ in 0..10_000 {
@@ -65,10 +64,12 @@ fn measured_frequency(m: &mut Model, seconds: f64) -> f64 {
 #[test]
 fn natural_frequencies_match_hand_calculation() {
     // Tiny damping: C = K''/ω with ω = 2π·1 kHz.
-    let mut p = Params::default();
-    p.excitation_frequency = 1000.0;
-    p.initial_link_angle = 0.01;
-    p.motor_drive = MotorDrive::PrescribedAngle;
+    let mut p = Params {
+        excitation_frequency: 1000.0,
+        initial_link_angle: 0.01,
+        motor_drive: MotorDrive::PrescribedAngle,
+        ..Params::default()
+    };
     let k = hand_stiffness(985.34);
     let c = 834.45e3 * 0.064 * 0.02075_f64.powi(2) / (2.0 * std::f64::consts::PI * 1000.0);
     // Link against a held motor: ω_d = √(K/J_l) √(1 − ζ²)
@@ -171,11 +172,13 @@ fn exact_step_matches_fine_reference_over_20_s_cold_and_hot() {
 fn adaptive_step_matches_fine_reference_with_nonlinear_effects() {
     let w = 2.0 * std::f64::consts::PI * 1.0;
     // Prescribed motor (as in calibration): a driven, damped link, not a chaotic free pendulum.
-    let mut p = Params::default();
-    p.motor_drive = MotorDrive::PrescribedAngle;
-    p.coulomb_friction = 0.05;
-    p.gravity_link_mass = 0.3;
-    p.backlash_width = 0.01;
+    let p = Params {
+        motor_drive: MotorDrive::PrescribedAngle,
+        coulomb_friction: 0.05,
+        gravity_link_mass: 0.3,
+        backlash_width: 0.01,
+        ..Params::default()
+    };
     for temp in [22.0, 60.0] {
         let reference = reference_link_angles(&p, temp, prescribed(|t| 0.5 * (w * t).sin()), 20.0);
         let model = model_link_angles(&p, temp, prescribed(|t| 0.5 * (w * t).sin()), 20.0);
@@ -183,9 +186,7 @@ fn adaptive_step_matches_fine_reference_with_nonlinear_effects() {
         assert!(err < 1e-6, "{temp} °C: max |Δθl| = {err:e} rad");
     }
     // Torque-driven with link friction: the free motor makes the run drift, yet no chaos.
-    let mut p = Params::default();
-    p.coulomb_friction = 0.05;
-    p.stribeck_friction = 0.02;
+    let p = Params { coulomb_friction: 0.05, stribeck_friction: 0.02, ..Params::default() };
     for temp in [22.0, 60.0] {
         let reference = reference_link_angles(&p, temp, torque(|t| 1.5 * (w * t).sin()), 20.0);
         let model = model_link_angles(&p, temp, torque(|t| 1.5 * (w * t).sin()), 20.0);
@@ -198,10 +199,12 @@ fn adaptive_step_matches_fine_reference_with_nonlinear_effects() {
 fn stiffest_parameters_stay_exact_and_stable() {
     // Printed Table 2 at its stiffest (cold), a very slow excitation (C = K''/ω ≈ 370 N·m·s/rad)
     // and a light motor: the fast pole is near −4e5 1/s, 400× beyond explicit RK4's limit at 1 ms.
-    let mut p = Params::default();
-    p.material_table = thermovia::model::material::MaterialTable::PrintedExperimental;
-    p.excitation_frequency = 0.01;
-    p.motor_inertia = 1e-3;
+    let mut p = Params {
+        material_table: thermovia::model::material::MaterialTable::PrintedExperimental,
+        excitation_frequency: 0.01,
+        motor_inertia: 1e-3,
+        ..Params::default()
+    };
     let step = || torque(|t| if t < 1.0 { 1.0 } else { -0.5 });
     let coarse = model_link_angles(&p, 22.0, step(), 5.0);
     p.max_internal_step = 1e-5;
@@ -249,9 +252,11 @@ fn heater_energy_equals_stored_plus_lost_to_rounding() {
 
 #[test]
 fn a_step_that_fails_leaves_the_model_unchanged() {
-    let mut p = Params::default();
-    p.coulomb_friction = 0.01;
-    p.solver_tolerance = 1e-30; // unreachable: the adaptive solver must give up, not loop
+    let p = Params {
+        coulomb_friction: 0.01,
+        solver_tolerance: 1e-30, // unreachable: the adaptive solver must give up, not loop
+        ..Params::default()
+    };
     let mut m = at_temperature(p, 22.0);
     m.inputs.motor_torque = 1.0;
     let before = m.clone();

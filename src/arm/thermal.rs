@@ -71,7 +71,7 @@ pub fn switching(
         n += 1;
         let t = n as f64 * dt;
         let (pcl, housing, kv) = (inst.get_handle(tp).map_err(e)?, inst.get_handle(th).map_err(e)?, inst.get_handle(k).map_err(e)?);
-        if n % sample_every == 0 {
+        if n.is_multiple_of(sample_every) {
             r.samples.push([t, pcl - ZERO_C, housing - ZERO_C, kv]);
         }
         match off_at {

@@ -252,7 +252,7 @@ impl Master {
         }
         for p in &mut self.participants {
             p.instance.step(h).map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t, source })?;
-            let slow_too = (self.steps + 1) % p.slow_every == 0;
+            let slow_too = (self.steps + 1).is_multiple_of(p.slow_every);
             p.read(slow_too).map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t + h, source })?;
         }
         self.steps += 1;
