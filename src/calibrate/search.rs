@@ -1,0 +1,88 @@
+//! The loop: fit the nominal model, diagnose, add the best-supported effect, refit everything,
+//! keep it only if it earns its place, repeat until nothing in the library helps.
+
+use super::diagnose::{rank, signatures, Candidate, Signatures};
+use super::fit::{levenberg_marquardt, Effect, Fit, ModelSpec, Problem};
+
+/// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
+/// on the Kass & Raftery (1995) scale (ΔBIC > 10).
+pub const BIC_MARGIN: f64 = 10.0;
+/// Refits tried per round, best-ranked first.
+pub const TRIES_PER_ROUND: usize = 2;
+pub const MAX_EFFECTS: usize = 4;
+pub const MAX_ITERATIONS: usize = 25;
+
+/// One round of diagnosis and what came of it.
+#[derive(Clone, Debug)]
+pub struct Round {
+    pub signatures: Signatures,
+    pub candidates: Vec<Candidate>,
+    /// (effect, BIC before, BIC after, structure ratio before, after, kept)
+    pub attempts: Vec<(Effect, f64, f64, f64, f64, bool)>,
+}
+
+pub struct Outcome {
+    pub baseline: Fit,
+    pub baseline_signatures: Signatures,
+    pub final_fit: Fit,
+    pub final_signatures: Signatures,
+    pub rounds: Vec<Round>,
+    pub unexplained: bool,
+}
+
+pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
+    let spec = ModelSpec { effects: vec![] };
+    let p0 = vec![0.0; spec.n_params(prob.n_groups)];
+    let baseline = levenberg_marquardt(prob, spec, p0, MAX_ITERATIONS)?;
+    let baseline_signatures = signatures(prob, &baseline);
+    let mut current = baseline.clone();
+    let mut sig = baseline_signatures.clone();
+    let mut rounds = Vec::new();
+    // until the residual is white at the noise floor, or nothing in the library earns its place
+    while current.spec.effects.len() < MAX_EFFECTS && !sig.white() {
+        let t = std::time::Instant::now();
+        let candidates = rank(prob, &current, &sig);
+        if std::env::var_os("THERMOVIA_DEBUG").is_some() {
+            eprintln!("rank took {:?}", t.elapsed());
+        }
+        let mut round = Round { signatures: sig.clone(), candidates: candidates.clone(), attempts: vec![] };
+        let mut accepted = None;
+        for c in candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(TRIES_PER_ROUND) {
+            let mut spec = current.spec.clone();
+            spec.effects.push(c.effect);
+            let mut p = current.p.clone();
+            p.extend_from_slice(&c.start);
+            // The moduli fitted without the effect may have absorbed it (friction mimicked by a
+            // softer PCL): also try the table's moduli as the start and keep the better one.
+            let mut p_table = p.clone();
+            p_table[..2 * prob.n_groups].iter_mut().for_each(|x| *x = 0.0);
+            let cost = |q: &[f64]| prob.outputs(&spec, q).map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>()).unwrap_or(f64::INFINITY);
+            if cost(&p_table) < cost(&p) {
+                p = p_table;
+            }
+            let t = std::time::Instant::now();
+            let Ok(refit) = levenberg_marquardt(prob, spec, p, MAX_ITERATIONS) else { continue };
+            if std::env::var_os("THERMOVIA_DEBUG").is_some() {
+                eprintln!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations);
+            }
+            let refit_sig = signatures(prob, &refit);
+            // keep it only if BIC says so and the residual lost structure
+            let keep = refit.bic() < current.bic() - BIC_MARGIN && refit_sig.structure_ratio < sig.structure_ratio;
+            round.attempts.push((c.effect, current.bic(), refit.bic(), sig.structure_ratio, refit_sig.structure_ratio, keep));
+            if keep {
+                accepted = Some((refit, refit_sig));
+                break;
+            }
+        }
+        rounds.push(round);
+        match accepted {
+            Some((f, s)) => {
+                current = f;
+                sig = s;
+            }
+            None => break,
+        }
+    }
+    let unexplained = !sig.white();
+    Ok(Outcome { baseline, baseline_signatures, final_fit: current, final_signatures: sig, rounds, unexplained })
+}
