@@ -9,6 +9,7 @@
 pub mod data;
 pub mod diagnose;
 pub mod fit;
+pub mod report;
 pub mod search;
 pub mod sim;
 pub mod synthetic;
@@ -29,6 +30,9 @@ pub struct CalibrateArgs {
     /// FMU instances simulating in parallel.
     #[arg(long, default_value_t = 2)]
     pub threads: usize,
+    /// Skip the SVG plots (report.json and report.md only).
+    #[arg(long)]
+    pub no_plots: bool,
 }
 
 /// Temperature groups: runs at one nominal temperature share E' and E''. The nominal temperature is
@@ -63,30 +67,60 @@ pub fn sim_input(r: &data::Run) -> sim::SimInput {
     }
 }
 
-pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
+/// Everything `thermovia calibrate` computes, before it is written.
+pub struct Calibration {
+    pub runs: Vec<data::Run>,
+    pub temperatures: Vec<f64>,
+    pub outcome: search::Outcome,
+    pub report: serde_json::Value,
+    pub files: Vec<(String, Vec<u8>)>,
+}
+
+/// Reads the runs, fits, diagnoses, searches the effect library and builds the report files.
+pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error::Error>> {
+    let t0 = std::time::Instant::now();
     let runs = data::read_inputs(&args.inputs)?;
     let fmu = match &args.fmu {
         Some(p) => crate::harness::Fmu::open(p)?,
         None => crate::harness::Fmu::open_default()?,
     };
     let sim = sim::Simulator::new(fmu, args.threads)?;
-    let (group, temps) = group_runs(&runs);
+    let (group, temperatures) = group_runs(&runs);
     let prob = fit::Problem {
         sim: &sim,
         inputs: runs.iter().map(sim_input).collect(),
         measured: runs.iter().map(|r| r.link.clone()).collect(),
         group,
-        n_groups: temps.len(),
+        n_groups: temperatures.len(),
         solver_tolerance: 1e-8,
     };
-    let t0 = std::time::Instant::now();
-    let o = search::calibrate(&prob)?;
-    eprintln!("baseline rmse {:.3e} bic {:.0} struct {:.2} noise {:.3e}", o.baseline.rmse(), o.baseline.bic(), o.baseline_signatures.structure_ratio, o.baseline_signatures.noise_floor);
-    for r in &o.rounds {
-        for c in &r.candidates { eprintln!("  {} {:.3} {:.0} {:?}", c.effect.name(), c.score, c.predicted_delta_bic, c.start); }
-        for a in &r.attempts { eprintln!("  attempt {:?}", a); }
+    let outcome = search::calibrate(&prob)?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
+    let mut files = vec![
+        ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
+        ("report.md".to_string(), report::report_markdown(&report, &outcome).into_bytes()),
+    ];
+    if !args.no_plots {
+        files.extend(report::plots(&runs, &prob, &outcome)?);
     }
-    eprintln!("final {:?} rmse {:.3e} struct {:.2} p {:?} in {:?} sims {}", diagnose::spec_names(&o.final_fit.spec), o.final_fit.rmse(), o.final_signatures.structure_ratio, o.final_fit.p, t0.elapsed(), sim.simulations.load(std::sync::atomic::Ordering::Relaxed));
+    Ok(Calibration { runs, temperatures, outcome, report, files })
+}
+
+pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
+    let c = calibrate(args)?;
+    synthetic::write_atomically(&args.out, &c.files)?;
+    let m = |k: &str| c.report[k]["rmse_rad"].as_f64().unwrap_or(f64::NAN);
+    let added: Vec<&str> = c.outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect();
+    println!(
+        "{} runs: baseline RMSE {:.3e} rad, final {:.3e} rad, added [{}], unexplained {}; report in {}",
+        c.runs.len(),
+        m("baseline"),
+        m("final"),
+        added.join(", "),
+        c.outcome.unexplained,
+        args.out.display()
+    );
     Ok(())
 }
 
