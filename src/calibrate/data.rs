@@ -226,15 +226,29 @@ pub fn dominant_frequency(t: &[f64], x: &[f64]) -> Option<f64> {
         return None;
     }
     let mean = x.iter().sum::<f64>() / n as f64;
+    // variance explained by a least-squares sinusoid at f (exact for a pure sinusoid, unlike
+    // the DFT magnitude, whose peak leaks toward the negative-frequency image on short records)
     let power_every = |f: f64, stride: usize| {
         let w = 2.0 * std::f64::consts::PI * f;
-        let (mut c, mut s) = (0.0, 0.0);
+        let (mut sc, mut ss, mut scc, mut sss, mut scs, mut syc, mut sys, mut m) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for i in (0..n).step_by(stride) {
             let (si, ci) = (w * t[i]).sin_cos();
-            c += (x[i] - mean) * ci;
-            s += (x[i] - mean) * si;
+            let y = x[i] - mean;
+            sc += ci;
+            ss += si;
+            scc += ci * ci;
+            sss += si * si;
+            scs += ci * si;
+            syc += y * ci;
+            sys += y * si;
+            m += 1.0;
         }
-        c * c + s * s
+        let (a, b, c) = (scc - sc * sc / m, sss - ss * ss / m, scs - sc * ss / m);
+        let det = a * b - c * c;
+        if det <= 1e-12 * (a * b).max(1e-300) {
+            return 0.0;
+        }
+        (b * syc * syc - 2.0 * c * syc * sys + a * sys * sys) / det
     };
     let power = |f: f64| power_every(f, 1);
     // coarse grid on at most ~2000 samples (enough below 20 Hz), refined on all of them
