@@ -142,6 +142,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "added_effects": added,
         "final": metrics(prob, &o.final_fit),
         "unexplained": o.unexplained,
+        "pruned_effects": o.pruned.iter().map(|p| json!({"effect": p.0.name(), "bic_with": p.1, "bic_without": p.2})).collect::<Vec<_>>(),
         "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
         "moduli": {"baseline": moduli(prob, &o.baseline, temps), "final": moduli(prob, &o.final_fit, temps)},
@@ -149,7 +150,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "signatures": {"baseline": signature_json(&o.baseline_signatures), "final": signature_json(&o.final_signatures)},
         "method": {
             "fit": "Levenberg–Marquardt on every sample, FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians; covariance σ²(JᵀJ)⁻¹ (σ² = SSE/(N−p); optimistic when the residual is correlated)",
-            "acceptance": format!("ΔBIC < −{} and less low-frequency structure; stop when the residual is white (structure ratio < {})", super::search::BIC_MARGIN, super::diagnose::STRUCTURE_LIMIT),
+            "acceptance": format!("ΔBIC < −{} and at least {:.0}% of the residual's low-frequency structure over white noise removed; stop when the residual is white (structure ratio < {})", super::search::BIC_MARGIN, 100.0 * super::search::STRUCTURE_DROP, super::diagnose::STRUCTURE_LIMIT),
             "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
             "seconds": seconds,
         },
@@ -192,6 +193,9 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     }
     if o.rounds.is_empty() {
         s += "The baseline residual is already white at the noise floor: no effect searched for.\n\n";
+    }
+    for p in &o.pruned {
+        s += &format!("Backward check: **{}** removed again (BIC {:.0} with it, {:.0} without: redundant once the later effects were in).\n\n", p.0.name(), p.1, p.2);
     }
     s += "## Added effects\n\n";
     if o.final_fit.spec.effects.is_empty() {

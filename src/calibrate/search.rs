@@ -7,8 +7,10 @@ use super::fit::{levenberg_marquardt, Effect, Fit, ModelSpec, Problem};
 /// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
 /// on the Kass & Raftery (1995) scale (ΔBIC > 10).
 pub const BIC_MARGIN: f64 = 10.0;
+/// Fraction of the residual's low-frequency structure (over white noise) an effect must remove.
+pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
 /// Refits tried per round, best-ranked first.
-pub const TRIES_PER_ROUND: usize = 2;
+pub const TRIES_PER_ROUND: usize = 3;
 pub const MAX_EFFECTS: usize = 4;
 pub const MAX_ITERATIONS: usize = 25;
 
@@ -27,6 +29,8 @@ pub struct Outcome {
     pub final_fit: Fit,
     pub final_signatures: Signatures,
     pub rounds: Vec<Round>,
+    /// Effects removed again by the backward check: (effect, BIC with it, BIC without).
+    pub pruned: Vec<(Effect, f64, f64)>,
     pub unexplained: bool,
 }
 
@@ -46,7 +50,9 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
             eprintln!("rank took {:?}", t.elapsed());
         }
         let mut round = Round { signatures: sig.clone(), candidates: candidates.clone(), attempts: vec![] };
-        let mut accepted = None;
+        // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
+        // earn their place, the one with the lowest BIC is added.
+        let mut accepted: Option<(Fit, Signatures)> = None;
         for c in candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(TRIES_PER_ROUND) {
             let mut spec = current.spec.clone();
             spec.effects.push(c.effect);
@@ -66,12 +72,20 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
                 eprintln!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations);
             }
             let refit_sig = signatures(prob, &refit);
-            // keep it only if BIC says so and the residual lost structure
-            let keep = refit.bic() < current.bic() - BIC_MARGIN && refit_sig.structure_ratio < sig.structure_ratio;
+            // it earns its place if BIC says so and the residual lost the structure it explained:
+            // at least STRUCTURE_DROP of the low-frequency excess over white noise (BIC alone,
+            // with N = every sample, over-rewards small effects fitting correlated leftovers)
+            let excess = |x: f64| (x - 1.0).max(0.0);
+            let keep = refit.bic() < current.bic() - BIC_MARGIN
+                && excess(refit_sig.structure_ratio) <= (1.0 - STRUCTURE_DROP) * excess(sig.structure_ratio);
             round.attempts.push((c.effect, current.bic(), refit.bic(), sig.structure_ratio, refit_sig.structure_ratio, keep));
-            if keep {
+            if keep && accepted.as_ref().map_or(true, |a| refit.bic() < a.0.bic()) {
                 accepted = Some((refit, refit_sig));
-                break;
+            }
+        }
+        if let Some((f, _)) = &accepted {
+            for a in round.attempts.iter_mut() {
+                a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
             }
         }
         rounds.push(round);
@@ -83,6 +97,30 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
             None => break,
         }
     }
+    // Backward check: an effect added early may be redundant once a later one is in (a Maxwell
+    // branch standing in for link damping). Drop any whose removal does not cost BIC_MARGIN.
+    let mut pruned = Vec::new();
+    let mut changed = current.spec.effects.len() > 1;
+    while changed {
+        changed = false;
+        for &e in current.spec.effects.clone().iter() {
+            let spec = ModelSpec { effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect() };
+            let mut p = current.p[..2 * prob.n_groups].to_vec();
+            for (o, x) in current.spec.offsets(prob.n_groups) {
+                if x != e {
+                    p.extend_from_slice(&current.p[o..o + x.params().len()]);
+                }
+            }
+            let Ok(refit) = levenberg_marquardt(prob, spec, p, MAX_ITERATIONS) else { continue };
+            if refit.bic() < current.bic() + BIC_MARGIN {
+                pruned.push((e, current.bic(), refit.bic()));
+                sig = signatures(prob, &refit);
+                current = refit;
+                changed = current.spec.effects.len() > 1;
+                break;
+            }
+        }
+    }
     let unexplained = !sig.white();
-    Ok(Outcome { baseline, baseline_signatures, final_fit: current, final_signatures: sig, rounds, unexplained })
+    Ok(Outcome { baseline, baseline_signatures, final_fit: current, final_signatures: sig, rounds, pruned, unexplained })
 }

@@ -82,6 +82,20 @@ pub struct SynthArgs {
     pub fmu: Option<PathBuf>,
 }
 
+#[derive(clap::Parser)]
+struct SynthCli {
+    #[command(flatten)]
+    args: SynthArgs,
+}
+
+impl SynthArgs {
+    /// Options as `thermovia synth` would read them from `args` (without the program name).
+    pub fn from_cli(args: &[&str]) -> Result<SynthArgs, clap::Error> {
+        use clap::Parser;
+        SynthCli::try_parse_from(std::iter::once("synth").chain(args.iter().copied())).map(|c| c.args)
+    }
+}
+
 /// splitmix64: a small, well-mixed, seedable generator (Steele, Lea, Flood 2014).
 pub struct SplitMix(u64);
 
