@@ -9,6 +9,7 @@
 pub mod data;
 pub mod diagnose;
 pub mod fit;
+pub mod paper;
 pub mod report;
 pub mod search;
 pub mod sim;
@@ -34,6 +35,10 @@ pub struct CalibrateArgs {
     /// angle before it drives the model; 0 uses the raw samples.
     #[arg(long, default_value_t = 100)]
     pub input_smoothing: usize,
+    /// Run the loop on the paper's summary numbers (shared/data/paper-reported.json) instead of
+    /// run files: writes paper.json and paper.md into --out.
+    #[arg(long)]
+    pub paper: Option<std::path::PathBuf>,
     /// Skip the SVG plots (report.json and report.md only).
     #[arg(long)]
     pub no_plots: bool,
@@ -160,6 +165,23 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
 }
 
 pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
+    if let Some(path) = &args.paper {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+        let source: serde_json::Value = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let fmu = match &args.fmu {
+            Some(p) => crate::harness::Fmu::open(p)?,
+            None => crate::harness::Fmu::open_default()?,
+        };
+        let sim = sim::Simulator::new(fmu, args.threads)?;
+        let (j, md) = paper::run(&sim, &source)?;
+        let files = vec![
+            ("paper.json".to_string(), (serde_json::to_string_pretty(&j)? + "\n").into_bytes()),
+            ("paper.md".to_string(), md.clone().into_bytes()),
+        ];
+        synthetic::write_atomically(&args.out, &files)?;
+        println!("{md}");
+        return Ok(());
+    }
     let c = calibrate(args)?;
     synthetic::write_atomically(&args.out, &c.files)?;
     let m = |k: &str| c.report[k]["rmse_rad"].as_f64().unwrap_or(f64::NAN);
