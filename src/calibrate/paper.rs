@@ -123,7 +123,7 @@ fn with(effect: Effect, v: f64) -> EffectValues {
 /// Parameter scan range of each effect (log-spaced), SI.
 fn range(effect: Effect) -> (f64, f64, &'static str) {
     match effect {
-        Effect::CoulombFriction => (1e-3, 2.0, "torque_nm"),
+        Effect::CoulombFriction => (1e-3, 5.0, "torque_nm"),
         Effect::Backlash => (1e-4, 0.3, "width_rad"),
         Effect::Gravity => (1e-2, 10.0, "mgl_nm"),
         Effect::LinkDamping => (1e-3, 5.0, "damping_nms"),

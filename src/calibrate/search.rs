@@ -13,6 +13,9 @@ pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
 pub const TRIES_PER_ROUND: usize = 3;
 pub const MAX_EFFECTS: usize = 4;
 pub const MAX_ITERATIONS: usize = 25;
+/// Levenberg–Marquardt iterations a shortlisted candidate gets before the comparison; the
+/// winner then runs to convergence (speed: most of a search is spent on losers).
+pub const SCREEN_ITERATIONS: usize = 4;
 
 /// One round of diagnosis and what came of it.
 #[derive(Clone, Debug)]
@@ -67,7 +70,7 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
                 p = p_table;
             }
             let t = std::time::Instant::now();
-            let Ok(refit) = levenberg_marquardt(prob, spec, p, MAX_ITERATIONS) else { continue };
+            let Ok(refit) = levenberg_marquardt(prob, spec, p, SCREEN_ITERATIONS) else { continue };
             if std::env::var_os("THERMOVIA_DEBUG").is_some() {
                 eprintln!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations);
             }
@@ -86,6 +89,17 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
         if let Some((f, _)) = &accepted {
             for a in round.attempts.iter_mut() {
                 a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
+            }
+        }
+        // the winner runs to convergence
+        if let Some((f, _)) = &accepted {
+            if f.iterations >= SCREEN_ITERATIONS {
+                if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
+                    if done.sse <= f.sse {
+                        let s = signatures(prob, &done);
+                        accepted = Some((done, s));
+                    }
+                }
             }
         }
         rounds.push(round);
