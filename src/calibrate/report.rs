@@ -186,7 +186,9 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
                 if a.5 { "kept" } else { "rejected" }
             );
         }
-        if r.attempts.is_empty() {
+        if r.attempts.is_empty() && r.signatures.white() {
+            s += "\nThe residual is white at the noise floor: nothing to add.\n";
+        } else if r.attempts.is_empty() {
             s += "\nNo candidate predicted a BIC gain worth a refit.\n";
         }
         s += "\n";

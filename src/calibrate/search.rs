@@ -46,7 +46,9 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
     let mut sig = baseline_signatures.clone();
     let mut rounds = Vec::new();
     // until the residual is white at the noise floor, or nothing in the library earns its place
-    while current.spec.effects.len() < MAX_EFFECTS && !sig.white() {
+    // The baseline is always diagnosed (the ranking and its evidence are reported even for a
+    // white residual); refits happen only while structure remains.
+    while current.spec.effects.len() < MAX_EFFECTS && (rounds.is_empty() || !sig.white()) {
         let t = std::time::Instant::now();
         let candidates = rank(prob, &current, &sig);
         if std::env::var_os("THERMOVIA_DEBUG").is_some() {
@@ -56,7 +58,8 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
         // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
         // earn their place, the one with the lowest BIC is added.
         let mut accepted: Option<(Fit, Signatures)> = None;
-        for c in candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(TRIES_PER_ROUND) {
+        let shortlist = if sig.white() { 0 } else { TRIES_PER_ROUND };
+        for c in candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(shortlist) {
             let mut spec = current.spec.clone();
             spec.effects.push(c.effect);
             let mut p = current.p.clone();
