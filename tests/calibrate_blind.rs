@@ -57,9 +57,31 @@ fn check_single(name: &str, truth: &[&str], effect: &str, parameter: &str, value
     assert!(fin < base, "the added effect must lower the error");
 }
 
+/// The keys interfaces.md fixes for report.json.
+fn check_schema(r: &serde_json::Value) {
+    for run in r["runs"].as_array().unwrap() {
+        assert!(run["file"].is_string() && run["temperature_c"].is_f64() && run["frequency_hz"].is_f64() && run["samples"].is_u64(), "{run}");
+    }
+    for k in ["baseline", "final"] {
+        for f in ["rmse_rad", "nrmse", "fit_percent", "bic"] {
+            assert!(r[k][f].is_f64(), "{k}.{f}");
+        }
+    }
+    for d in r["diagnosis"].as_array().unwrap() {
+        assert!(d["effect"].is_string() && d["score"].is_f64() && d["evidence"].is_string(), "{d}");
+    }
+    for e in r["added_effects"].as_array().unwrap() {
+        assert!(e["effect"].is_string() && e["parameters"].is_object(), "{e}");
+    }
+    assert!(r["unexplained"].is_boolean());
+}
+
 #[test]
 fn clean_data_get_no_effect() {
     let (c, synth) = blind("clean", &[]);
+    check_schema(&c.report);
+    assert_eq!(c.report["runs"].as_array().unwrap().len(), 4);
+    assert_eq!(c.report["diagnosis"].as_array().unwrap().len(), 6, "the baseline is diagnosed even when white");
     assert!(added(&c).is_empty(), "{}", c.report["diagnosis"]);
     assert_eq!(c.report["unexplained"], false);
     let fin = c.report["final"]["rmse_rad"].as_f64().unwrap();
