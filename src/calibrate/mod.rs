@@ -89,7 +89,8 @@ fn savitzky_golay_weights(m: usize, order: usize) -> Vec<f64> {
     (0..rows).map(|i| pinv[(0, i)]).collect()
 }
 
-/// Zero-phase quintic Savitzky–Golay smoothing over 2m+1 samples (the window shrinks
+/// Zero-phase quintic Savitzky–Golay smoothing over 2m+1 samples, by sample index (uneven
+/// sampling is smoothed as if even; the window shrinks
 /// symmetrically at the ends). Quintics pass unchanged, so a 0.5–1 Hz sinusoid keeps its
 /// amplitude to O((ω m Δt)⁶).
 pub fn savitzky_golay(x: &[f64], half: usize) -> Vec<f64> {
