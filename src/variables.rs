@@ -218,6 +218,8 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(207, pcl_radius, Fixed, "m", Gt(0.0), None, "r_p, mean distance of the PCL from the axis", "PAPER Table 1: 20.75 mm"),
     real_param!(208, pcl_shape_factor, Fixed, "m", Gt(0.0), None, "κ = 3A/L0, PCL cavities' area over thickness", "EST: A ≈ 143 mm², L0 ≈ 6.7 mm per cavity, so cold PCL adds ~4× the spring stiffness"),
     real_param!(209, excitation_frequency, Tunable, "Hz", Gt(0.0), None, "Frequency of the harmonic run: C = K''/ω (hysteretic loss)", "PAPER: 0.5 and 1 Hz"),
+    real_param!(210, storage_modulus_scale, Tunable, "", Gt(0.0), None, "Multiplies E'(T) of the material table (calibration of the storage modulus)", "CALIBRATION: 1 = the table as it is"),
+    real_param!(211, loss_modulus_scale, Tunable, "", Gt(0.0), None, "Multiplies E''(T) of the material table (calibration of the loss modulus)", "CALIBRATION: 1 = the table as it is"),
     // ---- effects, all off by default
     real_param!(220, maxwell_stiffness, Fixed, "N.m/rad", Ge(0.0), None, "K_M of a Maxwell branch (effect frequency_dependent_modulus)", "EFFECT: off"),
     real_param!(221, maxwell_relaxation_time, Fixed, "s", Gt(0.0), None, "λ of the Maxwell branch", "EFFECT: 0.1 s placeholder while K_M = 0"),

@@ -38,6 +38,7 @@ pub struct Coefficients {
 impl Coefficients {
     pub fn at(p: &Params, pcl_temperature_k: f64) -> Self {
         let (e1, e2) = p.material_table.moduli_pa(pcl_temperature_k - super::params::ZERO_CELSIUS);
+        let (e1, e2) = (e1 * p.storage_modulus_scale, e2 * p.loss_modulus_scale);
         let kappa = p.modulus_to_torsion();
         let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
         Coefficients {

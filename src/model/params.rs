@@ -37,6 +37,9 @@ pub struct Params {
     pub pcl_shape_factor: f64,
     pub material_table: MaterialTable,
     pub excitation_frequency: f64,
+    /// Multiplies the table's E' and E'' (calibration: measured moduli per run).
+    pub storage_modulus_scale: f64,
+    pub loss_modulus_scale: f64,
     // effects (all off by default)
     pub maxwell_stiffness: f64,
     pub maxwell_relaxation_time: f64,
@@ -88,6 +91,8 @@ impl Default for Params {
             pcl_shape_factor: 0.064,
             material_table: MaterialTable::RepairedExperimental,
             excitation_frequency: 0.5,
+            storage_modulus_scale: 1.0,
+            loss_modulus_scale: 1.0,
             maxwell_stiffness: 0.0,
             maxwell_relaxation_time: 0.1,
             coulomb_friction: 0.0,

@@ -1,0 +1,372 @@
+//! Residual analysis as a system-identification engineer does it, and ranking of the effect
+//! library (docs/physics.md §8).
+//!
+//! Two kinds of evidence: (1) signatures of the residual e = y − ŷ itself: harmonic content over
+//! whole cycles (DC, 1ω, 2ω, 3ω, 5ω), whiteness (autocorrelation; low-frequency structure against
+//! the noise floor), correlation with candidate regressors (sign of link speed, sin and cos of the
+//! link angle, the dead-zone signature sign of motor speed, time within the run), and patterns
+//! across frequency and temperature; (2) a score test per effect: the FMU's sensitivity of the
+//! link angle to the effect's parameters at the current fit, projected on the residual orthogonal
+//! to the parameters already fitted. That projection predicts how much of the residual the effect
+//! can explain and with what value (one Gauss–Newton step from "off"), which ranks the candidates.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::fit::{spd_inverse, Effect, Fit, ModelSpec, Problem, MAXWELL_TIME_GRID};
+
+/// Window of the moving average that exposes low-frequency structure, samples.
+pub const STRUCTURE_WINDOW: usize = 25;
+/// Smoothed residual above this many times the white-noise expectation is "structure".
+pub const STRUCTURE_LIMIT: f64 = 3.0;
+
+/// Per-run residual statistics.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct RunResidual {
+    pub rmse: f64,
+    /// Amplitudes of DC, 1ω, 2ω, 3ω, 5ω over whole cycles after the first, rad.
+    pub harmonics: [f64; 5],
+    /// 1ω component in phase with the motor's fundamental and in quadrature (leading), rad.
+    pub fundamental_in_phase: f64,
+    pub fundamental_quadrature: f64,
+    /// RMS of the residual over the first and last third of the run (after the first cycle).
+    pub early_rms: f64,
+    pub late_rms: f64,
+}
+
+/// Residual signatures pooled over runs.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Signatures {
+    pub rmse: f64,
+    /// Noise floor estimated from the data alone: var(Δ²y)/6 of the measured link angle.
+    pub noise_floor: f64,
+    /// RMS of the 25-sample moving average of e over σ̂/√25 (≈ 1 for white noise).
+    pub structure_ratio: f64,
+    pub autocorrelation: Vec<(usize, f64)>,
+    pub corr_sign_link_speed: f64,
+    pub corr_sin_link_angle: f64,
+    pub corr_cos_link_angle: f64,
+    pub corr_dead_zone: f64,
+    pub corr_time: f64,
+    pub runs: Vec<RunResidual>,
+}
+
+impl Signatures {
+    pub fn white(&self) -> bool {
+        self.structure_ratio < STRUCTURE_LIMIT
+    }
+}
+
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma).powi(2);
+        sbb += (y - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+fn sign_of_slope(x: &[f64], k: usize, half: usize) -> f64 {
+    let a = x[k.saturating_sub(half)];
+    let b = x[(k + half).min(x.len() - 1)];
+    (b - a).signum()
+}
+
+/// Least-squares harmonics of `e` on [t0, t1) at multiples of `w`: returns (DC, [(cos, sin) per harmonic]).
+fn harmonics(t: &[f64], e: &[f64], w: f64, orders: &[usize], t0: f64, t1: f64) -> (f64, Vec<(f64, f64)>) {
+    let idx: Vec<usize> = (0..t.len()).filter(|&k| t[k] >= t0 && t[k] < t1).collect();
+    let m = 1 + 2 * orders.len();
+    if idx.len() <= m {
+        return (0.0, vec![(0.0, 0.0); orders.len()]);
+    }
+    let x = DMatrix::from_fn(idx.len(), m, |i, j| {
+        let tt = t[idx[i]];
+        if j == 0 {
+            1.0
+        } else {
+            let k = orders[(j - 1) / 2] as f64;
+            if (j - 1) % 2 == 0 { (k * w * tt).cos() } else { (k * w * tt).sin() }
+        }
+    });
+    let y = DVector::from_iterator(idx.len(), idx.iter().map(|&k| e[k]));
+    let a = x.transpose() * &x;
+    let beta = spd_inverse(&a) * (x.transpose() * y);
+    (beta[0], orders.iter().enumerate().map(|(i, _)| (beta[1 + 2 * i], beta[2 + 2 * i])).collect())
+}
+
+pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
+    let mut offset = 0;
+    let (mut all_e, mut speed, mut sinl, mut cosl, mut dead, mut time) = (vec![], vec![], vec![], vec![], vec![], vec![]);
+    let mut runs = Vec::new();
+    let mut noise_num = 0.0f64;
+    let mut noise_den = 0.0f64;
+    let mut smooth_sq = 0.0;
+    let mut smooth_n = 0.0f64;
+    let mut acf: Vec<(usize, f64, f64)> = [1usize, 2, 5, 10, 50].iter().map(|&l| (l, 0.0, 0.0)).collect();
+    for (r, inp) in prob.inputs.iter().enumerate() {
+        let y = &prob.measured[r];
+        let n = y.len();
+        let e = &fit.residual[offset..offset + n];
+        offset += n;
+        let model = &fit.outputs[r];
+        let t = &inp.time;
+        for k in 1..n - 1 {
+            noise_num += (y[k + 1] - 2.0 * y[k] + y[k - 1]).powi(2);
+            noise_den += 6.0;
+        }
+        let span = t[n - 1] - t[0];
+        for k in 0..n {
+            all_e.push(e[k]);
+            speed.push(sign_of_slope(model, k, 1));
+            sinl.push(y[k].sin());
+            cosl.push(y[k].cos());
+            dead.push(sign_of_slope(&inp.motor, k, 5));
+            time.push((t[k] - t[0]) / span);
+        }
+        let mut acc = 0.0;
+        let w = STRUCTURE_WINDOW;
+        for k in 0..n {
+            acc += e[k];
+            if k >= w {
+                acc -= e[k - w];
+            }
+            if k + 1 >= w {
+                smooth_sq += (acc / w as f64).powi(2);
+                smooth_n += 1.0;
+            }
+        }
+        let var: f64 = e.iter().map(|x| x * x).sum::<f64>();
+        for (lag, num, den) in acf.iter_mut() {
+            if *lag < n {
+                *num += (0..n - *lag).map(|k| e[k] * e[k + *lag]).sum::<f64>();
+                *den += var;
+            }
+        }
+        // whole cycles after the first
+        let f = inp.frequency_hz;
+        let period = 1.0 / f;
+        let cycles = ((span - period) / period).floor().max(0.0);
+        let (t0, t1) = (t[0] + period, t[0] + period * (1.0 + cycles));
+        let w0 = 2.0 * std::f64::consts::PI * f;
+        let (dc, hs) = harmonics(t, e, w0, &[1, 2, 3, 5], t0, t1);
+        let (_, motor_h) = harmonics(t, &inp.motor, w0, &[1], t0, t1);
+        // phase of the residual's fundamental relative to the motor's
+        let (mc, ms) = motor_h[0];
+        let mamp = mc.hypot(ms).max(1e-300);
+        let (ec, es) = hs[0];
+        // motor ≈ A sin(wt + φ) with (cos, sin) coefficients (mc, ms): in-phase unit (ms, mc)/A
+        let in_phase = (es * ms + ec * mc) / mamp;
+        let quadrature = (ec * ms - es * mc) / mamp;
+        let third = (t1 - t0) / 3.0;
+        let rms_between = |a: f64, b: f64| {
+            let v: Vec<f64> = (0..n).filter(|&k| t[k] >= a && t[k] < b).map(|k| e[k] * e[k]).collect();
+            if v.is_empty() { 0.0 } else { (v.iter().sum::<f64>() / v.len() as f64).sqrt() }
+        };
+        runs.push(RunResidual {
+            rmse: (e.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt(),
+            harmonics: [dc.abs(), hs[0].0.hypot(hs[0].1), hs[1].0.hypot(hs[1].1), hs[2].0.hypot(hs[2].1), hs[3].0.hypot(hs[3].1)],
+            fundamental_in_phase: in_phase,
+            fundamental_quadrature: quadrature,
+            early_rms: rms_between(t0, t0 + third),
+            late_rms: rms_between(t1 - third, t1),
+        });
+    }
+    let noise_floor = (noise_num / noise_den.max(1.0)).sqrt();
+    let smooth_rms = (smooth_sq / smooth_n.max(1.0)).sqrt();
+    Signatures {
+        rmse: fit.rmse(),
+        noise_floor,
+        structure_ratio: smooth_rms / (noise_floor / (STRUCTURE_WINDOW as f64).sqrt()),
+        autocorrelation: acf.into_iter().map(|(l, a, b)| (l, if b > 0.0 { a / b } else { 0.0 })).collect(),
+        corr_sign_link_speed: corr(&all_e, &speed),
+        corr_sin_link_angle: corr(&all_e, &sinl),
+        corr_cos_link_angle: corr(&all_e, &cosl),
+        corr_dead_zone: corr(&all_e, &dead),
+        corr_time: corr(&all_e, &time),
+        runs,
+    }
+}
+
+/// One ranked candidate.
+#[derive(Clone, Debug)]
+pub struct Candidate {
+    pub effect: Effect,
+    /// Fraction of the residual's sum of squares the effect explains (linearised), 0–1.
+    pub score: f64,
+    /// BIC change predicted by the linearised fit.
+    pub predicted_delta_bic: f64,
+    /// Starting values of the effect's internal parameters for the refit.
+    pub start: Vec<f64>,
+    pub evidence: String,
+}
+
+/// Residual sum of squares after the linear least-squares fit of r on the columns of m.
+fn projected(m: &DMatrix<f64>, r: &DVector<f64>) -> (f64, DVector<f64>) {
+    let a = m.transpose() * m;
+    let g = m.transpose() * r;
+    let beta = spd_inverse(&a) * &g;
+    let fitted = m * &beta;
+    ((r - fitted).norm_squared(), beta)
+}
+
+/// Score test of every effect not yet in the model; best first.
+pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
+    let n = fit.n as f64;
+    let r = DVector::from_column_slice(&fit.residual);
+    let (sse_now, _) = projected(&fit.jacobian, &r);
+    // a lag behind a constant thermocouple changes nothing: no simulation needed to know that
+    let heating = thermocouple_varies(prob);
+    let mut out = Vec::new();
+    for effect in Effect::ALL {
+        if fit.spec.effects.contains(&effect) {
+            continue;
+        }
+        let mut spec = fit.spec.clone();
+        spec.effects.push(effect);
+        let base = fit.p.len();
+        let k = effect.params().len();
+        // Secant probes: the effect "off" against the effect at a few sizes (one Gauss–Newton
+        // step would be blind to effects that are not smooth at zero, such as a dead zone);
+        // the Maxwell branch's λ is scanned over a grid with K_M probed.
+        let mut settings: Vec<(f64, f64)> = Vec::new(); // (size factor, λ)
+        match effect {
+            Effect::FrequencyDependentModulus => settings.extend(MAXWELL_TIME_GRID.iter().map(|&l| (1.0, l))),
+            Effect::CoulombFriction | Effect::Backlash => settings.extend([1.0, 5.0].map(|f| (f, f64::NAN))),
+            Effect::ThermalLag if !heating => {}
+            Effect::Gravity | Effect::LinkDamping | Effect::ThermalLag => settings.push((1.0, f64::NAN)),
+        }
+        let mut best: Option<(f64, Vec<f64>)> = None;
+        for (size, lam) in settings {
+            let mut p0 = fit.p.clone();
+            p0.extend(std::iter::repeat(0.0).take(k));
+            let probe_cols: Vec<usize> = if effect == Effect::FrequencyDependentModulus {
+                p0[base + 1] = lam.ln();
+                vec![base]
+            } else {
+                (base..base + k).collect()
+            };
+            let step = |j: usize| size * effect.params()[j - base].1;
+            let jobs: Vec<_> = probe_cols
+                .iter()
+                .flat_map(|&j| {
+                    let mut q = p0.clone();
+                    q[j] += step(j);
+                    let spec = &spec;
+                    (0..prob.inputs.len()).map(move |run| (run, prob.run_model(spec, &q, run))).collect::<Vec<_>>()
+                })
+                .collect();
+            let res = prob.sim.run_jobs(&prob.inputs, &jobs);
+            if res.iter().any(|r| r.is_err()) {
+                continue;
+            }
+            let mut s = DMatrix::zeros(fit.n, probe_cols.len());
+            for (ci, &j) in probe_cols.iter().enumerate() {
+                let h = step(j);
+                let mut row = 0;
+                for run in 0..prob.inputs.len() {
+                    let out = res[ci * prob.inputs.len() + run].as_ref().unwrap();
+                    for (a, b) in out.iter().zip(&fit.outputs[run]) {
+                        s[(row, ci)] = (a - b) / h;
+                        row += 1;
+                    }
+                }
+            }
+            let m = DMatrix::from_fn(fit.n, base + probe_cols.len(), |i, j| if j < base { fit.jacobian[(i, j)] } else { s[(i, j - base)] });
+            let (sse_aug, beta) = projected(&m, &r);
+            let mut start = p0[base..].to_vec();
+            let mut physical = true;
+            for (ci, &j) in probe_cols.iter().enumerate() {
+                start[j - base] = p0[j] + beta[base + ci];
+                if effect.params()[j - base].2.is_some_and(|b| start[j - base] < b) {
+                    physical = false;
+                }
+            }
+            let gain = if physical { (sse_now - sse_aug).max(0.0) } else { 0.0 };
+            if best.as_ref().map_or(true, |b| gain > b.0) {
+                best = Some((gain, start));
+            }
+        }
+        let (gain, start) = best.unwrap_or((0.0, vec![0.0; k]));
+        let score = gain / sse_now.max(1e-300);
+        let predicted_delta_bic = n * ((sse_now - gain) / sse_now).max(1e-300).ln() + k as f64 * n.ln();
+        let evidence = evidence_text(prob, effect, sig, score, predicted_delta_bic, &start);
+        out.push(Candidate { effect, score, predicted_delta_bic, start, evidence });
+    }
+    out.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(std::cmp::Ordering::Equal));
+    out
+}
+
+/// True when some run's thermocouple moves by more than 0.05 K.
+pub fn thermocouple_varies(prob: &Problem) -> bool {
+    prob.inputs.iter().any(|i| i.housing_k.iter().any(|&t| (t - i.housing_k[0]).abs() > 0.05))
+}
+
+fn mean(v: impl Iterator<Item = f64>) -> f64 {
+    let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+    if n == 0 { 0.0 } else { s / n as f64 }
+}
+
+fn evidence_text(prob: &Problem, effect: Effect, sig: &Signatures, score: f64, dbic: f64, start: &[f64]) -> String {
+    let runs = &sig.runs;
+    let h = |i: usize| mean(runs.iter().map(|r| r.harmonics[i]));
+    let ratio3 = h(3) / h(1).max(1e-300);
+    let head = format!(
+        "explains {:.1}% of the residual sum of squares (FMU sensitivity projected on the residual; predicted ΔBIC {:+.0}); ",
+        100.0 * score,
+        dbic
+    );
+    let body = match effect {
+        Effect::CoulombFriction => format!(
+            "corr(e, sign θl') = {:+.2}; odd harmonics 3ω/1ω = {:.2}, 5ω = {:.2e} rad; linearised torque {:.3} N·m",
+            sig.corr_sign_link_speed, ratio3, h(4), start[0]
+        ),
+        Effect::Backlash => format!(
+            "dead-zone signature corr(e, sign θm') = {:+.2}; 3ω/1ω = {:.2}; linearised width {:.2e} rad",
+            sig.corr_dead_zone, ratio3, start[0]
+        ),
+        Effect::Gravity => format!(
+            "corr(e, sin θl) = {:+.2}, corr(e, cos θl) = {:+.2}; DC {:.2e} rad; 3ω/1ω = {:.2}; linearised m·g·d = {:.3} N·m, offset {:+.3} rad",
+            sig.corr_sin_link_angle, sig.corr_cos_link_angle, h(0), ratio3, start[0].hypot(start[1]), start[1].atan2(start[0])
+        ),
+        Effect::LinkDamping => format!(
+            "1ω quadrature residual mean {:+.2e} rad (in phase {:+.2e}); linearised damping {:.3} N·m·s/rad",
+            mean(runs.iter().map(|r| r.fundamental_quadrature)),
+            mean(runs.iter().map(|r| r.fundamental_in_phase)),
+            start[0]
+        ),
+        Effect::ThermalLag => {
+            let drift = mean(runs.iter().map(|r| r.early_rms / r.late_rms.max(1e-300)));
+            let heating = thermocouple_varies(prob);
+            format!(
+                "corr(e, time in run) = {:+.2}; early/late residual RMS = {:.2}; thermocouple {} within runs; linearised time constant {:.2} s",
+                sig.corr_time, drift, if heating { "varies" } else { "is constant (no lag can show)" }, start[0]
+            )
+        }
+        Effect::FrequencyDependentModulus => {
+            let mut pairs = Vec::new();
+            for g in 0..prob.n_groups {
+                let ip: Vec<(f64, f64)> = (0..prob.inputs.len())
+                    .filter(|&r| prob.group[r] == g)
+                    .map(|r| (prob.inputs[r].frequency_hz, runs[r].fundamental_in_phase))
+                    .collect();
+                if ip.len() > 1 {
+                    pairs.push(ip.iter().map(|(f, v)| format!("{f} Hz {v:+.1e}")).collect::<Vec<_>>().join(" / "));
+                }
+            }
+            let text = if pairs.is_empty() { "only one frequency per temperature: cannot separate".to_string() } else { pairs.join("; ") };
+            format!("1ω in-phase residual across frequencies at each temperature: {text}; linearised K_M = {:.3} N·m/rad at λ = {:.3} s", start[0], start[1].exp())
+        }
+    };
+    head + &body
+}
+
+/// Report-friendly spec of a model.
+pub fn spec_names(spec: &ModelSpec) -> Vec<&'static str> {
+    spec.effects.iter().map(|e| e.name()).collect()
+}

@@ -1,0 +1,340 @@
+//! report.json (interfaces.md), report.md and SVG plots, all built in memory and written at once.
+
+use plotters::prelude::*;
+use serde_json::{json, Map, Value};
+
+use super::data::Run;
+use super::diagnose::Signatures;
+use super::fit::{Effect, Fit, Problem};
+use super::search::Outcome;
+
+/// Error metrics of a fit over every sample used.
+pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
+    let y: Vec<f64> = prob.measured.iter().flatten().copied().collect();
+    let n = y.len() as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let spread = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+    let err = fit.sse.sqrt();
+    json!({
+        "rmse_rad": fit.rmse(),
+        "nrmse": fit.rmse() / (spread / n.sqrt()),
+        "fit_percent": 100.0 * (1.0 - err / spread),
+        "bic": fit.bic(),
+        "parameters": fit.p.len(),
+        "samples": fit.n,
+    })
+}
+
+/// (name, value, standard error) of an effect's parameters in the SI units of interfaces.md.
+pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f64)> {
+    let (o, _) = fit.spec.offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2)
+        .into_iter()
+        .find(|(_, e)| *e == effect)
+        .expect("effect in the fit");
+    let v = &fit.p[o..];
+    let c = |i: usize, j: usize| fit.covariance[(o + i, o + j)];
+    match effect {
+        Effect::CoulombFriction => vec![("torque_nm", v[0], c(0, 0).sqrt())],
+        Effect::Backlash => vec![("width_rad", v[0], c(0, 0).sqrt())],
+        Effect::LinkDamping => vec![("damping_nms", v[0], c(0, 0).sqrt())],
+        Effect::ThermalLag => vec![("time_constant_s", v[0], c(0, 0).sqrt())],
+        Effect::Gravity => {
+            let (a, b) = (v[0], v[1]);
+            let m = a.hypot(b).max(1e-300);
+            // delta method through (a, b) → (|·|, atan2)
+            let gm = [a / m, b / m];
+            let go = [-b / (m * m), a / (m * m)];
+            let var = |g: [f64; 2]| g[0] * g[0] * c(0, 0) + 2.0 * g[0] * g[1] * c(0, 1) + g[1] * g[1] * c(1, 1);
+            vec![("mgl_nm", m, var(gm).max(0.0).sqrt()), ("offset_rad", b.atan2(a), var(go).max(0.0).sqrt())]
+        }
+        Effect::FrequencyDependentModulus => {
+            let lam = v[1].exp();
+            vec![("stiffness_nm_per_rad", v[0], c(0, 0).sqrt()), ("relaxation_time_s", lam, lam * c(1, 1).sqrt())]
+        }
+    }
+}
+
+fn moduli(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
+    Value::Array(
+        (0..prob.n_groups)
+            .map(|g| {
+                let (s1, s2) = (fit.p[2 * g], fit.p[2 * g + 1]);
+                json!({
+                    "temperature_c": temps[g],
+                    "storage_modulus_scale": s1.exp(),
+                    "storage_modulus_scale_std": s1.exp() * fit.std_err(2 * g),
+                    "loss_modulus_scale": s2.exp(),
+                    "loss_modulus_scale_std": s2.exp() * fit.std_err(2 * g + 1),
+                    "at_bound": s1.abs() >= super::fit::MODULUS_SCALE_LIMIT - 1e-9 || s2.abs() >= super::fit::MODULUS_SCALE_LIMIT - 1e-9,
+                })
+            })
+            .collect(),
+    )
+}
+
+fn signature_json(s: &Signatures) -> Value {
+    serde_json::to_value(s).unwrap_or(Value::Null)
+}
+
+/// Words for what is left in a residual that no effect explained.
+pub fn remaining_structure(s: &Signatures) -> String {
+    let h = |i: usize| s.runs.iter().map(|r| r.harmonics[i]).sum::<f64>() / s.runs.len() as f64;
+    format!(
+        "residual RMS {:.2e} rad against a noise floor of {:.2e} rad; low-frequency structure {:.1}× white noise (limit {}); \
+         mean harmonics DC {:.1e}, 1ω {:.1e}, 2ω {:.1e}, 3ω {:.1e}, 5ω {:.1e} rad; corr with sign θl' {:+.2}, sin θl {:+.2}, \
+         sign θm' {:+.2}, time {:+.2}; lag-1 autocorrelation {:+.2}",
+        s.rmse,
+        s.noise_floor,
+        s.structure_ratio,
+        super::diagnose::STRUCTURE_LIMIT,
+        h(0),
+        h(1),
+        h(2),
+        h(3),
+        h(4),
+        s.corr_sign_link_speed,
+        s.corr_sin_link_angle,
+        s.corr_dead_zone,
+        s.corr_time,
+        s.autocorrelation.first().map(|a| a.1).unwrap_or(0.0)
+    )
+}
+
+pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], seconds: f64) -> Value {
+    let runs_json: Vec<Value> = runs
+        .iter()
+        .map(|r| json!({"file": r.name(), "temperature_c": r.mean_temperature_c(), "frequency_hz": r.frequency_hz, "samples": r.time.len()}))
+        .collect();
+    let diagnosis: Vec<Value> = o.rounds.first().map_or(vec![], |r| {
+        r.candidates.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence})).collect()
+    });
+    let added: Vec<Value> = o
+        .final_fit
+        .spec
+        .effects
+        .iter()
+        .map(|&e| {
+            let ps = effect_parameters(&o.final_fit, e);
+            let mut p = Map::new();
+            let mut u = Map::new();
+            for (n, v, s) in ps {
+                p.insert(n.into(), json!(v));
+                u.insert(n.into(), json!(s));
+            }
+            json!({"effect": e.name(), "parameters": p, "standard_errors": u})
+        })
+        .collect();
+    let rounds: Vec<Value> = o
+        .rounds
+        .iter()
+        .map(|r| {
+            json!({
+                "structure_ratio": r.signatures.structure_ratio,
+                "ranking": r.candidates.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence})).collect::<Vec<_>>(),
+                "attempts": r.attempts.iter().map(|a| json!({"effect": a.0.name(), "bic_before": a.1, "bic_after": a.2, "structure_before": a.3, "structure_after": a.4, "kept": a.5})).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    json!({
+        "runs": runs_json,
+        "baseline": metrics(prob, &o.baseline),
+        "diagnosis": diagnosis,
+        "added_effects": added,
+        "final": metrics(prob, &o.final_fit),
+        "unexplained": o.unexplained,
+        "pruned_effects": o.pruned.iter().map(|p| json!({"effect": p.0.name(), "bic_with": p.1, "bic_without": p.2})).collect::<Vec<_>>(),
+        "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
+        "noise_floor_rad": o.final_signatures.noise_floor,
+        "moduli": {"baseline": moduli(prob, &o.baseline, temps), "final": moduli(prob, &o.final_fit, temps)},
+        "rounds": rounds,
+        "signatures": {"baseline": signature_json(&o.baseline_signatures), "final": signature_json(&o.final_signatures)},
+        "method": {
+            "fit": "Levenberg–Marquardt on every sample, FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians; covariance σ²(JᵀJ)⁻¹ (σ² = SSE/(N−p); optimistic when the residual is correlated)",
+            "acceptance": format!("ΔBIC < −{} and at least {:.0}% of the residual's low-frequency structure over white noise removed; stop when the residual is white (structure ratio < {})", super::search::BIC_MARGIN, 100.0 * super::search::STRUCTURE_DROP, super::diagnose::STRUCTURE_LIMIT),
+            "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
+            "seconds": seconds,
+        },
+    })
+}
+
+fn fmt_params(fit: &Fit, e: Effect) -> String {
+    effect_parameters(fit, e).iter().map(|(n, v, s)| format!("{n} = {v:.4} ± {s:.2e}")).collect::<Vec<_>>().join(", ")
+}
+
+pub fn report_markdown(j: &Value, o: &Outcome) -> String {
+    let m = |k: &str, f: &str| j[k][f].as_f64().unwrap_or(f64::NAN);
+    let mut s = String::from("# Calibration report\n\n");
+    s += &format!("{} runs, {} samples. Noise floor estimated from the data (second differences): {:.3e} rad.\n\n", j["runs"].as_array().map_or(0, |a| a.len()), o.baseline.n, j["noise_floor_rad"].as_f64().unwrap_or(0.0));
+    s += "| model | RMSE (rad) | NRMSE | fit % | BIC |\n|---|---|---|---|---|\n";
+    for k in ["baseline", "final"] {
+        s += &format!("| {k} | {:.3e} | {:.4} | {:.2} | {:.0} |\n", m(k, "rmse_rad"), m(k, "nrmse"), m(k, "fit_percent"), m(k, "bic"));
+    }
+    s += "\n## Chain of evidence\n\n";
+    for (i, r) in o.rounds.iter().enumerate() {
+        s += &format!("### Round {} (residual structure {:.1}× white noise)\n\n| effect | score | predicted ΔBIC | evidence |\n|---|---|---|---|\n", i + 1, r.signatures.structure_ratio);
+        for c in &r.candidates {
+            s += &format!("| {} | {:.3} | {:+.0} | {} |\n", c.effect.name(), c.score, c.predicted_delta_bic, c.evidence);
+        }
+        for a in &r.attempts {
+            s += &format!(
+                "\nRefit with **{}**: BIC {:.0} → {:.0}, structure {:.1} → {:.1}: {}.\n",
+                a.0.name(),
+                a.1,
+                a.2,
+                a.3,
+                a.4,
+                if a.5 { "kept" } else { "rejected" }
+            );
+        }
+        if r.attempts.is_empty() && r.signatures.white() {
+            s += "\nThe residual is white at the noise floor: nothing to add.\n";
+        } else if r.attempts.is_empty() {
+            s += "\nNo candidate predicted a BIC gain worth a refit.\n";
+        }
+        s += "\n";
+    }
+    if o.rounds.is_empty() {
+        s += "The baseline residual is already white at the noise floor: no effect searched for.\n\n";
+    }
+    for p in &o.pruned {
+        s += &format!("Backward check: **{}** removed again (BIC {:.0} with it, {:.0} without: redundant once the later effects were in).\n\n", p.0.name(), p.1, p.2);
+    }
+    s += "## Added effects\n\n";
+    if o.final_fit.spec.effects.is_empty() {
+        s += "None.\n";
+    }
+    for &e in &o.final_fit.spec.effects {
+        s += &format!("- **{}**: {}\n", e.name(), fmt_params(&o.final_fit, e));
+    }
+    s += "\n## Moduli (factors on the material table, ± standard error)\n\n| T (°C) | E' factor | E'' factor |\n|---|---|---|\n";
+    if let Some(a) = j["moduli"]["final"].as_array() {
+        for g in a {
+            s += &format!(
+                "| {} | {:.4} ± {:.1e} | {:.4} ± {:.1e} |\n",
+                g["temperature_c"],
+                g["storage_modulus_scale"].as_f64().unwrap_or(0.0),
+                g["storage_modulus_scale_std"].as_f64().unwrap_or(0.0),
+                g["loss_modulus_scale"].as_f64().unwrap_or(0.0),
+                g["loss_modulus_scale_std"].as_f64().unwrap_or(0.0)
+            );
+        }
+    }
+    s += &format!("\n## Residual\n\n{}\n\nunexplained: **{}**\n\n", remaining_structure(&o.final_signatures), o.unexplained);
+    s += "Plots: `plots/fit_*.svg` (measured vs model before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
+    s
+}
+
+fn thin(t: &[f64], y: &[f64], max: usize) -> Vec<(f64, f64)> {
+    let step = (t.len() / max).max(1);
+    (0..t.len()).step_by(step).map(|k| (t[k], y[k])).collect()
+}
+
+fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
+    if !(lo < hi) {
+        (lo - 1e-6, lo + 1e-6)
+    } else {
+        let pad = 0.05 * (hi - lo);
+        (lo - pad, hi + pad)
+    }
+}
+
+fn line_plot(title: &str, ylabel: &str, t: &[f64], series: &[(&str, &[f64], RGBColor)]) -> Result<String, Box<dyn std::error::Error>> {
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let (y0, y1) = range(series.iter().flat_map(|s| s.1.iter().copied()));
+        let mut ch = ChartBuilder::on(&root)
+            .caption(title, ("sans-serif", 16))
+            .margin(10)
+            .x_label_area_size(32)
+            .y_label_area_size(70)
+            .build_cartesian_2d(t[0]..t[t.len() - 1], y0..y1)?;
+        ch.configure_mesh().x_desc("time (s)").y_desc(ylabel).draw()?;
+        for (name, y, c) in series {
+            let c = *c;
+            ch.draw_series(LineSeries::new(thin(t, y, 4000), c.stroke_width(1)))?
+                .label(*name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+        }
+        ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
+        root.present()?;
+    }
+    Ok(svg)
+}
+
+/// Amplitude spectrum of `e` sampled at `t` (one-sided, rad), on `freqs`.
+pub fn amplitude_spectrum(t: &[f64], e: &[f64], freqs: &[f64]) -> Vec<f64> {
+    let step = (t.len() / 4000).max(1);
+    let idx: Vec<usize> = (0..t.len()).step_by(step).collect();
+    let n = idx.len() as f64;
+    freqs
+        .iter()
+        .map(|&f| {
+            let w = 2.0 * std::f64::consts::PI * f;
+            let (mut c, mut s) = (0.0, 0.0);
+            for &k in &idx {
+                let (sn, cs) = (w * t[k]).sin_cos();
+                c += e[k] * cs;
+                s += e[k] * sn;
+            }
+            2.0 * (c * c + s * s).sqrt() / n
+        })
+        .collect()
+}
+
+pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<Vec<(String, Vec<u8>)>, Box<dyn std::error::Error>> {
+    let mut files = Vec::new();
+    let mut offset = 0;
+    let blue = RGBColor(31, 119, 180);
+    let orange = RGBColor(255, 127, 14);
+    let green = RGBColor(44, 160, 44);
+    let freqs: Vec<f64> = (1..=400).map(|k| k as f64 * 0.025).collect();
+    let mut spec_before = vec![0.0; freqs.len()];
+    let mut spec_after = vec![0.0; freqs.len()];
+    for (r, run) in runs.iter().enumerate() {
+        let n = run.time.len();
+        let e0: Vec<f64> = o.baseline.residual[offset..offset + n].to_vec();
+        let e1: Vec<f64> = o.final_fit.residual[offset..offset + n].to_vec();
+        offset += n;
+        let stem = run.name().trim_end_matches(".csv").to_string();
+        let svg = line_plot(
+            &format!("{}: measured link angle and the model before/after", run.name()),
+            "link angle (rad)",
+            &run.time,
+            &[("measured", &prob.measured[r], RGBColor(0, 0, 0)), ("baseline", &o.baseline.outputs[r], orange), ("final", &o.final_fit.outputs[r], blue)],
+        )?;
+        files.push((format!("plots/fit_{stem}.svg"), svg.into_bytes()));
+        let svg = line_plot(&format!("{}: residual before and after", run.name()), "measured − model (rad)", &run.time, &[("baseline", &e0, orange), ("final", &e1, blue)])?;
+        files.push((format!("plots/residual_{stem}.svg"), svg.into_bytes()));
+        for (acc, e) in [(&mut spec_before, &e0), (&mut spec_after, &e1)] {
+            for (a, v) in acc.iter_mut().zip(amplitude_spectrum(&run.time, e, &freqs)) {
+                *a += v / runs.len() as f64;
+            }
+        }
+    }
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let lo = spec_before.iter().chain(&spec_after).cloned().fold(f64::INFINITY, f64::min).max(1e-9);
+        let hi = spec_before.iter().chain(&spec_after).cloned().fold(0.0, f64::max).max(lo * 10.0);
+        let mut ch = ChartBuilder::on(&root)
+            .caption("Residual amplitude spectrum, mean over runs", ("sans-serif", 16))
+            .margin(10)
+            .x_label_area_size(32)
+            .y_label_area_size(70)
+            .build_cartesian_2d(0.0..10.0, (lo..hi).log_scale())?;
+        ch.configure_mesh().x_desc("frequency (Hz)").y_desc("amplitude (rad)").draw()?;
+        for (name, y, c) in [("baseline", &spec_before, orange), ("final", &spec_after, green)] {
+            ch.draw_series(LineSeries::new(freqs.iter().copied().zip(y.iter().copied()), c.stroke_width(1)))?
+                .label(name)
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
+        }
+        ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
+        root.present()?;
+    }
+    files.push(("plots/residual_spectrum.svg".into(), svg.into_bytes()));
+    Ok(files)
+}

@@ -1,0 +1,143 @@
+//! The whole loop, blind, on synthetic runs from a truth model through the FMU: the calibration
+//! sees only the CSV files (the truth sits in truth.json, which it does not read).
+//!
+//! CI protocol (shorter than the CLI default of 4 temperatures × 2 frequencies × 20 s): two
+//! temperatures, 0.5 and 1 Hz, 8 s per run at 1 kHz, encoder quantisation 2π/10000 plus
+//! Gaussian noise of 1e-4 rad; truth moduli 0.8 × E' and 1.25 × E'' of the table.
+
+use std::path::PathBuf;
+
+use thermovia::calibrate::synthetic::{generate, write_atomically, SynthArgs};
+use thermovia::calibrate::{calibrate, CalibrateArgs, Calibration};
+use thermovia::harness::Fmu;
+
+fn blind(name: &str, truth: &[&str]) -> (Calibration, SynthArgs) {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("blind-{name}"));
+    let mut cli = vec!["--temperatures", "40,60", "--duration", "8", "--seed", "7"];
+    cli.extend_from_slice(truth);
+    let out = dir.join("data");
+    let out_s = out.to_str().unwrap().to_string();
+    cli.extend_from_slice(&["--out", &out_s]);
+    let synth = SynthArgs::from_cli(&cli).unwrap();
+    let files = generate(&synth, Fmu::open_default().expect("run `cargo run --release -p fmu-build` first")).unwrap();
+    let files: Vec<_> = files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect();
+    write_atomically(&out, &files).unwrap();
+    let report = dir.join("report");
+    let args = CalibrateArgs::from_cli(&[&out_s, "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
+    let c = calibrate(&args).unwrap();
+    write_atomically(&report, &c.files).unwrap();
+    (c, synth)
+}
+
+fn added(c: &Calibration) -> Vec<String> {
+    c.report["added_effects"].as_array().unwrap().iter().map(|e| e["effect"].as_str().unwrap().to_string()).collect()
+}
+
+fn param(c: &Calibration, effect: &str, name: &str) -> f64 {
+    let e = c.report["added_effects"].as_array().unwrap().iter().find(|e| e["effect"] == effect).unwrap();
+    e["parameters"][name].as_f64().unwrap()
+}
+
+fn within(got: f64, truth: f64, rel: f64) -> bool {
+    (got - truth).abs() <= rel * truth.abs()
+}
+
+/// The right effect found, nothing else, its parameter within 20 %, final error within 1.5×
+/// the injected noise (quantisation + Gaussian).
+fn check_single(name: &str, truth: &[&str], effect: &str, parameter: &str, value: f64) {
+    let (c, synth) = blind(name, truth);
+    let got = added(&c);
+    let fin = c.report["final"]["rmse_rad"].as_f64().unwrap();
+    let base = c.report["baseline"]["rmse_rad"].as_f64().unwrap();
+    eprintln!("{name}: added {got:?}, baseline {base:.3e}, final {fin:.3e}, floor {:.3e}, report {}", synth.noise_floor(), c.report["added_effects"]);
+    assert_eq!(got, vec![effect.to_string()], "{}", c.report["diagnosis"]);
+    let p = param(&c, effect, parameter);
+    assert!(within(p, value, 0.2), "{effect}.{parameter} = {p}, truth {value}");
+    assert!(fin <= 1.5 * synth.noise_floor(), "final RMSE {fin:.3e} > 1.5 × noise floor {:.3e}", synth.noise_floor());
+    assert!(fin < base, "the added effect must lower the error");
+}
+
+/// The keys interfaces.md fixes for report.json.
+fn check_schema(r: &serde_json::Value) {
+    for run in r["runs"].as_array().unwrap() {
+        assert!(run["file"].is_string() && run["temperature_c"].is_f64() && run["frequency_hz"].is_f64() && run["samples"].is_u64(), "{run}");
+    }
+    for k in ["baseline", "final"] {
+        for f in ["rmse_rad", "nrmse", "fit_percent", "bic"] {
+            assert!(r[k][f].is_f64(), "{k}.{f}");
+        }
+    }
+    for d in r["diagnosis"].as_array().unwrap() {
+        assert!(d["effect"].is_string() && d["score"].is_f64() && d["evidence"].is_string(), "{d}");
+    }
+    for e in r["added_effects"].as_array().unwrap() {
+        assert!(e["effect"].is_string() && e["parameters"].is_object(), "{e}");
+    }
+    assert!(r["unexplained"].is_boolean());
+}
+
+#[test]
+fn clean_data_get_no_effect() {
+    let (c, synth) = blind("clean", &[]);
+    check_schema(&c.report);
+    assert_eq!(c.report["runs"].as_array().unwrap().len(), 4);
+    assert_eq!(c.report["diagnosis"].as_array().unwrap().len(), 6, "the baseline is diagnosed even when white");
+    assert!(added(&c).is_empty(), "{}", c.report["diagnosis"]);
+    assert_eq!(c.report["unexplained"], false);
+    let fin = c.report["final"]["rmse_rad"].as_f64().unwrap();
+    assert!(fin <= 1.5 * synth.noise_floor(), "{fin}");
+    // the moduli come back: truth 0.8 × E', 1.25 × E''
+    for g in c.report["moduli"]["final"].as_array().unwrap() {
+        let (s1, s2) = (g["storage_modulus_scale"].as_f64().unwrap(), g["loss_modulus_scale"].as_f64().unwrap());
+        assert!(within(s1, 0.8, 0.05) && within(s2, 1.25, 0.05), "{g}");
+    }
+}
+
+#[test]
+fn coulomb_friction_is_found_blind() {
+    check_single("friction", &["--coulomb-friction", "0.05"], "coulomb_friction", "torque_nm", 0.05);
+}
+
+#[test]
+fn backlash_is_found_blind() {
+    check_single("backlash", &["--backlash-width", "0.006"], "backlash", "width_rad", 0.006);
+}
+
+#[test]
+fn gravity_is_found_blind() {
+    // the paper's load: 0.91 kg at 0.14 m, m g d = 1.249 N·m, hanging 0.1 rad off the zero
+    check_single("gravity", &["--gravity-mgl", "1.249", "--gravity-offset", "0.1"], "gravity", "mgl_nm", 1.249);
+}
+
+#[test]
+fn link_damping_is_found_blind() {
+    check_single("damping", &["--link-damping", "0.05"], "link_damping", "damping_nms", 0.05);
+}
+
+#[test]
+fn thermal_lag_is_found_blind() {
+    check_single("lag", &["--thermal-lag", "2", "--heating-k", "8"], "thermal_lag", "time_constant_s", 2.0);
+}
+
+#[test]
+fn frequency_dependent_modulus_is_found_blind() {
+    check_single(
+        "maxwell",
+        &["--maxwell-stiffness", "3", "--maxwell-time", "0.15"],
+        "frequency_dependent_modulus",
+        "stiffness_nm_per_rad",
+        3.0,
+    );
+}
+
+#[test]
+fn two_effects_are_both_found() {
+    let (c, synth) = blind("two", &["--coulomb-friction", "0.05", "--gravity-mgl", "1.249", "--gravity-offset", "0.1"]);
+    let mut got = added(&c);
+    got.sort();
+    assert_eq!(got, vec!["coulomb_friction".to_string(), "gravity".to_string()], "{}", c.report["rounds"]);
+    assert!(within(param(&c, "coulomb_friction", "torque_nm"), 0.05, 0.2));
+    assert!(within(param(&c, "gravity", "mgl_nm"), 1.249, 0.2));
+    let fin = c.report["final"]["rmse_rad"].as_f64().unwrap();
+    assert!(fin <= 1.5 * synth.noise_floor(), "{fin}");
+}

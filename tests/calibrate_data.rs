@@ -1,0 +1,130 @@
+//! The run reader: every malformed file gets an error naming file, line and column, and the
+//! command exits non-zero without writing anything into --out.
+
+use std::path::{Path, PathBuf};
+
+use thermovia::calibrate::data::{parse_run, read_inputs, DataError};
+
+const GOOD: &str = "# temperature_c=40\n# source=test\n# frequency_hz=0.5\ntime_s,motor_angle_rad,link_angle_rad,extra\n0.000,0.0,0.0,a\n0.001,0.001,0.0005,b\n0.002,0.002,0.0011,c\n0.003,0.003,0.0016,d\n";
+
+fn err(text: &str) -> DataError {
+    parse_run(Path::new("bad.csv"), text).unwrap_err()
+}
+
+#[test]
+fn a_good_file_reads_with_its_metadata_and_ignores_other_columns() {
+    let r = parse_run(Path::new("good.csv"), GOOD).unwrap();
+    assert_eq!(r.time.len(), 4);
+    assert_eq!(r.link[2], 0.0011);
+    assert_eq!(r.temperature_c, vec![40.0; 4]);
+    assert_eq!(r.frequency_hz, 0.5);
+    assert_eq!(r.meta.get("source").map(String::as_str), Some("test"));
+}
+
+#[test]
+fn the_temperature_column_wins_over_metadata() {
+    let text = "# temperature_c=40\ntime_s,temperature_c,motor_angle_rad,link_angle_rad\n0,50.5,0,0\n1,51,0.1,0\n2,52,0.2,0.1\n3,53,0.3,0.2\n";
+    let r = parse_run(Path::new("t.csv"), text).unwrap();
+    assert_eq!(r.temperature_c, vec![50.5, 51.0, 52.0, 53.0]);
+}
+
+#[test]
+fn missing_column_names_file_line_and_column() {
+    let e = err("# temperature_c=40\ntime_s,motor_angle_rad\n0,0\n");
+    let s = e.to_string();
+    assert_eq!(e.line, Some(2));
+    assert!(s.starts_with("bad.csv:2"), "{s}");
+    assert!(s.contains("link_angle_rad"), "{s}");
+}
+
+#[test]
+fn text_in_a_number_column_names_line_and_column() {
+    let e = err(&GOOD.replace("0.002,0.002,0.0011", "0.002,abc,0.0011"));
+    assert_eq!(e.line, Some(7));
+    assert_eq!(e.column, Some((2, "motor_angle_rad".into())));
+    let s = e.to_string();
+    assert!(s.starts_with("bad.csv:7:2"), "{s}");
+    assert!(s.contains("abc"), "{s}");
+}
+
+#[test]
+fn nan_and_empty_and_missing_cells_are_errors() {
+    let e = err(&GOOD.replace("0.001,0.001,0.0005", "0.001,0.001,NaN"));
+    assert_eq!((e.line, e.column.as_ref().map(|c| c.0)), (Some(6), Some(3)), "{e}");
+    let e = err(&GOOD.replace("0.001,0.001,0.0005", "0.001,,0.0005"));
+    assert_eq!((e.line, e.column.as_ref().map(|c| c.0)), (Some(6), Some(2)), "{e}");
+    let e = err(&GOOD.replace("0.003,0.003,0.0016,d", "0.003,0.003"));
+    assert_eq!((e.line, e.column.as_ref().map(|c| c.0)), (Some(8), Some(3)), "{e}");
+    assert!(e.to_string().contains("missing cell"), "{e}");
+}
+
+#[test]
+fn time_must_increase_strictly() {
+    let e = err(&GOOD.replace("0.002,0.002", "0.001,0.002"));
+    assert_eq!((e.line, e.column.as_ref().map(|c| c.0)), (Some(7), Some(1)), "{e}");
+    assert!(e.to_string().contains("does not increase"), "{e}");
+}
+
+#[test]
+fn a_run_without_a_temperature_is_an_error_naming_the_file() {
+    let e = err(&GOOD.replace("# temperature_c=40\n", ""));
+    assert!(e.to_string().starts_with("bad.csv: "), "{e}");
+    assert!(e.to_string().contains("temperature"), "{e}");
+}
+
+#[test]
+fn an_empty_file_is_an_error() {
+    let e = err("");
+    assert!(e.to_string().contains("empty"), "{e}");
+    let e = err("# temperature_c=40\ntime_s,motor_angle_rad,link_angle_rad\n");
+    assert!(e.to_string().contains("data rows"), "{e}");
+}
+
+#[test]
+fn the_frequency_is_measured_when_not_declared() {
+    let mut text = String::from("# temperature_c=22\ntime_s,motor_angle_rad,link_angle_rad\n");
+    for k in 0..8000 {
+        let t = k as f64 * 1e-3;
+        text += &format!("{t},{},{}\n", 0.3 * (2.0 * std::f64::consts::PI * 0.75 * t).sin(), 0.0);
+    }
+    let r = parse_run(Path::new("f.csv"), &text).unwrap();
+    assert!((r.frequency_hz - 0.75).abs() < 1e-3, "{}", r.frequency_hz);
+    assert!(!r.frequency_declared);
+}
+
+fn tmp(name: &str) -> PathBuf {
+    let d = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+#[test]
+fn folders_expand_to_their_csv_files_and_the_first_bad_file_stops_everything() {
+    let d = tmp("calib-data-folder");
+    std::fs::write(d.join("a.csv"), GOOD).unwrap();
+    std::fs::write(d.join("notes.txt"), "not a run").unwrap();
+    let runs = read_inputs(&[d.clone()]).unwrap();
+    assert_eq!(runs.len(), 1);
+    std::fs::write(d.join("b.csv"), GOOD.replace("0.0005", "x")).unwrap();
+    let e = read_inputs(&[d.clone()]).unwrap_err().to_string();
+    assert!(e.contains("b.csv:6:3"), "{e}");
+}
+
+#[test]
+fn the_cli_exits_non_zero_and_leaves_out_untouched_on_bad_input() {
+    let d = tmp("calib-data-cli");
+    let bad = d.join("bad.csv");
+    std::fs::write(&bad, GOOD.replace("0.002,0.002,0.0011", "0.002,0.002,oops")).unwrap();
+    let out = d.join("out");
+    let r = std::process::Command::new(env!("CARGO_BIN_EXE_thermovia"))
+        .args(["calibrate", bad.to_str().unwrap(), "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!r.status.success());
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(stderr.contains("bad.csv:7:3"), "{stderr}");
+    assert!(!out.exists(), "nothing may be written into --out");
+    let leftovers: Vec<_> = std::fs::read_dir(&d).unwrap().filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
+    assert_eq!(leftovers.len(), 1, "no temporary folder may remain: {leftovers:?}");
+}
