@@ -251,15 +251,19 @@ fn sse(r: &[f64]) -> f64 {
     r.iter().map(|x| x * x).sum()
 }
 
+/// A with its diagonal scaled to one, S = D⁻¹ A D⁻¹, and D: keeps the normal equations'
+/// conditioning independent of the parameters' units.
+fn diagonally_scaled(a: &DMatrix<f64>) -> (DMatrix<f64>, Vec<f64>) {
+    let n = a.nrows();
+    let d: Vec<f64> = (0..n).map(|i| a[(i, i)].max(1e-300).sqrt()).collect();
+    (DMatrix::from_fn(n, n, |i, j| a[(i, j)] / (d[i] * d[j])), d)
+}
+
 /// Solves (A + μ diag A) δ = g with column scaling; falls back to a pseudo-inverse.
 fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
     let n = a.nrows();
-    let d: Vec<f64> = (0..n).map(|i| a[(i, i)].max(1e-300).sqrt()).collect();
-    let mut s = a.clone();
+    let (mut s, d) = diagonally_scaled(a);
     for i in 0..n {
-        for j in 0..n {
-            s[(i, j)] /= d[i] * d[j];
-        }
         s[(i, i)] += mu;
     }
     let rhs = DVector::from_iterator(n, (0..n).map(|i| g[i] / d[i]));
@@ -273,13 +277,7 @@ fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
 /// Pseudo-inverse of a symmetric positive semi-definite matrix with diagonal scaling.
 pub fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
     let n = a.nrows();
-    let d: Vec<f64> = (0..n).map(|i| a[(i, i)].max(1e-300).sqrt()).collect();
-    let mut s = a.clone();
-    for i in 0..n {
-        for j in 0..n {
-            s[(i, j)] /= d[i] * d[j];
-        }
-    }
+    let (s, d) = diagonally_scaled(a);
     let inv = s.pseudo_inverse(1e-12).unwrap_or_else(|_| DMatrix::zeros(n, n));
     DMatrix::from_fn(n, n, |i, j| inv[(i, j)] / (d[i] * d[j]))
 }
