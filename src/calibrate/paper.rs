@@ -253,7 +253,17 @@ pub fn run(sim: &Simulator, source: &Value) -> Result<(Value, String), String> {
     md += "| model | D22 0.5 Hz (mrad) | D60 0.5 Hz (mrad) | ratio 0.5 Hz | ratio 1 Hz | max abs phase (°) | ln(ratio/5) |\n|---|---|---|---|---|---|---|\n";
     let line = |name: &str, s: &Summary| {
         let d = |t: f64, f: f64| s.conditions.iter().find(|c| c.temperature_c == t && c.frequency_hz == f).map(|c| c.decay_rad * 1e3).unwrap_or(f64::NAN);
-        format!("| {name} | {:+.2} | {:+.2} | {:.2} | {:.2} | {:.2} | {:.3} |\n", d(22.0, 0.5), d(60.0, 0.5), s.ratio_half_hz, s.ratio_one_hz, s.max_abs_phase_deg, s.log_ratio_error)
+        // A ratio of Decays is only defined for positive Decays: the nominal model has none.
+        let num = |x: f64, digits: usize| if x.is_finite() { format!("{x:.digits$}") } else { "— (Decay < 0)".to_string() };
+        format!(
+            "| {name} | {:+.2} | {:+.2} | {} | {} | {:.2} | {} |\n",
+            d(22.0, 0.5),
+            d(60.0, 0.5),
+            num(s.ratio_half_hz, 2),
+            num(s.ratio_one_hz, 2),
+            s.max_abs_phase_deg,
+            num(s.log_ratio_error, 3)
+        )
     };
     md += &line("nominal (before)", &nominal);
     if let Some((e, v, s)) = &best {
