@@ -433,16 +433,18 @@ impl Instance {
                 "fmi2DoStep: currentCommunicationPoint {t} does not match the FMU's time {now}"
             ));
         }
-        let mut end = t + h;
+        // The model advances by exactly the h the master passed ((t + h) − t may differ from h
+        // in the last bit), unless stopTime cuts the step short.
+        let (mut end, mut advance) = (t + h, h);
         let mut status = Status::Ok;
         if let Some(stop) = self.s.stop_time {
             if end > stop + 1e-9 * stop.abs().max(1.0) {
-                end = stop;
+                (end, advance) = (stop, stop - t);
                 status = Status::Discard;
             }
         }
-        if end > t {
-            if let Err(failure) = self.s.model.step(end - t) {
+        if advance > 0.0 {
+            if let Err(failure) = self.s.model.step(advance) {
                 self.s.phase = Phase::StepFailed;
                 self.s.last_successful_time = t;
                 self.last_step_status = Status::Discard;
