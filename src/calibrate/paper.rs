@@ -41,17 +41,12 @@ pub struct Summary {
     pub minimal_phase: bool,
 }
 
+/// Amplitude and phase of A sin(wt + φ) fitted to the samples from `from` on (the sweep's DFT over
+/// whole cycles).
 fn fundamental(t: &[f64], x: &[f64], w: f64, from: f64) -> (f64, f64) {
-    let (mut c, mut s, mut n) = (0.0, 0.0, 0.0);
-    for (tt, v) in t.iter().zip(x) {
-        if *tt >= from {
-            c += v * (w * tt).cos();
-            s += v * (w * tt).sin();
-            n += 1.0;
-        }
-    }
-    let (c, s) = (2.0 * c / n, 2.0 * s / n);
-    (c.hypot(s), c.atan2(s)) // amplitude, phase of A sin(wt + φ)
+    let start = t.partition_point(|&tt| tt < from);
+    let c = crate::sweep::analysis::first_harmonic(t, x, w, start, t.len() - start);
+    (c.norm(), c.arg())
 }
 
 /// Sweeps 22/60 °C at 0.5 and 1 Hz with `effects` and summarises as the paper does.
