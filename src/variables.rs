@@ -62,6 +62,13 @@ pub enum Access {
     Integer { get: IntGet, set: Option<IntSet> },
 }
 
+/// A named Integer type: an FMI Enumeration, so tools show names instead of numbers.
+pub struct Enumeration {
+    pub name: &'static str,
+    /// (value, name, description)
+    pub items: &'static [(i32, &'static str, &'static str)],
+}
+
 #[derive(Clone, Copy)]
 pub struct Variable {
     pub name: &'static str,
@@ -76,6 +83,8 @@ pub struct Variable {
     /// Where the default comes from: PAPER, LIT, EST (with the reasoning) or MODE/NUMERICS.
     pub source: &'static str,
     pub access: Access,
+    /// Integer variables only: the enumeration they are declared as.
+    pub enumeration: Option<&'static Enumeration>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -142,6 +151,7 @@ macro_rules! real_param {
                 get: |m| m.params().$field,
                 set: Some(|m, v| m.params_mut().$field = v),
             },
+            enumeration: None,
         }
     };
 }
@@ -159,6 +169,7 @@ macro_rules! real_input {
             description: $desc,
             source: "input",
             access: Access::Real { get: |m| m.inputs.$field, set: Some(|m, v| m.inputs.$field = v) },
+            enumeration: None,
         }
     };
 }
@@ -176,12 +187,39 @@ macro_rules! real_output {
             description: $desc,
             source: "output",
             access: Access::Real { get: $get, set: None },
+            enumeration: None,
         }
     };
 }
 
 use Lower::{Exclusive as Gt, Inclusive as Ge};
 const NONE: Lower = Lower::None;
+
+pub static MATERIAL_TABLE: Enumeration = Enumeration {
+    name: "MaterialTable",
+    items: &[
+        (1, "repaired_experimental", "Table 2 experimental columns, small entries read as MPa (default)"),
+        (2, "printed_experimental", "Table 2 experimental columns as printed"),
+        (3, "repaired_estimated", "Table 2 estimated columns, small entries read as MPa"),
+        (4, "printed_estimated", "Table 2 estimated columns as printed"),
+    ],
+};
+
+pub static MOTOR_DRIVE: Enumeration = Enumeration {
+    name: "MotorDrive",
+    items: &[
+        (0, "torque", "motor_torque drives the motor inertia"),
+        (1, "prescribed_angle", "the motor follows motor_angle_command with slope motor_speed_command"),
+    ],
+};
+
+pub static THERMAL_DRIVE: Enumeration = Enumeration {
+    name: "ThermalDrive",
+    items: &[
+        (0, "heater", "heater_power drives the thermal network"),
+        (1, "prescribed_housing", "the housing follows housing_temperature_command"),
+    ],
+};
 
 pub static VARIABLES: &[Variable] = &[
     // ---- inputs
@@ -267,6 +305,7 @@ pub static VARIABLES: &[Variable] = &[
                 m.params_mut().material_table = MaterialTable::from_index(v).expect("range-checked")
             }),
         },
+        enumeration: Some(&MATERIAL_TABLE),
     },
     Variable {
         name: "motor_drive",
@@ -284,6 +323,7 @@ pub static VARIABLES: &[Variable] = &[
                 m.params_mut().motor_drive = if v == 0 { MotorDrive::Torque } else { MotorDrive::PrescribedAngle }
             }),
         },
+        enumeration: Some(&MOTOR_DRIVE),
     },
     Variable {
         name: "thermal_drive",
@@ -302,6 +342,7 @@ pub static VARIABLES: &[Variable] = &[
                     if v == 0 { ThermalDrive::Heater } else { ThermalDrive::PrescribedHousing }
             }),
         },
+        enumeration: Some(&THERMAL_DRIVE),
     },
 ];
 
@@ -345,11 +386,11 @@ pub fn markdown_table() -> String {
         let hi = v.upper.map(|b| format!("≤ {}", format_number(b))).unwrap_or_default();
         let range = [lo, hi].into_iter().filter(|s| !s.is_empty()).collect::<Vec<_>>().join(", ");
         s += &format!(
-            "| `{}` | {} | {} | {:?} | {} | {} | {} | {} | {} |\n",
+            "| `{}` | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             v.name,
             v.causality.as_str(),
             v.variability.as_str(),
-            v.base_type(),
+            v.enumeration.map_or(format!("{:?}", v.base_type()), |e| format!("Enumeration {}", e.name)),
             v.unit,
             start,
             range,
@@ -381,6 +422,19 @@ mod tests {
         for v in VARIABLES {
             assert!(seen.insert((v.base_type(), v.value_reference)), "duplicate vr {}", v.value_reference);
             assert!(names.insert(v.name), "duplicate name {}", v.name);
+        }
+    }
+
+    #[test]
+    fn enumerations_cover_their_variables_ranges() {
+        for v in VARIABLES {
+            if let Some(e) = v.enumeration {
+                let values: Vec<f64> = e.items.iter().map(|(x, _, _)| *x as f64).collect();
+                assert_eq!(v.base_type(), BaseType::Integer, "{}", v.name);
+                let (Lower::Inclusive(lo), Some(hi)) = (v.lower, v.upper) else { panic!("{} needs a range", v.name) };
+                let expected: Vec<f64> = (lo as i32..=hi as i32).map(f64::from).collect();
+                assert_eq!(values, expected, "{}", v.name);
+            }
         }
     }
 

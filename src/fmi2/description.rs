@@ -3,7 +3,7 @@
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
-use crate::variables::{format_number, Access, Causality, Lower, VARIABLES};
+use crate::variables::{format_number, Access, Causality, Enumeration, Lower, VARIABLES};
 
 pub const MODEL_IDENTIFIER: &str = "ThermoVIA";
 
@@ -104,6 +104,28 @@ fn render(guid: &str) -> String {
     }
     put(Event::End(BytesEnd::new("UnitDefinitions")));
 
+    let mut enumerations: Vec<&Enumeration> = VARIABLES.iter().filter_map(|v| v.enumeration).collect();
+    enumerations.dedup_by_key(|e| e.name);
+    if !enumerations.is_empty() {
+        put(Event::Start(BytesStart::new("TypeDefinitions")));
+        for e in enumerations {
+            let mut st = BytesStart::new("SimpleType");
+            st.push_attribute(("name", e.name));
+            put(Event::Start(st));
+            put(Event::Start(BytesStart::new("Enumeration")));
+            for (value, name, description) in e.items {
+                let mut item = BytesStart::new("Item");
+                item.push_attribute(("name", *name));
+                item.push_attribute(("value", value.to_string().as_str()));
+                item.push_attribute(("description", *description));
+                put(Event::Empty(item));
+            }
+            put(Event::End(BytesEnd::new("Enumeration")));
+            put(Event::End(BytesEnd::new("SimpleType")));
+        }
+        put(Event::End(BytesEnd::new("TypeDefinitions")));
+    }
+
     put(Event::Start(BytesStart::new("LogCategories")));
     for (name, desc) in LOG_CATEGORIES {
         let mut c = BytesStart::new("Category");
@@ -128,11 +150,15 @@ fn render(guid: &str) -> String {
         sv.push_attribute(("causality", v.causality.as_str()));
         sv.push_attribute(("variability", v.variability.as_str()));
         put(Event::Start(sv));
-        let (tag, is_real) = match v.access {
-            Access::Real { .. } => ("Real", true),
-            Access::Integer { .. } => ("Integer", false),
+        let (tag, is_real) = match (v.access, v.enumeration) {
+            (Access::Real { .. }, _) => ("Real", true),
+            (Access::Integer { .. }, None) => ("Integer", false),
+            (Access::Integer { .. }, Some(_)) => ("Enumeration", false),
         };
         let mut t = BytesStart::new(tag);
+        if let Some(e) = v.enumeration {
+            t.push_attribute(("declaredType", e.name));
+        }
         if is_real && !v.unit.is_empty() {
             t.push_attribute(("unit", v.unit));
             if v.unit == "K" {
