@@ -18,5 +18,6 @@ pub mod calibrate;
 pub mod fmi2;
 pub mod harness;
 pub mod model;
+pub mod output;
 pub mod sweep;
 pub mod variables;

@@ -441,33 +441,12 @@ pub fn run(args: &ArmArgs) -> Result<(), Box<dyn std::error::Error>> {
         reference_steps,
         real_time_factor,
     };
-    write_atomically(&args.out, |dir| write_report(dir, &cfg, &report, &traces, &refs))?;
+    crate::output::replace_folder(&args.out, |dir| write_report(dir, &cfg, &report, &traces, &refs).map_err(std::io::Error::other))?;
     println!("{}", summary(&report));
     println!("report: {}", args.out.join("report.md").display());
     Ok(())
 }
 
-/// Writes into a fresh sibling folder, then swaps it in, so `out` is either the old or the new
-/// complete report, never a half-written one.
-pub fn write_atomically(out: &Path, write: impl FnOnce(&Path) -> Result<(), String>) -> Result<(), String> {
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent).map_err(|e| format!("{}: {e}", parent.display()))?;
-    let name = out.file_name().ok_or_else(|| format!("{}: not a folder name", out.display()))?.to_string_lossy().to_string();
-    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
-    let old = parent.join(format!(".{name}.old-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp).map_err(|e| format!("{}: {e}", tmp.display()))?;
-    if let Err(e) = write(&tmp) {
-        let _ = std::fs::remove_dir_all(&tmp);
-        return Err(e);
-    }
-    if out.exists() {
-        std::fs::rename(out, &old).map_err(|e| format!("{}: {e}", out.display()))?;
-    }
-    std::fs::rename(&tmp, out).map_err(|e| format!("{}: {e}", out.display()))?;
-    let _ = std::fs::remove_dir_all(&old);
-    Ok(())
-}
 
 fn ms(v: Option<f64>) -> String {
     v.map_or("none".into(), |v| format!("{:.2} ms", v * 1e3))

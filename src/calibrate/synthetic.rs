@@ -219,16 +219,10 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
     Ok(files)
 }
 
-/// Writes `files` into a fresh folder beside `out`, then renames it to `out` (replacing an
-/// older one), so a failure never leaves a half-written `out`.
+/// Writes `files` (paths relative to `out`) as one folder, replacing an older `out` only when
+/// all are written (`crate::output::replace_folder`).
 pub fn write_atomically(out: &Path, files: &[(String, Vec<u8>)]) -> std::io::Result<()> {
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(parent)?;
-    let name = out.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "out".into());
-    let tmp = parent.join(format!(".{name}.tmp-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp)?;
-    let result = (|| {
+    crate::output::replace_folder(out, |tmp| {
         for (f, bytes) in files {
             let p = tmp.join(f);
             if let Some(d) = p.parent() {
@@ -236,20 +230,8 @@ pub fn write_atomically(out: &Path, files: &[(String, Vec<u8>)]) -> std::io::Res
             }
             std::fs::File::create(&p)?.write_all(bytes)?;
         }
-        if out.exists() {
-            let old = parent.join(format!(".{name}.old-{}", std::process::id()));
-            std::fs::rename(out, &old)?;
-            std::fs::rename(&tmp, out)?;
-            let _ = std::fs::remove_dir_all(&old);
-        } else {
-            std::fs::rename(&tmp, out)?;
-        }
         Ok(())
-    })();
-    if result.is_err() {
-        let _ = std::fs::remove_dir_all(&tmp);
-    }
-    result
+    })
 }
 
 pub fn run(args: &SynthArgs) -> Result<(), Box<dyn std::error::Error>> {

@@ -3,7 +3,7 @@
 //! so a failed run never leaves a half-written folder.
 
 use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use super::master::Trace;
 use super::{Condition, SweepResult};
@@ -447,21 +447,9 @@ fn findings(r: &SweepResult) -> String {
     s
 }
 
-fn temp_dir_next_to(out: &Path, tag: &str) -> PathBuf {
-    let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let name = out.file_name().map_or("sweep".into(), |n| n.to_string_lossy().into_owned());
-    parent.join(format!(".{name}.{tag}-{}", std::process::id()))
-}
-
 /// Writes every output into `out` atomically; returns the number of files.
 pub fn write_all(r: &SweepResult, out: &Path) -> Result<usize, Box<dyn std::error::Error>> {
-    let tmp = temp_dir_next_to(out, "tmp");
-    if let Some(p) = tmp.parent() {
-        std::fs::create_dir_all(p)?;
-    }
-    let _ = std::fs::remove_dir_all(&tmp);
-    std::fs::create_dir_all(&tmp)?;
-    let result = (|| -> Result<usize, Box<dyn std::error::Error>> {
+    crate::output::replace_folder(out, |tmp| -> Result<usize, Box<dyn std::error::Error>> {
         let mut n = 0;
         std::fs::write(tmp.join("summary.json"), serde_json::to_string_pretty(&summary_json(r))?)?;
         std::fs::write(tmp.join("report.md"), markdown(r))?;
@@ -474,21 +462,7 @@ pub fn write_all(r: &SweepResult, out: &Path) -> Result<usize, Box<dyn std::erro
             write_csv(&tmp.join(format!("warmup_{}C.csv", w.target_c)), t)?;
             n += 1;
         }
-        n += super::plots::write_all(r, &tmp)?;
+        n += super::plots::write_all(r, tmp)?;
         Ok(n)
-    })();
-    let n = match result {
-        Ok(n) => n,
-        Err(e) => {
-            let _ = std::fs::remove_dir_all(&tmp);
-            return Err(e);
-        }
-    };
-    let old = temp_dir_next_to(out, "old");
-    if out.exists() {
-        std::fs::rename(out, &old)?;
-    }
-    std::fs::rename(&tmp, out)?;
-    let _ = std::fs::remove_dir_all(&old);
-    Ok(n)
+    })
 }
