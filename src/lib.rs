@@ -20,4 +20,5 @@ pub mod harness;
 pub mod model;
 pub mod output;
 pub mod sweep;
+pub mod table;
 pub mod variables;

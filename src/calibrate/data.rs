@@ -36,30 +36,7 @@ impl Run {
     }
 }
 
-/// A data error: `file:line:column: message` (line and column 1-based; column absent when the
-/// problem is a whole line or the whole file).
-#[derive(Debug, Clone, PartialEq)]
-pub struct DataError {
-    pub file: PathBuf,
-    pub line: Option<usize>,
-    pub column: Option<(usize, String)>,
-    pub message: String,
-}
-
-impl std::fmt::Display for DataError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "{}", self.file.display())?;
-        if let Some(l) = self.line {
-            write!(f, ":{l}")?;
-        }
-        if let Some((c, name)) = &self.column {
-            write!(f, ":{c} (column {name:?})")?;
-        }
-        write!(f, ": {}", self.message)
-    }
-}
-
-impl std::error::Error for DataError {}
+pub use crate::table::DataError;
 
 /// Expands folders into their `*.csv` files (sorted), keeps files as given.
 pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
@@ -87,7 +64,7 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
 }
 
 fn file_error(file: &Path, message: String) -> DataError {
-    DataError { file: file.to_path_buf(), line: None, column: None, message }
+    DataError::file(file, message)
 }
 
 pub fn read_run(path: &Path) -> Result<Run, DataError> {
@@ -97,83 +74,17 @@ pub fn read_run(path: &Path) -> Result<Run, DataError> {
 
 /// Parses one run from its text (`path` only names it in errors).
 pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
-    let err_line = |line: usize, message: String| DataError { file: path.to_path_buf(), line: Some(line), column: None, message };
-    let mut meta = BTreeMap::new();
-    let mut lines = text.lines().enumerate().map(|(i, l)| (i + 1, l.trim_end_matches('\r')));
-    // metadata, then the header
-    let header = loop {
-        match lines.next() {
-            None => return Err(file_error(path, "empty file: no header row (time_s, motor_angle_rad, link_angle_rad)".into())),
-            Some((_, l)) if l.trim().is_empty() => continue,
-            Some((n, l)) if l.trim_start().starts_with('#') => {
-                let body = l.trim_start().trim_start_matches('#').trim();
-                if let Some((k, v)) = body.split_once('=') {
-                    meta.insert(k.trim().to_string(), v.trim().to_string());
-                } else if !body.is_empty() {
-                    // a comment without key=value is kept as a note
-                    meta.insert(format!("note_line_{n}"), body.to_string());
-                }
-            }
-            Some((n, l)) => break (n, l),
-        }
-    };
-    let names: Vec<String> = header.1.split(',').map(|s| s.trim().to_string()).collect();
-    let find = |name: &str| names.iter().position(|c| c == name);
-    let mut required = Vec::new();
-    for name in ["time_s", "motor_angle_rad", "link_angle_rad"] {
-        match find(name) {
-            Some(i) => required.push(i),
-            None => {
-                return Err(err_line(header.0, format!("missing required column {name:?} (header has: {})", names.join(", "))))
-            }
-        }
-    }
-    let temp_col = find("temperature_c");
-    let mut cols = vec![Vec::new(); 4];
-    let mut last_line = header.0;
-    for (n, l) in lines {
-        if l.trim().is_empty() {
-            continue;
-        }
-        if l.trim_start().starts_with('#') {
-            return Err(err_line(n, "a '#' line after the header (metadata goes before it)".into()));
-        }
-        last_line = n;
-        let cells: Vec<&str> = l.split(',').collect();
-        let wanted = required.iter().copied().chain(temp_col);
-        for (slot, c) in wanted.enumerate() {
-            let col_err = |message: String| DataError {
-                file: path.to_path_buf(),
-                line: Some(n),
-                column: Some((c + 1, names[c].clone())),
-                message,
-            };
-            let cell = match cells.get(c) {
-                None => return Err(col_err(format!("missing cell (the row has {} of {} columns)", cells.len(), names.len()))),
-                Some(s) => s.trim(),
-            };
-            if cell.is_empty() {
-                return Err(col_err("empty cell".into()));
-            }
-            let v: f64 = cell.parse().map_err(|_| col_err(format!("{cell:?} is not a number")))?;
-            if !v.is_finite() {
-                return Err(col_err(format!("{cell} is not a finite number")));
-            }
-            if slot == 0 {
-                if let Some(&prev) = cols[0].last() {
-                    if v <= prev {
-                        return Err(col_err(format!("time {v} s does not increase (previous sample {prev} s)")));
-                    }
-                }
-            }
-            cols[slot].push(v);
-        }
-    }
+    const COLUMNS: [(&str, bool); 4] =
+        [("time_s", true), ("motor_angle_rad", true), ("link_angle_rad", true), ("temperature_c", false)];
+    let table = crate::table::parse(path, text, crate::table::Columns::Named(&COLUMNS))?;
+    let (meta, last_line) = (table.meta, table.last_line);
+    let has_temperature_column = table.columns[3].is_some();
+    let mut cols: Vec<Vec<f64>> = table.columns.into_iter().map(Option::unwrap_or_default).collect();
     let n = cols[0].len();
     if n < 3 {
-        return Err(err_line(last_line, format!("only {n} data rows; a run needs at least 3")));
+        return Err(DataError::line(path, last_line, format!("only {n} data rows; a run needs at least 3")));
     }
-    let temperature_c = if temp_col.is_some() {
+    let temperature_c = if has_temperature_column {
         std::mem::take(&mut cols[3])
     } else if let Some(v) = meta.get("temperature_c") {
         let t: f64 = v.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {

@@ -23,44 +23,21 @@ impl InputTable {
     /// name the file, line and column.
     pub fn read_csv(path: &Path) -> Result<InputTable, String> {
         let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let at = |line: usize, col: usize, what: String| format!("{}:{line}:{col}: {what}", path.display());
-        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty() && !l.starts_with('#'));
-        let (hline, header) = lines.next().ok_or_else(|| format!("{}: empty file", path.display()))?;
-        let names: Vec<String> = header.split(',').map(|s| s.trim().trim_matches('"').to_string()).collect();
-        if names.first().map(String::as_str) != Some("time") {
-            return Err(at(hline + 1, 1, format!("the first column must be \"time\", found {:?}", names[0])));
+        let table = crate::table::parse(path, &text, crate::table::Columns::All).map_err(|e| e.to_string())?;
+        if table.names[0] != "time" {
+            return Err(format!(
+                "{}:{}:1: the first column must be \"time\", found {:?}",
+                path.display(),
+                table.header_line,
+                table.names[0]
+            ));
         }
-        let mut time = Vec::new();
-        let mut columns = vec![Vec::new(); names.len() - 1];
-        for (i, line) in lines {
-            let cells: Vec<&str> = line.split(',').collect();
-            if cells.len() != names.len() {
-                return Err(at(i + 1, cells.len().min(names.len()) + 1, format!("{} cells, the header has {}", cells.len(), names.len())));
-            }
-            for (j, cell) in cells.iter().enumerate() {
-                let v: f64 = cell
-                    .trim()
-                    .parse()
-                    .map_err(|_| at(i + 1, j + 1, format!("{:?} is not a number ({})", cell.trim(), names[j])))?;
-                if !v.is_finite() {
-                    return Err(at(i + 1, j + 1, format!("{} is not finite ({})", v, names[j])));
-                }
-                if j == 0 {
-                    if let Some(&last) = time.last() {
-                        if v <= last {
-                            return Err(at(i + 1, 1, format!("time {v} does not increase (previous {last})")));
-                        }
-                    }
-                    time.push(v);
-                } else {
-                    columns[j - 1].push(v);
-                }
-            }
-        }
+        let mut columns: Vec<Vec<f64>> = table.columns.into_iter().map(Option::unwrap_or_default).collect();
+        let time = columns.remove(0);
         if time.is_empty() {
             return Err(format!("{}: no data rows", path.display()));
         }
-        Ok(InputTable { names: names[1..].to_vec(), time, columns })
+        Ok(InputTable { names: table.names[1..].to_vec(), time, columns })
     }
 
     /// Column `j` at time `t`: linear between samples, held beyond the ends.
