@@ -1,10 +1,64 @@
 #!/usr/bin/env bash
-# Debian packages the tests need: libclang for the `fmi` crate's bindgen build (the second,
-# independent importer in tests/second_importer.rs). Installs only what is missing.
+# Debian packages the tests need, installed only when missing:
+#   libclang-dev  the `fmi` crate's bindgen build (tests/second_importer.rs) dlopens libclang.so or
+#                 libclang-<ver>.so. The image ships libclang-cpp.so.14, a different library that
+#                 bindgen cannot use, so the check looks for the very file bindgen loads.
+#   libtbb12      ecospy's native library links it (tests/python/test_importers.py).
+#
+# Usage: scripts/setup-system.sh [--dry-run]
+#   --dry-run  print what would be installed and why, install nothing; exit 0 either way.
 set -euo pipefail
-if ! ls /usr/lib/llvm-*/lib/libclang*.so* >/dev/null 2>&1 && ! ldconfig -p 2>/dev/null | grep -q 'libclang[-.0-9]*\.so'; then
-  SUDO=""
-  [[ "$(id -u)" == 0 ]] || SUDO="sudo"
-  $SUDO apt-get update -qq
-  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq libclang-dev
+
+dry_run=0
+case "${1:-}" in
+  "") ;;
+  --dry-run) dry_run=1 ;;
+  -h|--help) sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+  *) echo "setup-system.sh: unknown argument '$1' (expected --dry-run or nothing)" >&2; exit 2 ;;
+esac
+
+# bindgen (clang-sys) searches LIBCLANG_PATH, then llvm-config's libdir, then the usual library
+# folders, for libclang.so or libclang-<version>.so (not libclang-cpp).
+has_libclang() {
+  local dirs=()
+  [[ -n "${LIBCLANG_PATH:-}" ]] && dirs+=("$LIBCLANG_PATH")
+  # SETUP_SYSTEM_LIBDIRS (space-separated) replaces the system folders: the tests use it.
+  # shellcheck disable=SC2206
+  dirs+=(${SETUP_SYSTEM_LIBDIRS:-/usr/lib/llvm-*/lib /usr/lib/x86_64-linux-gnu /usr/lib/aarch64-linux-gnu /usr/lib /usr/local/lib})
+  local d f
+  for d in "${dirs[@]}"; do
+    for f in "$d"/libclang.so "$d"/libclang.so.* "$d"/libclang-[0-9]*.so "$d"/libclang-[0-9]*.so.*; do
+      [[ -e "$f" ]] && return 0
+    done
+  done
+  return 1
+}
+
+has_shared_lib() { ldconfig -p 2>/dev/null | grep -q "^[[:space:]]*$1[[:space:]]"; }
+
+missing=()
+reasons=()
+if ! has_libclang; then
+  missing+=(libclang-dev)
+  reasons+=("libclang-dev: no libclang.so / libclang-<ver>.so for bindgen (the fmi crate, second importer)")
 fi
+if ! has_shared_lib libtbb.so.12; then
+  missing+=(libtbb12)
+  reasons+=("libtbb12: no libtbb.so.12 for ecospy (third-party importer test)")
+fi
+
+if ((${#missing[@]} == 0)); then
+  echo "setup-system: nothing to install (libclang and libtbb12 present)"
+  exit 0
+fi
+for r in "${reasons[@]}"; do echo "setup-system: would install $r"; done
+if ((dry_run)); then
+  echo "setup-system: dry run, installed nothing: apt-get install -y ${missing[*]}"
+  exit 0
+fi
+
+SUDO=""
+[[ "$(id -u)" == 0 ]] || SUDO="sudo"
+$SUDO apt-get update -qq
+DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
+has_libclang || { echo "setup-system: libclang-dev installed but no libclang.so found" >&2; exit 1; }

@@ -1,0 +1,34 @@
+"""scripts/setup-system.sh decides what to install by the very file each build loads: bindgen loads
+libclang.so or libclang-<ver>.so, and the image's libclang-cpp.so.14 is a different library."""
+import os
+import pathlib
+import subprocess
+
+SCRIPT = pathlib.Path(__file__).resolve().parents[2] / "scripts" / "setup-system.sh"
+
+
+def dry_run(tmp_path, *files):
+    for f in files:
+        (tmp_path / f).touch()
+    env = dict(os.environ, SETUP_SYSTEM_LIBDIRS=str(tmp_path))
+    env.pop("LIBCLANG_PATH", None)
+    run = subprocess.run(["bash", str(SCRIPT), "--dry-run"], env=env, capture_output=True, text=True, check=True)
+    return run.stdout
+
+
+def test_libclang_cpp_alone_is_not_libclang(tmp_path):
+    out = dry_run(tmp_path, "libclang-cpp.so.14", "libclang-cpp.so")
+    assert "would install libclang-dev" in out, out
+    assert "installed nothing" in out, out
+
+
+def test_versioned_or_plain_libclang_is_enough(tmp_path):
+    for name in ("libclang-14.so.1", "libclang.so"):
+        d = tmp_path / name.replace(".", "_")
+        d.mkdir()
+        assert "libclang-dev" not in dry_run(d, name), name
+
+
+def test_bad_argument_is_refused():
+    run = subprocess.run(["bash", str(SCRIPT), "--install-everything"], capture_output=True, text=True)
+    assert run.returncode == 2 and "--install-everything" in run.stderr, run.stderr
