@@ -24,8 +24,7 @@ fn nominal_model_overshoots_and_gravity_turns_decay_positive() {
 
 #[test]
 fn paper_loop_reports_before_after_and_the_candidates() {
-    let source: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../shared/data/paper-reported.json")).unwrap_or_else(|_| r#"{"decay":[{"ratio_60_vs_22":5.0}]}"#.into())).unwrap();
+    let source: serde_json::Value = serde_json::from_str(paper::REPORTED_JSON).unwrap();
     let (j, md) = paper::run(&sim(), &source).unwrap();
     assert_eq!(j["candidates"].as_array().unwrap().len(), 6);
     assert!(j["baseline"]["conditions"].as_array().unwrap().len() == 4);

@@ -1,4 +1,4 @@
-//! Measured runs in the data format of `shared/docs/interfaces.md`: one CSV per run, `# key=value`
+//! Measured runs in the data format of `docs/interfaces.md`: one CSV per run, `# key=value`
 //! metadata lines before the header, required `time_s`, `motor_angle_rad`, `link_angle_rad`.
 //! Every error names the file, the line and (for cells) the column.
 

@@ -1,5 +1,5 @@
 //! The loop on the paper's own measurements, which exist only in summary form
-//! (`shared/data/paper-reported.json`, docs/physics.md §7): Decay D = θ0 − Θ at 60 °C "nearly five
+//! (`data/paper-reported.json`, docs/physics.md §7): Decay D = θ0 − Θ at 60 °C "nearly five
 //! times" that at 22 °C at 0.5 Hz, the temperature effect "less pronounced" at 1 Hz, phase delay
 //! "minimal". The fit happens in summary space: the FMU is swept at the paper's conditions (motor
 //! θ0 sin ωt, steady cycles), the same summary numbers are computed from it, and each effect of the
@@ -10,6 +10,9 @@ use serde_json::{json, Value};
 
 use super::sim::{EffectValues, RunModel, SimInput, Simulator};
 use super::fit::Effect;
+
+/// The paper's reported numbers as the repository keeps them, the default of `calibrate --paper`.
+pub const REPORTED_JSON: &str = include_str!("../../data/paper-reported.json");
 
 /// Motor amplitude of the sweeps, rad. The paper's is not recoverable from our copy
 /// (paper-reported.json: "amplitude not recoverable"); 0.3 rad is an assumption, stated in the report.

@@ -8,7 +8,7 @@ use std::path::Path;
 use super::master::Trace;
 use super::{Condition, SweepResult};
 
-/// Paper numbers used in the comparison (docs/physics.md §7, shared/data/paper-reported.json).
+/// Paper numbers used in the comparison (docs/physics.md §7, data/paper-reported.json).
 pub const PAPER_DECAY_RATIO_60_22_HALF_HZ: f64 = 5.0;
 pub const PAPER_HEATING_TIME_S: (f64, f64) = (30.0, 90.0);
 pub const PAPER_HEATING_POWER_W: (f64, f64) = (5.0, 15.0);

@@ -1,0 +1,74 @@
+//! The repository stands alone: a clone has no `../shared`, so no document or source refers
+//! outside the repository, and every `docs/…` or `data/…` file that is named exists.
+
+use std::path::{Path, PathBuf};
+
+const ROOT: &str = env!("CARGO_MANIFEST_DIR");
+
+fn files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let p = entry.unwrap().path();
+        if p.is_dir() {
+            files(&p, out);
+        } else if matches!(p.extension().and_then(|e| e.to_str()), Some("rs" | "md" | "py" | "sh" | "toml")) {
+            out.push(p);
+        }
+    }
+}
+
+fn sources() -> Vec<PathBuf> {
+    let mut out = vec![Path::new(ROOT).join("README.md")];
+    for d in ["src", "tests", "docs", "scripts", "benches", "examples", "fmu-build/src", ".ci"] {
+        let dir = Path::new(ROOT).join(d);
+        if dir.exists() {
+            files(&dir, &mut out);
+        }
+    }
+    out
+}
+
+#[test]
+fn nothing_refers_outside_the_repository() {
+    let this_file = Path::new(ROOT).join("tests/repository.rs");
+    let needle = ["..", "/shared"].concat();
+    let mut bad = Vec::new();
+    for f in sources().into_iter().filter(|f| *f != this_file) {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            if line.contains(&needle) {
+                bad.push(format!("{}:{}: {}", f.display(), i + 1, line.trim()));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "references outside the repository:\n{}", bad.join("\n"));
+}
+
+#[test]
+fn every_named_doc_and_data_file_exists() {
+    let mut missing = Vec::new();
+    let mut seen = 0;
+    for f in sources() {
+        let text = std::fs::read_to_string(&f).unwrap();
+        for (i, line) in text.lines().enumerate() {
+            for prefix in ["docs/", "data/"] {
+                for (at, _) in line.match_indices(prefix) {
+                    // a path starts the token: not part of a longer one (target/…/docs/…)
+                    if at > 0 && !" `([\"'".contains(line.as_bytes()[at - 1] as char) {
+                        continue;
+                    }
+                    let name: String = line[at..].chars().take_while(|c| c.is_alphanumeric() || "/._-".contains(*c)).collect();
+                    let name = name.trim_end_matches(['.', '/']);
+                    if !name.contains('.') {
+                        continue; // a folder or prose, not a file
+                    }
+                    seen += 1;
+                    if !Path::new(ROOT).join(name).exists() {
+                        missing.push(format!("{}:{}: {name}", f.display(), i + 1));
+                    }
+                }
+            }
+        }
+    }
+    assert!(seen >= 10, "the scan found only {seen} references: is it still reading the sources?");
+    assert!(missing.is_empty(), "named but missing:\n{}", missing.join("\n"));
+}
