@@ -256,3 +256,10 @@ fn bad_options_are_rejected_with_a_reason() {
     let a = SweepArgs { fmu: Some("/nonexistent/x.fmu".into()), ..args() };
     assert!(sweep::simulate(&a, |_| {}).unwrap_err().to_string().contains("no such file"));
 }
+
+#[test]
+fn a_negative_step_is_called_negative() {
+    let a = SweepArgs { step: -1.0, ..args() };
+    let e = sweep::simulate(&a, |_| {}).unwrap_err().to_string();
+    assert!(e.contains("--step -1") && e.contains("> 0") && !e.contains("divide"), "{e}");
+}

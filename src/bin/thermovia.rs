@@ -1,7 +1,9 @@
 //! The ThermoVIA command line: every subcommand drives the packaged FMU
 //! (`target/fmu/ThermoVIA.fmu`, built by `cargo run --release -p fmu-build`) through its C API.
 
-use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 #[derive(Parser)]
 #[command(name = "thermovia", version, about = "Thermo-active variable impedance actuator: FMU tools", long_about = None)]
@@ -20,75 +22,129 @@ enum Command {
     Synth(thermovia::calibrate::SynthArgs),
     /// A two-link arm in a vertical plane with two ThermoVIA joints (co-simulation example).
     Arm(thermovia::arm::ArmArgs),
-    /// Simulate any FMI 2.0 CS FMU like `fmpy simulate`: inputs from CSV, results as CSV.
+    /// Simulate any FMI 2.0 co-simulation FMU like `fmpy simulate`: inputs from CSV, results as CSV.
+    ///
+    /// Start, stop and step default to the FMU's DefaultExperiment; every output variable is
+    /// recorded unless --output names others. Example:
+    ///   thermovia simulate target/fmu/ThermoVIA.fmu --set heater_power=10 --set motor_drive=prescribed_angle
     Simulate(SimulateArgs),
+    /// Describe any FMI 2.0 co-simulation FMU like `fmpy info`: its variables (causality, type,
+    /// start value, unit), capabilities and DefaultExperiment.
+    Info(InfoArgs),
 }
 
 /// Options of `thermovia simulate`.
 #[derive(clap::Args)]
 struct SimulateArgs {
-    /// The FMU to load [default: target/fmu/ThermoVIA.fmu].
-    #[arg(long)]
-    fmu: Option<std::path::PathBuf>,
+    /// The FMU to simulate (any FMI 2.0 co-simulation FMU; ThermoVIA's is target/fmu/ThermoVIA.fmu).
+    fmu: PathBuf,
     /// Input signals: CSV with "time" first and one column per FMU input, linearly interpolated
     /// at each communication point (fmpy's convention) and held beyond the last row.
     #[arg(long)]
-    input: Option<std::path::PathBuf>,
-    /// Results: CSV in fmpy's layout ("time" first, one column per --output).
+    input: Option<PathBuf>,
+    /// Results: CSV in fmpy's layout ("time" first, one column per recorded variable)
+    /// [default: <modelName>_out.csv, as fmpy].
     #[arg(long)]
-    out: std::path::PathBuf,
-    /// Start time, s.
-    #[arg(long, default_value_t = 0.0)]
-    start_time: f64,
-    /// Stop time, s.
-    #[arg(long, default_value_t = 20.0)]
-    stop_time: f64,
-    /// Communication step, s.
-    #[arg(long, default_value_t = 1e-3)]
-    step: f64,
-    /// Variables to record, comma-separated.
-    #[arg(long, value_delimiter = ',', default_value = "motor_angle,link_angle,housing_temperature,pcl_temperature")]
-    output: Vec<String>,
-    /// Parameter or start value, NAME=VALUE (repeatable), set before initialisation.
-    #[arg(long = "set", value_parser = parse_assignment)]
-    set: Vec<(String, f64)>,
+    out: Option<PathBuf>,
+    /// Start time, s [default: the FMU's DefaultExperiment startTime, else 0].
+    #[arg(long)]
+    start_time: Option<f64>,
+    /// Stop time, s [default: DefaultExperiment stopTime, else start + 1].
+    #[arg(long)]
+    stop_time: Option<f64>,
+    /// Communication step (the h of every fmi2DoStep), s [default: DefaultExperiment stepSize,
+    /// else 1/500 of the run].
+    #[arg(long)]
+    step: Option<f64>,
+    /// Time between recorded rows, s: a whole multiple of the step [default: the step].
+    #[arg(long)]
+    output_interval: Option<f64>,
+    /// Variables to record, comma-separated [default: every output of the FMU].
+    #[arg(long, value_delimiter = ',')]
+    output: Option<Vec<String>>,
+    /// Parameter or start value NAME=VALUE (repeatable), set before initialisation. VALUE is read
+    /// by the variable's type: a number, an integer, true/false, or an Enumeration item's name.
+    #[arg(long = "set", value_name = "NAME=VALUE", value_parser = parse_assignment)]
+    set: Vec<(String, String)>,
 }
 
-fn parse_assignment(s: &str) -> Result<(String, f64), String> {
+/// Options of `thermovia info`.
+#[derive(clap::Args)]
+struct InfoArgs {
+    /// The FMU to describe.
+    fmu: PathBuf,
+}
+
+fn parse_assignment(s: &str) -> Result<(String, String), String> {
     let (name, value) = s.split_once('=').ok_or_else(|| format!("{s:?}: expected NAME=VALUE"))?;
-    let v = value.trim().parse().map_err(|_| format!("{s:?}: {value:?} is not a number"))?;
-    Ok((name.trim().to_string(), v))
+    Ok((name.trim().to_string(), value.trim().to_string()))
 }
 
 fn simulate(a: &SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use thermovia::harness::simulate::{simulate, InputTable, SimulateOptions};
-    let path = a.fmu.clone().unwrap_or_else(thermovia::harness::default_fmu_path);
-    let fmu = thermovia::harness::Fmu::open(&path)?;
-    let input = a.input.as_deref().map(InputTable::read_csv).transpose()?;
-    let options = SimulateOptions {
-        start_time: a.start_time,
-        stop_time: a.stop_time,
-        step: a.step,
-        parameters: a.set.clone(),
-        input,
-        outputs: a.output.clone(),
-    };
+    use thermovia::harness::simulate::{parse_value, simulate, InputTable, SimulateOptions};
+    let fmu = thermovia::harness::Fmu::open(&a.fmu)?;
+    let md = &fmu.description;
+    let mut options = SimulateOptions::with_defaults(md, a.start_time, a.stop_time, a.step, a.output_interval, a.output.clone());
+    options.parameters = a
+        .set
+        .iter()
+        .map(|(name, text)| parse_value(md, name, text).map(|v| (name.clone(), v)).map_err(|e| format!("--set {e}")))
+        .collect::<Result<_, _>>()?;
+    options.input = a.input.as_deref().map(InputTable::read_csv).transpose()?;
+    let out = a.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}_out.csv", md.model_name)));
     let trajectory = simulate(&fmu, &options)?;
-    // Written beside the target and renamed: never a half-written result file.
-    let tmp = a.out.with_extension("csv.partial");
-    trajectory.write_csv(&tmp)?;
-    std::fs::rename(&tmp, &a.out)?;
+    thermovia::output::write_file(&out, |path| trajectory.write_csv(path))?;
+    eprintln!(
+        "thermovia: {} rows × {} variables, t = {} … {} s, written to {}",
+        trajectory.columns[0].len(),
+        trajectory.names.len() - 1,
+        options.start_time,
+        options.stop_time,
+        out.display()
+    );
     Ok(())
 }
 
+fn info(a: &InfoArgs) -> Result<(), Box<dyn std::error::Error>> {
+    let fmu = thermovia::harness::Fmu::open(&a.fmu)?;
+    print!("{}", thermovia::harness::info::describe(&fmu.description));
+    Ok(())
+}
+
+/// The parsed command line. Numeric options take negative values (`--step -0.001`), so the tools'
+/// own checks, which name the option and the range, judge them rather than the parser.
+fn parse_command_line() -> Cli {
+    fn allow_negative(cmd: clap::Command) -> clap::Command {
+        cmd.mut_args(|a| if a.get_num_args().is_none_or(|n| n.takes_values()) { a.allow_negative_numbers(true) } else { a })
+            .mut_subcommands(allow_negative)
+    }
+    let parsed = allow_negative(Cli::command()).try_get_matches().and_then(|m| Cli::from_arg_matches(&m));
+    parsed.unwrap_or_else(|e| {
+        use clap::error::ErrorKind;
+        if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand) {
+            e.exit();
+        }
+        // One line: clap's message with its tips, without the usage block.
+        let text = e.render().to_string();
+        let lines: Vec<&str> = text
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with("Usage:") && !l.starts_with("For more information"))
+            .collect();
+        eprintln!("thermovia: {} (see --help)", lines.join("; "));
+        std::process::exit(2);
+    })
+}
+
 fn main() {
-    let cli = Cli::parse();
+    let cli = parse_command_line();
     let result = match &cli.command {
         Command::Sweep(a) => thermovia::sweep::run(a),
         Command::Calibrate(a) => thermovia::calibrate::run(a),
         Command::Synth(a) => thermovia::calibrate::synth(a),
         Command::Arm(a) => thermovia::arm::run(a),
         Command::Simulate(a) => simulate(a),
+        Command::Info(a) => info(a),
     };
     if let Err(e) = result {
         eprintln!("thermovia: error: {e}");

@@ -35,10 +35,10 @@ pub struct CalibrateArgs {
     /// angle before it drives the model; 0 uses the raw samples.
     #[arg(long, default_value_t = 100)]
     pub input_smoothing: usize,
-    /// Run the loop on the paper's summary numbers (shared/data/paper-reported.json) instead of
-    /// run files: writes paper.json and paper.md into --out.
-    #[arg(long)]
-    pub paper: Option<std::path::PathBuf>,
+    /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and
+    /// paper.md into --out. Without FILE, the repository's data/paper-reported.json (built in).
+    #[arg(long, value_name = "FILE", num_args = 0..=1)]
+    pub paper: Option<Option<std::path::PathBuf>>,
     /// Skip the SVG plots (report.json and report.md only).
     #[arg(long)]
     pub no_plots: bool,
@@ -167,8 +167,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
 
 pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
     if let Some(path) = &args.paper {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
-        let source: serde_json::Value = serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?;
+        let (origin, text) = match path {
+            Some(p) => (p.display().to_string(), std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?),
+            None => ("data/paper-reported.json (built in)".to_string(), paper::REPORTED_JSON.to_string()),
+        };
+        let source: serde_json::Value = serde_json::from_str(&text).map_err(|e| format!("{origin}: {e}"))?;
         let fmu = match &args.fmu {
             Some(p) => crate::harness::Fmu::open(p)?,
             None => crate::harness::Fmu::open_default()?,

@@ -264,6 +264,17 @@ impl RawInstance {
         unsafe { (self.lib.api.set_integer)(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr()) }
     }
 
+    pub fn get_boolean(&mut self, vrs: &[u32], out: &mut [Fmi2Boolean]) -> Fmi2Status {
+        assert_eq!(vrs.len(), out.len(), "one value per value reference");
+        // SAFETY: both slices have `len` elements.
+        unsafe { (self.lib.api.get_boolean)(self.c, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) }
+    }
+    pub fn set_boolean(&mut self, vrs: &[u32], values: &[Fmi2Boolean]) -> Fmi2Status {
+        assert_eq!(vrs.len(), values.len(), "one value per value reference");
+        // SAFETY: both slices have `len` elements.
+        unsafe { (self.lib.api.set_boolean)(self.c, vrs.as_ptr(), vrs.len(), values.as_ptr()) }
+    }
+
     pub fn get_real_status_last_successful_time(&mut self) -> (Fmi2Status, f64) {
         let mut t = f64::NAN;
         // SAFETY: `t` is a valid out pointer.

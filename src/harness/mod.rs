@@ -5,13 +5,14 @@
 
 pub mod cosim;
 pub mod description;
+pub mod info;
 pub mod simulate;
 
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
-pub use description::{ModelDescription, VariableInfo, VariableType};
+pub use description::{did_you_mean, DefaultExperiment, EnumerationItem, ModelDescription, VariableInfo, VariableType};
 
 use crate::fmi2::import::{FmuState, Library, LogRecord, RawInstance};
 use crate::fmi2::{FMI2_DISCARD, FMI2_OK, FMI2_WARNING};
@@ -236,11 +237,12 @@ impl Instance {
                 }
                 self.raw.set_integer(&[h.value_reference], &[value as i32])
             }
+            VariableType::Boolean => self.raw.set_boolean(&[h.value_reference], &[i32::from(value != 0.0)]),
             other => {
                 return Err(HarnessError::Call { call: format!("set on {}", self.name), status: 3, log: vec![format!("{other:?} variables are not supported by the harness")] })
             }
         };
-        self.check("fmi2SetReal/Integer", s)
+        self.check("fmi2SetReal/Integer/Boolean", s)
     }
 
     pub fn get_handle(&mut self, h: Handle) -> Result<f64, HarnessError> {
@@ -251,7 +253,18 @@ impl Instance {
                 self.check("fmi2GetReal", s)?;
                 Ok(v[0])
             }
-            _ => {
+            VariableType::Boolean => {
+                let mut v = [0];
+                let s = self.raw.get_boolean(&[h.value_reference], &mut v);
+                self.check("fmi2GetBoolean", s)?;
+                Ok(if v[0] != 0 { 1.0 } else { 0.0 })
+            }
+            VariableType::String => Err(HarnessError::Call {
+                call: format!("get on {}", self.name),
+                status: 3,
+                log: vec!["String variables are not supported by the harness".into()],
+            }),
+            VariableType::Integer | VariableType::Enumeration => {
                 let mut v = [0];
                 let s = self.raw.get_integer(&[h.value_reference], &mut v);
                 self.check("fmi2GetInteger", s)?;
@@ -260,7 +273,7 @@ impl Instance {
         }
     }
 
-    /// Sets a Real or Integer variable by name.
+    /// Sets a Real, Integer, Enumeration or Boolean (≠ 0 is true) variable by name.
     pub fn set(&mut self, name: &str, value: f64) -> Result<(), HarnessError> {
         let h = self.handle(name)?;
         self.set_handle(h, value)

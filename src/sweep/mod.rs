@@ -187,9 +187,22 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
     if a.temperatures.is_empty() || a.frequencies.is_empty() {
         return Err("need at least one temperature and one frequency".into());
     }
+    // Signs and ranges first, so a negative step is called negative, not "does not divide".
+    let positive = [("--step", a.step, "s"), ("--warmup-step", a.warmup_step, "s"), ("--heater-max-w", a.heater_max_w, "W")];
+    for (option, value, unit) in positive {
+        if !(value > 0.0) || !value.is_finite() {
+            return Err(format!("{option} {value}: must be a finite number > 0 {unit}"));
+        }
+    }
+    if !(a.soak >= 0.0) {
+        return Err(format!("--soak {}: must be ≥ 0 s", a.soak));
+    }
+    if a.cycles < 1 {
+        return Err(format!("--cycles {}: must be ≥ 1", a.cycles));
+    }
     for &f in &a.frequencies {
-        if f.is_nan() || f <= 0.0 {
-            return Err(format!("frequency {f} Hz must be > 0"));
+        if !(f > 0.0) || !f.is_finite() {
+            return Err(format!("--frequencies {f}: each frequency must be a finite number > 0 Hz"));
         }
         if analysis::samples_per_period(f, a.step).is_none() {
             return Err(format!(
@@ -197,9 +210,6 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
                 a.step
             ));
         }
-    }
-    if !(a.step > 0.0 && a.warmup_step > 0.0 && a.soak >= 0.0 && a.cycles >= 1 && a.heater_max_w > 0.0) {
-        return Err("--step, --warmup-step, --heater-max-w must be > 0, --soak ≥ 0, --cycles ≥ 1".into());
     }
     Ok(())
 }

@@ -46,7 +46,7 @@ def test_simulate_fmu_gives_the_rust_harness_trajectories(tmp_path):
     np.savetxt(csv_in, np.column_stack([signals[n] for n in signals.dtype.names]), delimiter=",",
                header=",".join(f'"{n}"' for n in signals.dtype.names), comments="", fmt="%.17g")
     csv_out = tmp_path / "rust.csv"
-    subprocess.run([str(THERMOVIA), "simulate", "--fmu", str(FMU), "--input", str(csv_in), "--out", str(csv_out),
+    subprocess.run([str(THERMOVIA), "simulate", str(FMU), "--input", str(csv_in), "--out", str(csv_out),
                     "--stop-time", str(stop), "--step", str(step), "--output", ",".join(OUTPUTS)], check=True)
     rust_result = read_csv(str(csv_out))
     assert len(rust_result) == len(fmpy_result) == 3001
