@@ -10,9 +10,9 @@
 
 use std::time::Instant;
 
-use thermovia::arm::dynamics::ArmConfig;
-use thermovia::arm::sim::{cosimulate, Scenario};
-use thermovia::harness::Fmu;
+use thermovia_tools::arm::dynamics::ArmConfig;
+use thermovia_tools::arm::sim::{cosimulate, Scenario};
+use thermovia_importer::Fmu;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap());
@@ -33,7 +33,7 @@ fn measure(runs: usize, simulated: f64, mut f: impl FnMut()) -> (f64, f64, f64) 
 }
 
 fn main() {
-    let fmu = Fmu::open_default().expect("build the FMU first: cargo run --release -p fmu-build");
+    let fmu = Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
     let (h, runs) = (1e-3, 15);
     for scenario in [Scenario::cold(), Scenario::hot()] {
         let cfg = ArmConfig { duration: 10.0, ..ArmConfig::default() };

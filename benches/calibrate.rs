@@ -3,16 +3,16 @@
 //! the whole loop (baseline fit, diagnosis, effect search, refit, report without plots) is timed.
 //! Prints each repetition and the median.
 
-use thermovia::calibrate::synthetic::{generate, write_atomically, SynthArgs};
-use thermovia::calibrate::{calibrate, CalibrateArgs};
-use thermovia::harness::Fmu;
+use thermovia_tools::calibrate::synthetic::{generate, write_atomically, SynthArgs};
+use thermovia_tools::calibrate::{calibrate, CalibrateArgs};
+use thermovia_importer::Fmu;
 
 fn main() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target").join("bench-calibrate");
     let data = dir.join("data");
     let data_s = data.to_str().unwrap().to_string();
     let synth = SynthArgs::from_cli(&["--coulomb-friction", "0.05", "--out", &data_s]).unwrap();
-    let files = generate(&synth, Fmu::open_default().expect("run `cargo run --release -p fmu-build` first")).unwrap();
+    let files = generate(&synth, Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build")).unwrap();
     write_atomically(&data, &files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect::<Vec<_>>()).unwrap();
     let reps: usize = std::env::var("CALIBRATE_BENCH_REPS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
     let mut times = Vec::new();

@@ -7,7 +7,7 @@
 use std::process::Command;
 use std::time::Instant;
 
-use thermovia::harness::Fmu;
+use thermovia_importer::Fmu;
 
 const STEP: f64 = 1e-3;
 const STEPS: usize = 20_000;
@@ -44,7 +44,7 @@ fn run(fmu: &Fmu, temperature_c: f64) -> f64 {
 }
 
 fn main() {
-    let fmu = Fmu::open_default().expect("build the FMU first: cargo run --release -p fmu-build");
+    let fmu = Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
     for (label, temp) in [("cold PCL (22 °C)", 22.0), ("hot PCL (60 °C)", 60.0)] {
         run(&fmu, temp); // warm caches
         let samples: Vec<f64> = (0..15).map(|_| run(&fmu, temp)).collect();

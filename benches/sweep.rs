@@ -10,7 +10,7 @@ use std::path::Path;
 use std::process::Command;
 use std::time::Instant;
 
-use thermovia::sweep::{self, SweepArgs};
+use thermovia_tools::sweep::{self, SweepArgs};
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
@@ -27,7 +27,7 @@ fn env_usize(name: &str, default: usize) -> usize {
 }
 
 fn main() {
-    let fmu = thermovia::harness::default_fmu_path();
+    let fmu = thermovia_tools::default_fmu_path();
     if !fmu.exists() {
         eprintln!("sweep bench: {} missing; run `cargo run --release -p fmu-build` first", fmu.display());
         std::process::exit(1);

@@ -2,21 +2,19 @@
 //! stability limit, refusal of bad input, cold vs heated joints, switching times, the command.
 //! Everything runs through the packaged FMU (`cargo run --release -p fmu-build` first).
 
-use thermovia::arm::dynamics::ArmConfig;
-use thermovia::arm::sim::{cosimulate, probe, Scenario};
-use thermovia::arm::{compare, reference, stability, thermal, ArmArgs};
-use thermovia::harness::Fmu;
+mod common;
 
-fn fmu() -> Fmu {
-    Fmu::open_default().expect("run `cargo run --release -p fmu-build` first")
-}
+use thermovia_tools::arm::dynamics::ArmConfig;
+use thermovia_tools::arm::sim::{cosimulate, probe, Scenario};
+use thermovia_tools::arm::{compare, reference, stability, thermal, ArmArgs};
+
 
 /// The bound: at a 1 ms communication step the co-simulated tip stays within 1 % of the
 /// tip's travel of the monolithic solution, cold and hot; and the error behaves as a first-order
 /// scheme's should (halving the step roughly halves it), so the bound is not luck.
 #[test]
 fn coupling_error_at_1ms_is_under_one_percent_and_first_order() {
-    let fmu = fmu();
+    let fmu = common::fmu();
     let cfg = ArmConfig::default();
     let ref_dt = 5e-4;
     for sc in [Scenario::cold(), Scenario::hot()] {
@@ -39,7 +37,7 @@ fn coupling_error_at_1ms_is_under_one_percent_and_first_order() {
 /// the initial motor offset g/K, the gravity feed-forward and the coupling torque balance.
 #[test]
 fn a_held_pose_stays_put_in_both_simulations() {
-    let fmu = fmu();
+    let fmu = common::fmu();
     let cfg = ArmConfig { goal_tip: ArmConfig::default().start_tip, duration: 1.0, ..ArmConfig::default() };
     let sc = Scenario::hot();
     let props = probe(&fmu, &cfg, &sc).unwrap();
@@ -60,7 +58,7 @@ fn a_held_pose_stays_put_in_both_simulations() {
 /// just below, diverging just above. A step at the limit is refused, saying why.
 #[test]
 fn stability_limit_is_predicted_checked_and_enforced() {
-    let fmu = fmu();
+    let fmu = common::fmu();
     let cfg = ArmConfig { duration: 3.5, ..ArmConfig::default() };
     let sc = Scenario::hot();
     let props = probe(&fmu, &cfg, &sc).unwrap();
@@ -103,7 +101,7 @@ fn bad_arm_configurations_are_refused_with_the_reason() {
     }
     assert!(base.validate().is_ok());
 
-    let fmu = fmu();
+    let fmu = common::fmu();
     let e = cosimulate(&fmu, &ArmConfig { m1: 0.0, ..base.clone() }, &Scenario::cold(), 1e-3, None, |_| {}).unwrap_err();
     assert!(e.contains("m1"), "{e}");
     let e = cosimulate(&fmu, &base, &Scenario::cold(), -1e-3, None, |_| {}).unwrap_err();
@@ -114,13 +112,13 @@ fn bad_arm_configurations_are_refused_with_the_reason() {
 /// peak and final force.
 #[test]
 fn heated_joints_hit_the_wall_softer() {
-    let fmu = fmu();
+    let fmu = common::fmu();
     let cfg = ArmConfig::default();
     let mut peaks = Vec::new();
     for sc in [Scenario::cold(), Scenario::hot()] {
         let props = probe(&fmu, &cfg, &sc).unwrap();
         let tr = cosimulate(&fmu, &cfg, &sc, 1e-3, stability::limit(&cfg, &props), |_| {}).unwrap();
-        let m = thermovia::arm::task_metrics(&cfg, &sc, props, &tr);
+        let m = thermovia_tools::arm::task_metrics(&cfg, &sc, props, &tr);
         assert!(m.first_contact_s.is_some(), "{}: the tip never reached the wall", sc.name);
         peaks.push((m.peak_contact_force_n, m.final_contact_force_n, props[0].stiffness));
     }
@@ -134,7 +132,7 @@ fn heated_joints_hit_the_wall_softer() {
 /// 90 % of the cold stiffness takes far longer than heating.
 #[test]
 fn heating_is_fast_and_passive_cooling_is_much_slower() {
-    let fmu = fmu();
+    let fmu = common::fmu();
     let r = thermal::switching(&fmu, 10.0, 60.0, 3600.0, 0.01, |_| {}).unwrap();
     let heat = r.heat_time_s.unwrap();
     assert!((30.0..=90.0).contains(&heat), "heating took {heat} s");
@@ -172,11 +170,11 @@ fn the_command_writes_report_and_plots() {
         heater_power: 10.0,
         cooling_limit: 3600.0,
     };
-    let e = thermovia::arm::run(&args(0.05)).unwrap_err().to_string();
+    let e = thermovia_tools::arm::run(&args(0.05), &thermovia_tools::output::Silent).unwrap_err().to_string();
     assert!(e.contains("stability limit"), "{e}");
     assert!(out.join("stale.txt").exists(), "a refused run must leave the old report alone");
 
-    thermovia::arm::run(&args(1e-3)).unwrap();
+    thermovia_tools::arm::run(&args(1e-3), &thermovia_tools::output::Silent).unwrap();
     assert!(!out.join("stale.txt").exists(), "the folder was not replaced as a whole");
     for f in ["report.md", "report.json", "tip_path.svg", "joint_torques.svg", "contact_force.svg", "coupling_error.svg", "impedance_switch_stiffness.svg"] {
         let meta = std::fs::metadata(out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));

@@ -1,14 +1,15 @@
 //! `harness::cosim::Master`: several instances of one FMU, each with its own parameters, stepped
 //! with Jacobi exchange. Checked against the same loop written by hand with the plain harness.
 
-use thermovia::harness::cosim::Master;
-use thermovia::harness::Fmu;
+mod common;
+
+use thermovia_importer::cosim::Master;
 
 /// Two instances coupled by a spring between their links (each pulls the other with the *other's*
 /// t_n angle): the master must give bit-identical results to the hand-written Jacobi loop.
 #[test]
 fn master_matches_a_hand_written_jacobi_loop() {
-    let fmu = Fmu::open_default().expect("run `cargo run --release -p fmu-build` first");
+    let fmu = common::fmu();
     let params = [[("link_inertia", 0.02), ("initial_link_angle", 0.3)], [("link_inertia", 0.05), ("initial_link_angle", -0.1)]];
     let k = 3.0;
     let (h, n) = (1e-3, 500);
@@ -53,7 +54,7 @@ fn master_matches_a_hand_written_jacobi_loop() {
 
 #[test]
 fn undeclared_ports_and_unknown_variables_are_named() {
-    let fmu = Fmu::open_default().expect("run `cargo run --release -p fmu-build` first");
+    let fmu = common::fmu();
     let mut master = Master::new(0.0, None);
     let e = master.add(&fmu, "a", &[], &["load_torq"], &["link_angle"]).err().unwrap().to_string();
     assert!(e.contains("load_torq"), "{e}");

@@ -5,11 +5,12 @@
 //! temperatures, 0.5 and 1 Hz, 8 s per run at 1 kHz, encoder quantisation 2π/10000 plus
 //! Gaussian noise of 1e-4 rad; truth moduli 0.8 × E' and 1.25 × E'' of the table.
 
+mod common;
+
 use std::path::PathBuf;
 
-use thermovia::calibrate::synthetic::{generate, write_atomically, SynthArgs};
-use thermovia::calibrate::{calibrate, CalibrateArgs, Calibration};
-use thermovia::harness::Fmu;
+use thermovia_tools::calibrate::synthetic::{generate, write_atomically, SynthArgs};
+use thermovia_tools::calibrate::{calibrate, CalibrateArgs, Calibration};
 
 fn blind(name: &str, truth: &[&str]) -> (Calibration, SynthArgs) {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("blind-{name}"));
@@ -19,7 +20,7 @@ fn blind(name: &str, truth: &[&str]) -> (Calibration, SynthArgs) {
     let out_s = out.to_str().unwrap().to_string();
     cli.extend_from_slice(&["--out", &out_s]);
     let synth = SynthArgs::from_cli(&cli).unwrap();
-    let files = generate(&synth, Fmu::open_default().expect("run `cargo run --release -p fmu-build` first")).unwrap();
+    let files = generate(&synth, common::fmu()).unwrap();
     let files: Vec<_> = files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect();
     write_atomically(&out, &files).unwrap();
     let report = dir.join("report");

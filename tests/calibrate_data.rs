@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use thermovia::calibrate::data::{parse_run, read_inputs, DataError};
+use thermovia_tools::calibrate::data::{parse_run, read_inputs, DataError};
 
 const GOOD: &str = "# temperature_c=40\n# source=test\n# frequency_hz=0.5\ntime_s,motor_angle_rad,link_angle_rad,extra\n0.000,0.0,0.0,a\n0.001,0.001,0.0005,b\n0.002,0.002,0.0011,c\n0.003,0.003,0.0016,d\n";
 

@@ -1,12 +1,13 @@
 //! The loop on the paper's summary numbers (physics.md §7): the nominal model cannot give a
 //! positive Decay; a ground-referenced effect can; the result is written out either way.
 
-use thermovia::calibrate::paper;
-use thermovia::calibrate::sim::{EffectValues, Simulator, STANDARD_GRAVITY};
-use thermovia::harness::Fmu;
+mod common;
+
+use thermovia_tools::calibrate::paper;
+use thermovia_tools::calibrate::sim::{EffectValues, Simulator, STANDARD_GRAVITY};
 
 fn sim() -> Simulator {
-    Simulator::new(Fmu::open_default().expect("run `cargo run --release -p fmu-build` first"), 2).unwrap()
+    Simulator::new(common::fmu(), 2).unwrap()
 }
 
 #[test]

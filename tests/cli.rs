@@ -3,6 +3,8 @@
 //! the value, nothing half-written. (`simulate`/`info` on an FMU that is not ThermoVIA: the
 //! container test in tests/python/test_cli_other_fmu.py.)
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -11,7 +13,7 @@ fn thermovia(args: &[&str]) -> Output {
 }
 
 fn fmu() -> String {
-    thermovia::harness::default_fmu_path().display().to_string()
+    common::fmu_path().display().to_string()
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -46,7 +48,7 @@ fn simulate_defaults_come_from_the_fmu() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (names, rows) = read_csv(&out);
     // every output of the FMU, in description order, and nothing else
-    let md = thermovia::harness::Fmu::open_default().unwrap().description.clone();
+    let md = common::fmu().description.clone();
     let outputs: Vec<&str> = md.variables.iter().filter(|v| v.causality == "output").map(|v| v.name.as_str()).collect();
     assert_eq!(names[0], "time");
     assert_eq!(&names[1..], outputs.as_slice());

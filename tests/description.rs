@@ -1,11 +1,12 @@
 //! One source of truth: the checked-in modelDescription, the README table and the packaged FMU all
 //! equal what the variable table generates, and the binary uses the start values it declares.
 
+mod common;
+
 use std::io::Read;
 
-use thermovia::fmi2::description::{guid, model_description};
-use thermovia::harness::{default_fmu_path, Fmu};
-use thermovia::variables::{markdown_table, Causality, VARIABLES};
+use thermovia_fmu::description::{guid, model_description};
+use thermovia_fmu::variables::{markdown_table, Causality, VARIABLES};
 
 const ROOT: &str = env!("CARGO_MANIFEST_DIR");
 const REFRESH: &str = "run `cargo run -p fmu-build -- --sync-docs` and commit the result";
@@ -28,7 +29,7 @@ fn readme_variable_table_equals_the_generated_one() {
 
 #[test]
 fn packaged_archive_has_the_standard_layout_and_this_builds_description() {
-    let file = std::fs::File::open(default_fmu_path()).expect("cargo run --release -p fmu-build");
+    let file = std::fs::File::open(common::fmu_path()).expect("cargo run --release -p fmu-build");
     let mut zip = zip::ZipArchive::new(file).unwrap();
     let names: Vec<String> = zip.file_names().map(str::to_string).collect();
     for needed in ["modelDescription.xml", "binaries/linux64/ThermoVIA.so", "documentation/index.html"] {
@@ -42,7 +43,7 @@ fn packaged_archive_has_the_standard_layout_and_this_builds_description() {
 
 #[test]
 fn structure_indices_point_at_outputs_and_every_unit_is_defined() {
-    let fmu = Fmu::open_default().unwrap();
+    let fmu = common::fmu();
     let md = &fmu.description;
     let xml = model_description();
     let outputs: Vec<usize> = md.variables.iter().enumerate().filter(|(_, v)| v.causality == "output").map(|(i, _)| i + 1).collect();
@@ -62,10 +63,10 @@ fn structure_indices_point_at_outputs_and_every_unit_is_defined() {
 
 #[test]
 fn start_values_are_what_the_binary_uses() {
-    let fmu = Fmu::open_default().unwrap();
+    let fmu = common::fmu();
     let mut inst = fmu.instantiate(None).unwrap();
     inst.initialize(0.0, None, &[]).unwrap();
-    for v in fmu.description.variables.iter().filter(|v| v.causality != "output") {
+    for v in fmu.description.variables.iter().filter(|v| v.causality != "output" && v.causality != "calculatedParameter") {
         let declared: f64 = v.start.as_ref().unwrap_or_else(|| panic!("{} has no start", v.name)).parse().unwrap();
         let used = inst.get(&v.name).unwrap();
         assert_eq!(declared, used, "{}", v.name);
@@ -76,7 +77,7 @@ fn start_values_are_what_the_binary_uses() {
 #[test]
 fn the_binary_needs_nothing_beyond_the_system_c_library() {
     let so = std::env::temp_dir().join(format!("thermovia-needed-{}.so", std::process::id()));
-    let mut zip = zip::ZipArchive::new(std::fs::File::open(default_fmu_path()).unwrap()).unwrap();
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(common::fmu_path()).unwrap()).unwrap();
     let mut bytes = Vec::new();
     zip.by_name("binaries/linux64/ThermoVIA.so").unwrap().read_to_end(&mut bytes).unwrap();
     std::fs::write(&so, bytes).unwrap();

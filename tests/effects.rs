@@ -2,7 +2,9 @@
 //! Numbers: K_s r_s² = 1160 N/m · 12 · (0.0222 m)² and κ r_p² = 0.064 m · (0.02075 m)² (the
 //! defaults, PAPER Table 1 / EST), E'(22 °C) = 985.34 kPa, E''(22 °C) = 834.45 kPa (Table 2).
 
-use thermovia::harness::{Fmu, Instance};
+mod common;
+
+use thermovia_importer::{Fmu, Instance};
 
 const KS: f64 = 1160.0 * 12.0 * 0.0222 * 0.0222;
 const KAPPA_R2: f64 = 0.064 * 0.02075 * 0.02075;
@@ -11,9 +13,6 @@ const E2_22: f64 = 834.45e3;
 const ROOM: f64 = 295.15;
 const H: f64 = 1e-3;
 
-fn fmu() -> Fmu {
-    Fmu::open_default().expect("run `cargo run --release -p fmu-build` first")
-}
 
 /// An instance with the motor following commands (motor_drive = 1) and the housing held at 22 °C.
 fn prescribed(fmu: &Fmu, params: &[(&str, f64)]) -> Instance {
@@ -42,7 +41,7 @@ fn close(a: f64, b: f64, rel: f64) -> bool {
 
 #[test]
 fn modulus_scales_multiply_the_table() {
-    let f = fmu();
+    let f = common::fmu();
     let i0 = &mut prescribed(&f, &[]);
     let i1 = &mut prescribed(&f, &[("storage_modulus_scale", 0.5), ("loss_modulus_scale", 2.0)]);
     let omega = 2.0 * std::f64::consts::PI * 0.5;
@@ -58,7 +57,7 @@ fn modulus_scales_multiply_the_table() {
 /// Δ = (F + B v) / K.
 #[test]
 fn coulomb_friction_lags_a_ramp_by_f_over_k() {
-    let f = fmu();
+    let f = common::fmu();
     let k = KS + E1_22 * KAPPA_R2;
     let mut i = prescribed(&f, &[("coulomb_friction", 0.05)]);
     let d = ramp(&mut i, 0.2, 5.0);
@@ -67,7 +66,7 @@ fn coulomb_friction_lags_a_ramp_by_f_over_k() {
 
 #[test]
 fn link_damping_lags_a_ramp_by_bv_over_k() {
-    let f = fmu();
+    let f = common::fmu();
     let k = KS + E1_22 * KAPPA_R2;
     let mut i = prescribed(&f, &[("link_damping", 0.1)]);
     let d = ramp(&mut i, 0.2, 5.0);
@@ -77,7 +76,7 @@ fn link_damping_lags_a_ramp_by_bv_over_k() {
 /// With play b the contact sits b/2 further: Δ = b/2 + F/K.
 #[test]
 fn backlash_adds_half_the_play_to_the_lag() {
-    let f = fmu();
+    let f = common::fmu();
     let k = KS + E1_22 * KAPPA_R2;
     let mut i = prescribed(&f, &[("coulomb_friction", 0.05), ("backlash_width", 0.01)]);
     let d = ramp(&mut i, 0.2, 5.0);
@@ -97,7 +96,7 @@ fn backlash_adds_half_the_play_to_the_lag() {
 /// angle solves K(0 − θ) = m g d sin(θ − 0.3) (Newton's method by hand below).
 #[test]
 fn gravity_rest_angle_balances_the_transmission() {
-    let f = fmu();
+    let f = common::fmu();
     let k = KS + E1_22 * KAPPA_R2;
     let mgd = 0.91 * 9.80665 * 0.14;
     let mut th: f64 = 0.0;
@@ -119,7 +118,7 @@ fn gravity_rest_angle_balances_the_transmission() {
 /// Housing stepped from 22 to 60 °C: T_pcl(t) = T1 + (T0 − T1) e^{−t/τ}.
 #[test]
 fn thermal_lag_is_first_order() {
-    let f = fmu();
+    let f = common::fmu();
     let tau = 2.0;
     let mut i = prescribed(&f, &[("thermal_lag_time_constant", tau)]);
     i.set("housing_temperature_command", ROOM + 38.0).unwrap();
@@ -136,7 +135,7 @@ fn thermal_lag_is_first_order() {
 /// |H| = |K + iωC + K_M iωλ/(1+iωλ)| / |−Jω² + iωC + K + K_M iωλ/(1+iωλ)|.
 #[test]
 fn maxwell_branch_matches_the_complex_stiffness() {
-    let f = fmu();
+    let f = common::fmu();
     let (freq, theta0, km, lam, j) = (5.0, 0.05, 20.0, 0.03, 0.018);
     let w = 2.0 * std::f64::consts::PI * freq;
     let k = KS + E1_22 * KAPPA_R2;

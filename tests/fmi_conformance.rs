@@ -1,15 +1,14 @@
 //! FMI 2.0 behaviour of the packaged FMU, exercised through its C API as an importer would
 //! (the archive is unpacked and the binary loaded with libloading by the harness).
 
+mod common;
+
 use std::ptr;
 
-use thermovia::fmi2::import::RawInstance;
-use thermovia::fmi2::*;
-use thermovia::harness::{Fmu, HarnessError, Instance};
+use thermovia_importer::loader::RawInstance;
+use thermovia_fmi2::*;
+use thermovia_importer::{Fmu, HarnessError, Instance};
 
-fn fmu() -> Fmu {
-    Fmu::open_default().expect("package the FMU first: cargo run --release -p fmu-build")
-}
 
 fn vr(inst: &Instance, name: &str) -> u32 {
     inst.handle(name).unwrap().value_reference
@@ -27,14 +26,14 @@ fn initialized(fmu: &Fmu) -> Instance {
 
 #[test]
 fn platform_version_and_all_symbols() {
-    let f = fmu(); // loading resolves all 34 functions or fails naming the missing one
+    let f = common::fmu(); // loading resolves all 34 functions or fails naming the missing one
     assert_eq!(f.library().version(), "2.0");
     assert_eq!(f.library().types_platform(), "default");
 }
 
 #[test]
 fn wrong_guid_and_bad_arguments_to_instantiate_return_null_with_a_reason() {
-    let f = fmu();
+    let f = common::fmu();
     let err = RawInstance::instantiate(f.library(), "a", "{00000000-0000-0000-0000-000000000000}", None, false)
         .err()
         .unwrap();
@@ -55,7 +54,7 @@ fn wrong_guid_and_bad_arguments_to_instantiate_return_null_with_a_reason() {
 
 #[test]
 fn illegal_call_sequences_are_errors_with_a_reason() {
-    let f = fmu();
+    let f = common::fmu();
     let mut i = f.instantiate(None).unwrap();
     let link = vr(&i, "link_angle");
     let raw = i.raw_mut();
@@ -95,7 +94,7 @@ fn illegal_call_sequences_are_errors_with_a_reason() {
 
 #[test]
 fn null_pointers_nan_unknown_references_and_outputs_are_refused() {
-    let f = fmu();
+    let f = common::fmu();
     let mut i = initialized(&f);
     let heater = vr(&i, "heater_power");
     let inertia = vr(&i, "link_inertia");
@@ -155,7 +154,7 @@ fn null_pointers_nan_unknown_references_and_outputs_are_refused() {
 
 #[test]
 fn a_percent_sign_in_a_message_is_not_a_format() {
-    let f = fmu();
+    let f = common::fmu();
     let mut i = initialized(&f);
     let raw = i.raw_mut();
     assert_eq!(raw.set_debug_logging(true, &["%s%n%d"]), FMI2_ERROR);
@@ -164,7 +163,7 @@ fn a_percent_sign_in_a_message_is_not_a_format() {
 
 #[test]
 fn stop_time_discards_the_overshooting_step_and_reports_it() {
-    let f = fmu();
+    let f = common::fmu();
     let mut i = f.instantiate(None).unwrap();
     i.initialize(0.0, Some(0.0105), &[]).unwrap();
     for _ in 0..10 {
@@ -199,7 +198,7 @@ fn run(i: &mut Instance, steps: usize) -> Vec<f64> {
 
 #[test]
 fn reset_returns_to_the_state_after_instantiation() {
-    let f = fmu();
+    let f = common::fmu();
     let mut fresh = f.instantiate(None).unwrap();
     fresh.initialize(0.0, None, &[]).unwrap();
     let expected = run(&mut fresh, 2000);
@@ -215,7 +214,7 @@ fn reset_returns_to_the_state_after_instantiation() {
 
 #[test]
 fn fmu_state_restores_and_serializes_bit_identically() {
-    let f = fmu();
+    let f = common::fmu();
     let mut a = initialized(&f);
     run(&mut a, 1000);
     let saved = a.save_state().unwrap();
@@ -244,7 +243,7 @@ fn fmu_state_restores_and_serializes_bit_identically() {
 
 #[test]
 fn two_instances_with_different_parameters_in_parallel_threads_do_not_interfere() {
-    let f = fmu();
+    let f = common::fmu();
     let configs: [&[(&str, f64)]; 2] = [&[("link_inertia", 0.018)], &[("link_inertia", 0.04), ("material_table", 3.0)]];
     let sequential: Vec<Vec<f64>> = configs
         .iter()
@@ -271,7 +270,7 @@ fn two_instances_with_different_parameters_in_parallel_threads_do_not_interfere(
 
 #[test]
 fn unsupported_capabilities_exist_and_say_so() {
-    let f = fmu();
+    let f = common::fmu();
     let mut i = initialized(&f);
     let raw = i.raw_mut();
     let (c, api) = raw.raw();
@@ -294,7 +293,7 @@ fn unsupported_capabilities_exist_and_say_so() {
 #[test]
 fn variable_communication_steps_give_the_same_trajectory() {
     // Inputs held constant: splitting a step changes nothing but rounding, whatever the split.
-    let f = fmu();
+    let f = common::fmu();
     let trace = |steps: &[f64]| -> Vec<f64> {
         let mut i = initialized(&f);
         i.set("motor_torque", 0.7).unwrap();

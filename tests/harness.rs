@@ -1,13 +1,15 @@
 //! The importer harness on the packaged FMU: clear errors for broken archives, missing symbols and
 //! unknown names; several independent instances side by side.
 
+mod common;
+
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use thermovia::harness::{Fmu, HarnessError};
+use thermovia_importer::{Fmu, HarnessError};
 
 fn packaged() -> Fmu {
-    Fmu::open_default().expect("run `cargo run --release -p fmu-build` first")
+    common::fmu()
 }
 
 fn scratch(name: &str) -> PathBuf {
@@ -59,7 +61,7 @@ fn a_file_that_is_not_a_zip_is_reported_as_not_an_fmu() {
 
 #[test]
 fn a_truncated_fmu_is_reported() {
-    let bytes = std::fs::read(thermovia::harness::default_fmu_path()).expect("packaged FMU");
+    let bytes = std::fs::read(common::fmu_path()).expect("packaged FMU");
     let p = scratch("truncated.fmu");
     std::fs::write(&p, &bytes[..bytes.len() / 2]).unwrap();
     let e = open_err(&p);
@@ -130,7 +132,7 @@ fn variables_are_listed_by_name_from_the_description() {
 }
 
 /// Runs an instance with a torque step and returns the link angle trajectory.
-fn torque_step(inst: &mut thermovia::harness::Instance, steps: usize) -> Vec<f64> {
+fn torque_step(inst: &mut thermovia_importer::Instance, steps: usize) -> Vec<f64> {
     let vr = inst.handle("link_angle").unwrap();
     inst.set("motor_torque", 0.4).unwrap();
     (0..steps)

@@ -1,9 +1,9 @@
 //! Physics of the plain-Rust model against hand calculations and an independent reference
 //! integration (no FMI here: the model crate is what the FMU wraps).
 
-use thermovia::model::mechanics::{self, Coefficients, Drive, State};
-use thermovia::model::params::ZERO_CELSIUS;
-use thermovia::model::{Model, MotorDrive, Params};
+use thermovia_model::mechanics::{self, Coefficients, Drive, State};
+use thermovia_model::params::ZERO_CELSIUS;
+use thermovia_model::{Model, MotorDrive, Params};
 
 fn celsius(t: f64) -> f64 {
     ZERO_CELSIUS + t
@@ -200,7 +200,7 @@ fn stiffest_parameters_stay_exact_and_stable() {
     // Printed Table 2 at its stiffest (cold), a very slow excitation (C = K''/ω ≈ 370 N·m·s/rad)
     // and a light motor: the fast pole is near −4e5 1/s, 400× beyond explicit RK4's limit at 1 ms.
     let mut p = Params {
-        material_table: thermovia::model::material::MaterialTable::PrintedExperimental,
+        material_table: thermovia_model::material::MaterialTable::PrintedExperimental,
         excitation_frequency: 0.01,
         motor_inertia: 1e-3,
         ..Params::default()

@@ -72,3 +72,35 @@ fn every_named_doc_and_data_file_exists() {
     assert!(seen >= 10, "the scan found only {seen} references: is it still reading the sources?");
     assert!(missing.is_empty(), "named but missing:\n{}", missing.join("\n"));
 }
+
+/// `cargo tree` of one package, normal dependencies only, as crate names.
+fn dependencies(package: &str) -> Vec<String> {
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let out = std::process::Command::new(cargo)
+        .args(["tree", "--offline", "-e", "normal", "--prefix", "none", "--format", "{p}", "-p", package])
+        .current_dir(ROOT)
+        .output()
+        .expect("cargo tree runs");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).lines().filter_map(|l| l.split_whitespace().next()).map(str::to_string).collect()
+}
+
+#[test]
+fn the_fmu_links_none_of_the_tools_dependencies() {
+    let deps = dependencies("thermovia-fmu");
+    assert!(deps.iter().any(|d| d == "thermovia-model"), "{deps:?}");
+    for banned in ["clap", "plotters", "indicatif", "libloading", "zip", "thermovia-importer", "thermovia-tools"] {
+        assert!(!deps.iter().any(|d| d == banned), "thermovia-fmu depends on {banned}: {deps:?}");
+    }
+}
+
+#[test]
+fn the_tools_reach_the_model_only_through_the_c_api() {
+    let deps = dependencies("thermovia-tools");
+    assert!(deps.iter().any(|d| d == "thermovia-importer"), "{deps:?}");
+    for banned in ["thermovia-model", "thermovia-fmu", "clap", "indicatif"] {
+        assert!(!deps.iter().any(|d| d == banned), "thermovia-tools depends on {banned}: {deps:?}");
+    }
+    let deps = dependencies("thermovia-importer");
+    assert!(!deps.iter().any(|d| d == "thermovia-fmu" || d == "thermovia-model"), "{deps:?}");
+}

@@ -2,10 +2,11 @@
 //! own schema and drives the binary through its own bindings. The trajectory must be bit-identical
 //! to the one this crate's harness produces.
 
+mod common;
+
 use fmi::fmi2::import::Fmi2Import;
 use fmi::fmi2::instance::{CoSimulation, Common};
 use fmi::traits::FmiImport;
-use thermovia::harness::{default_fmu_path, Fmu};
 
 const STEP: f64 = 1e-3;
 const STEPS: usize = 2000;
@@ -16,14 +17,14 @@ fn torque(k: usize) -> f64 {
 
 #[test]
 fn the_fmi_crate_reads_the_description_and_steps_the_binary_bit_identically() {
-    let import: Fmi2Import = fmi::import::from_path(default_fmu_path()).expect("rust-fmi opens the FMU");
+    let import: Fmi2Import = fmi::import::from_path(common::fmu_path()).expect("rust-fmi opens the FMU");
     let md = import.model_description();
     assert_eq!(md.fmi_version, "2.0");
-    assert_eq!(md.guid, thermovia::fmi2::description::guid());
+    assert_eq!(md.guid, thermovia_fmu::description::guid());
     assert_eq!(md.co_simulation.as_ref().expect("CoSimulation").model_identifier, "ThermoVIA");
     let vr = |name: &str| md.get_model_variables().find(|v| v.name == name).unwrap_or_else(|| panic!("{name}")).value_reference;
     let (torque_vr, heater_vr, link_vr) = (vr("motor_torque"), vr("heater_power"), vr("link_angle"));
-    assert_eq!(md.get_model_variables().count(), thermovia::variables::VARIABLES.len());
+    assert_eq!(md.get_model_variables().count(), thermovia_fmu::variables::VARIABLES.len());
 
     let mut inst = import.instantiate_cs("second_importer", false, true).expect("instantiate");
     inst.setup_experiment(None, 0.0, None).unwrap();
@@ -41,7 +42,7 @@ fn the_fmi_crate_reads_the_description_and_steps_the_binary_bit_identically() {
     // Refused, not crashed, through their bindings too.
     assert!(inst.set_real(&[heater_vr], &[-1.0]).is_err());
 
-    let fmu = Fmu::open_default().unwrap();
+    let fmu = common::fmu();
     let mut ours = fmu.instantiate(None).unwrap();
     ours.initialize(0.0, None, &[("heater_power", 9.0)]).unwrap();
     let mine: Vec<f64> = (0..STEPS)

@@ -1,8 +1,8 @@
-use thermovia::harness::Fmu;
+mod common;
 
 #[test]
 fn packaged_fmu_steps_through_the_c_api() {
-    let fmu = Fmu::open_default().expect("run `cargo run --release -p fmu-build` first");
+    let fmu = common::fmu();
     let mut a = fmu.instantiate(None).unwrap();
     a.initialize(0.0, None, &[("link_inertia", 0.02)]).unwrap();
     a.set("motor_torque", 0.5).unwrap();

@@ -1,11 +1,13 @@
 //! The sweep through the packaged FMU against an independent frequency-response calculation, the
 //! estimator on clean data, its ill-conditioning reports, the warm-up and the written outputs.
 
-use thermovia::model::material::MaterialTable;
-use thermovia::model::Params;
-use thermovia::sweep::analysis::Complex;
-use thermovia::sweep::estimator::{self, EstimateError, Known};
-use thermovia::sweep::{self, SweepArgs};
+mod common;
+
+use thermovia_model::material::MaterialTable;
+use thermovia_model::Params;
+use thermovia_tools::sweep::analysis::Complex;
+use thermovia_tools::sweep::estimator::{self, EstimateError, Known};
+use thermovia_tools::sweep::{self, SweepArgs};
 
 fn args() -> SweepArgs {
     SweepArgs { quiet: true, ..SweepArgs::default() }
@@ -177,10 +179,9 @@ fn warm_up_keeps_the_mechanics_at_rest_and_holds_the_housing() {
 
 #[test]
 fn warm_up_step_does_not_change_the_thermal_result() {
-    use thermovia::harness::Fmu;
     // Constant 10 W for 30 s with the default warm-up step (0.1 s) as internal step vs 1 ms: RK4
     // on time constants ≥ 5 s.
-    let fmu = Fmu::open_default().unwrap();
+    let fmu = common::fmu();
     let run = |h: f64| {
         let mut i = fmu.instantiate(None).unwrap();
         i.initialize(0.0, None, &[("max_internal_step", h)]).unwrap();

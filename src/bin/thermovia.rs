@@ -1,5 +1,7 @@
 //! The ThermoVIA command line: every subcommand drives the packaged FMU
 //! (`target/fmu/ThermoVIA.fmu`, built by `cargo run --release -p fmu-build`) through its C API.
+//! The parsers come from the tools' options structs (their `cli` feature); progress bars and
+//! clap live here, not in the libraries.
 
 use std::path::PathBuf;
 
@@ -15,13 +17,13 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Reproduce the paper's 0.5 Hz and 1 Hz sweeps at 22, 40, 50 and 60 °C (report, JSON, CSVs, plots).
-    Sweep(thermovia::sweep::SweepArgs),
+    Sweep(thermovia_tools::sweep::SweepArgs),
     /// Fit measured runs, diagnose the residual, add the effect it points to, report before/after.
-    Calibrate(thermovia::calibrate::CalibrateArgs),
+    Calibrate(thermovia_tools::calibrate::CalibrateArgs),
     /// Write realistic synthetic measured runs from a truth model with chosen effects.
-    Synth(thermovia::calibrate::SynthArgs),
+    Synth(thermovia_tools::calibrate::SynthArgs),
     /// A two-link arm in a vertical plane with two ThermoVIA joints (co-simulation example).
-    Arm(thermovia::arm::ArmArgs),
+    Arm(thermovia_tools::arm::ArmArgs),
     /// Simulate any FMI 2.0 co-simulation FMU like `fmpy simulate`: inputs from CSV, results as CSV.
     ///
     /// Start, stop and step default to the FMU's DefaultExperiment; every output variable is
@@ -81,8 +83,8 @@ fn parse_assignment(s: &str) -> Result<(String, String), String> {
 }
 
 fn simulate(a: &SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
-    use thermovia::harness::simulate::{parse_value, simulate, InputTable, SimulateOptions};
-    let fmu = thermovia::harness::Fmu::open(&a.fmu)?;
+    use thermovia_importer::simulate::{parse_value, simulate, InputTable, SimulateOptions};
+    let fmu = thermovia_importer::Fmu::open(&a.fmu)?;
     let md = &fmu.description;
     let mut options = SimulateOptions::with_defaults(md, a.start_time, a.stop_time, a.step, a.output_interval, a.output.clone());
     options.parameters = a
@@ -93,7 +95,7 @@ fn simulate(a: &SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
     options.input = a.input.as_deref().map(InputTable::read_csv).transpose()?;
     let out = a.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}_out.csv", md.model_name)));
     let trajectory = simulate(&fmu, &options)?;
-    thermovia::output::write_file(&out, |path| trajectory.write_csv(path))?;
+    thermovia_tools::output::write_file(&out, |path| trajectory.write_csv(path))?;
     eprintln!(
         "thermovia: {} rows × {} variables, t = {} … {} s, written to {}",
         trajectory.columns[0].len(),
@@ -106,8 +108,8 @@ fn simulate(a: &SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
 }
 
 fn info(a: &InfoArgs) -> Result<(), Box<dyn std::error::Error>> {
-    let fmu = thermovia::harness::Fmu::open(&a.fmu)?;
-    print!("{}", thermovia::harness::info::describe(&fmu.description));
+    let fmu = thermovia_importer::Fmu::open(&a.fmu)?;
+    print!("{}", thermovia_importer::info::describe(&fmu.description));
     Ok(())
 }
 
@@ -136,13 +138,49 @@ fn parse_command_line() -> Cli {
     })
 }
 
+/// A progress bar on stderr, hidden with --quiet, when stderr is not a terminal, or under CI.
+struct Bar(indicatif::ProgressBar);
+
+impl Bar {
+    fn new(quiet: bool, template: &str) -> Bar {
+        let show = !quiet
+            && std::env::var("CI").map_or(true, |v| v != "true")
+            && std::io::IsTerminal::is_terminal(&std::io::stderr());
+        if !show {
+            return Bar(indicatif::ProgressBar::hidden());
+        }
+        let bar = indicatif::ProgressBar::new(0);
+        bar.set_style(
+            indicatif::ProgressStyle::with_template(template)
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        Bar(bar)
+    }
+}
+
+impl thermovia_tools::output::Progress for Bar {
+    fn start(&self, total: u64) {
+        self.0.set_length(total);
+    }
+    fn set_label(&self, label: &str) {
+        self.0.set_message(label.to_string());
+    }
+    fn set_position(&self, position: u64) {
+        self.0.set_position(position);
+    }
+    fn finish(&self) {
+        self.0.finish_and_clear();
+    }
+}
+
 fn main() {
     let cli = parse_command_line();
     let result = match &cli.command {
-        Command::Sweep(a) => thermovia::sweep::run(a),
-        Command::Calibrate(a) => thermovia::calibrate::run(a),
-        Command::Synth(a) => thermovia::calibrate::synth(a),
-        Command::Arm(a) => thermovia::arm::run(a),
+        Command::Sweep(a) => thermovia_tools::sweep::run(a, &Bar::new(a.quiet, "{spinner} sweep [{bar:30}] {pos}/{len} {msg} ({elapsed})")),
+        Command::Calibrate(a) => thermovia_tools::calibrate::run(a),
+        Command::Synth(a) => thermovia_tools::calibrate::synth(a),
+        Command::Arm(a) => thermovia_tools::arm::run(a, &Bar::new(false, "{msg:32} [{bar:40}] {percent:>3}% {elapsed}")),
         Command::Simulate(a) => simulate(a),
         Command::Info(a) => info(a),
     };

@@ -1,0 +1,721 @@
+//! One FMU instance as safe Rust: the FMI 2.0 co-simulation state machine, argument checks,
+//! variable dispatch through the variable table, and logging. The C entry points in `export`
+//! only convert pointers and delegate here.
+
+use crate::description::guid;
+use thermovia_model::Model;
+use crate::variables::{by_reference, Access, BaseType, Causality, Variability, Variable, VARIABLES};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(i32)]
+pub enum Status {
+    Ok = 0,
+    Warning = 1,
+    Discard = 2,
+    Error = 3,
+    Fatal = 4,
+    Pending = 5,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Phase {
+    Instantiated = 1,
+    InitializationMode = 2,
+    StepComplete = 4,
+    StepFailed = 8,
+    Terminated = 16,
+    Error = 32,
+    Fatal = 64,
+}
+
+impl Phase {
+    fn from_bits(b: u8) -> Option<Phase> {
+        [
+            Phase::Instantiated,
+            Phase::InitializationMode,
+            Phase::StepComplete,
+            Phase::StepFailed,
+            Phase::Terminated,
+            Phase::Error,
+            Phase::Fatal,
+        ]
+        .into_iter()
+        .find(|p| *p as u8 == b)
+    }
+}
+
+/// Where each function may be called (FMI 2.0 §4.2.4 state machine, as in the Reference FMUs).
+pub mod allowed {
+    use super::Phase::*;
+    const fn m(p: super::Phase) -> u8 {
+        p as u8
+    }
+    pub const ANY_BUT_FATAL: u8 = m(Instantiated) | m(InitializationMode) | m(StepComplete) | m(StepFailed) | m(Terminated) | m(Error);
+    pub const SETUP: u8 = m(Instantiated);
+    pub const ENTER_INIT: u8 = m(Instantiated);
+    pub const EXIT_INIT: u8 = m(InitializationMode);
+    pub const TERMINATE: u8 = m(StepComplete) | m(StepFailed);
+    pub const GET: u8 = m(InitializationMode) | m(StepComplete) | m(StepFailed) | m(Terminated) | m(Error);
+    pub const SET: u8 = m(Instantiated) | m(InitializationMode) | m(StepComplete);
+    pub const DO_STEP: u8 = m(StepComplete);
+    pub const STATUS: u8 = m(StepComplete) | m(StepFailed) | m(Terminated);
+    pub const FMU_STATE: u8 = ANY_BUT_FATAL;
+}
+
+pub const LOG_EVENTS: u8 = 1;
+pub const LOG_WARNING: u8 = 2;
+pub const LOG_DISCARD: u8 = 4;
+pub const LOG_ERROR: u8 = 8;
+pub const LOG_FATAL: u8 = 16;
+const LOG_ALL: u8 = 31;
+
+fn category_bit(name: &str) -> Option<u8> {
+    Some(match name {
+        "logEvents" => LOG_EVENTS,
+        "logStatusWarning" => LOG_WARNING,
+        "logStatusDiscard" => LOG_DISCARD,
+        "logStatusError" => LOG_ERROR,
+        "logStatusFatal" => LOG_FATAL,
+        "logAll" => LOG_ALL,
+        _ => return None,
+    })
+}
+
+/// Receives (status, category, message); the C layer forwards it to the importer's logger.
+pub type LogSink = Box<dyn Fn(Status, &str, &str)>;
+
+/// Everything an FMU state holds: restoring it makes a run continue bit-identically.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Snapshot {
+    pub model: Model,
+    pub phase: Phase,
+    pub time: f64,
+    pub start_time: f64,
+    pub stop_time: Option<f64>,
+    pub last_successful_time: f64,
+    pub terminated: bool,
+}
+
+impl Snapshot {
+    /// The state right after fmi2Instantiate (and after fmi2Reset).
+    pub fn initial() -> Snapshot {
+        Snapshot {
+            model: Model::default(),
+            phase: Phase::Instantiated,
+            time: 0.0,
+            start_time: 0.0,
+            stop_time: None,
+            last_successful_time: 0.0,
+            terminated: false,
+        }
+    }
+}
+
+pub struct Component {
+    pub name: String,
+    log: LogSink,
+    initial_logging_on: bool,
+    logging_on: bool,
+    categories: u8,
+    pub(crate) s: Snapshot,
+    last_step_status: Status,
+}
+
+/// Decodes an `fmuResourceLocation` URI (`file:///abs`, `file:/abs`, `file://localhost/abs`,
+/// percent-escapes, trailing slash) into a path.
+pub fn resource_path_from_uri(uri: &str) -> Result<std::path::PathBuf, String> {
+    let rest = uri
+        .strip_prefix("file://localhost/")
+        .map(|r| format!("/{r}"))
+        .or_else(|| uri.strip_prefix("file:///").map(|r| format!("/{r}")))
+        .or_else(|| uri.strip_prefix("file:/").map(|r| format!("/{r}")))
+        .ok_or_else(|| format!("fmuResourceLocation {uri:?} is not a file: URI"))?;
+    let bytes = rest.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' {
+            let hex = rest.get(i + 1..i + 3).ok_or_else(|| format!("truncated %-escape in {uri:?}"))?;
+            out.push(u8::from_str_radix(hex, 16).map_err(|_| format!("bad %-escape %{hex} in {uri:?}"))?);
+            i += 3;
+        } else {
+            out.push(bytes[i]);
+            i += 1;
+        }
+    }
+    let s = String::from_utf8(out).map_err(|_| format!("{uri:?} is not UTF-8 after decoding"))?;
+    Ok(std::path::PathBuf::from(s.trim_end_matches('/').to_string()))
+}
+
+impl Component {
+    /// `fmi2Instantiate` after the C layer has read its strings. Err carries the reason, already
+    /// suitable for the logger.
+    pub fn new(
+        name: &str,
+        fmu_type: i32,
+        fmu_guid: &str,
+        resource_location: Option<&str>,
+        log: LogSink,
+        logging_on: bool,
+    ) -> Result<Component, String> {
+        if name.is_empty() {
+            return Err("fmi2Instantiate: instanceName is empty".into());
+        }
+        if fmu_type != 1 {
+            return Err(format!(
+                "fmi2Instantiate: fmuType {fmu_type} requested, but this FMU supports only fmi2CoSimulation (1)"
+            ));
+        }
+        if fmu_guid != guid() {
+            return Err(format!(
+                "fmi2Instantiate: GUID {fmu_guid:?} does not match this binary's {:?} (modelDescription.xml from another build?)",
+                guid()
+            ));
+        }
+        if let Some(uri) = resource_location {
+            // The model needs no resources; a malformed location is still worth a word.
+            resource_path_from_uri(uri).map_err(|e| format!("fmi2Instantiate: {e}"))?;
+        }
+        Ok(Component {
+            name: name.to_string(),
+            log,
+            initial_logging_on: logging_on,
+            logging_on,
+            categories: LOG_ALL,
+            s: Snapshot::initial(),
+            last_step_status: Status::Ok,
+        })
+    }
+
+    pub fn phase(&self) -> Phase {
+        self.s.phase
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.s.model
+    }
+
+    /// Debug messages honour loggingOn and the categories; discards, errors and fatals are always
+    /// passed on, since they explain a return status the importer must act on.
+    fn emit(&self, status: Status, category: &str, bit: u8, msg: &str) {
+        if status as i32 >= Status::Discard as i32 || (self.logging_on && self.categories & bit != 0) {
+            (self.log)(status, category, msg);
+        }
+    }
+
+    pub fn log_event(&self, msg: &str) {
+        self.emit(Status::Ok, "logEvents", LOG_EVENTS, msg);
+    }
+
+    /// Logs an error and moves to the Error state (FMI 2.0: after fmi2Error only Get*, Reset,
+    /// FreeInstance and SetFMUstate are allowed).
+    pub fn error(&mut self, msg: &str) -> Status {
+        // Errors are always reported, even with logging off: they say why a call failed.
+        (self.log)(Status::Error, "logStatusError", msg);
+        if self.s.phase != Phase::Fatal {
+            self.s.phase = Phase::Error;
+        }
+        Status::Error
+    }
+
+    pub fn fatal(&mut self, msg: &str) -> Status {
+        (self.log)(Status::Fatal, "logStatusFatal", msg);
+        self.s.phase = Phase::Fatal;
+        Status::Fatal
+    }
+
+    /// Checks the state machine; on an illegal call logs why and returns Err(Error).
+    pub fn check(&mut self, function: &str, mask: u8) -> Result<(), Status> {
+        if self.s.phase as u8 & mask != 0 {
+            Ok(())
+        } else {
+            let phase = self.s.phase;
+            Err(self.error(&format!("{function}: not allowed in state {phase:?}")))
+        }
+    }
+
+    pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Status {
+        if let Err(s) = self.check("fmi2SetDebugLogging", allowed::ANY_BUT_FATAL) {
+            return s;
+        }
+        let mut mask = 0;
+        for c in categories {
+            match category_bit(c) {
+                Some(b) => mask |= b,
+                None => return self.error(&format!("fmi2SetDebugLogging: unknown log category {c:?}")),
+            }
+        }
+        self.logging_on = on;
+        self.categories = if categories.is_empty() { LOG_ALL } else { mask };
+        Status::Ok
+    }
+
+    pub fn setup_experiment(&mut self, tolerance: Option<f64>, start: f64, stop: Option<f64>) -> Status {
+        if let Err(s) = self.check("fmi2SetupExperiment", allowed::SETUP) {
+            return s;
+        }
+        if !start.is_finite() {
+            return self.error(&format!("fmi2SetupExperiment: startTime {start} is not finite"));
+        }
+        if let Some(t) = stop {
+            if t.is_nan() || t < start {
+                return self.error(&format!("fmi2SetupExperiment: stopTime {t} is before startTime {start}"));
+            }
+        }
+        if let Some(tol) = tolerance {
+            if !(tol > 0.0 && tol.is_finite()) {
+                return self.error(&format!("fmi2SetupExperiment: tolerance {tol} is not positive"));
+            }
+            self.log_event(&format!(
+                "tolerance {tol} noted; the adaptive solver uses the parameter solver_tolerance"
+            ));
+        }
+        self.s.start_time = start;
+        self.s.time = start;
+        self.s.last_successful_time = start;
+        self.s.stop_time = stop;
+        Status::Ok
+    }
+
+    /// A state-machine transition: check, optionally re-derive initial states, move, log.
+    fn transition(&mut self, function: &str, mask: u8, to: Phase, initialize: bool, event: &str) -> Status {
+        if let Err(s) = self.check(function, mask) {
+            return s;
+        }
+        if initialize {
+            self.s.model.initialize();
+        }
+        self.s.phase = to;
+        self.log_event(event);
+        Status::Ok
+    }
+
+    pub fn enter_initialization_mode(&mut self) -> Status {
+        self.transition("fmi2EnterInitializationMode", allowed::ENTER_INIT, Phase::InitializationMode, true, "entered initialization mode")
+    }
+
+    pub fn exit_initialization_mode(&mut self) -> Status {
+        self.transition("fmi2ExitInitializationMode", allowed::EXIT_INIT, Phase::StepComplete, true, "exited initialization mode")
+    }
+
+    pub fn terminate(&mut self) -> Status {
+        self.transition("fmi2Terminate", allowed::TERMINATE, Phase::Terminated, false, "terminated")
+    }
+
+    pub fn reset(&mut self) -> Status {
+        if let Err(s) = self.check("fmi2Reset", allowed::ANY_BUT_FATAL) {
+            return s;
+        }
+        self.s = Snapshot::initial();
+        self.logging_on = self.initial_logging_on;
+        self.categories = LOG_ALL;
+        self.last_step_status = Status::Ok;
+        self.log_event("reset to the state after instantiation");
+        Status::Ok
+    }
+
+    fn lookup(&mut self, function: &str, ty: BaseType, vr: u32) -> Result<&'static Variable, Status> {
+        by_reference(ty, vr).ok_or_else(|| {
+            self.error(&format!("{function}: unknown value reference {vr} for type {ty:?}"))
+        })
+    }
+
+    pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Status {
+        if let Err(s) = self.check("fmi2GetReal", allowed::GET) {
+            return s;
+        }
+        for (vr, slot) in vrs.iter().zip(out.iter_mut()) {
+            match self.lookup("fmi2GetReal", BaseType::Real, *vr) {
+                Ok(v) => match v.access {
+                    Access::Real { get, .. } => *slot = get(&mut self.s.model),
+                    Access::Integer { .. } => unreachable!("looked up as Real"),
+                },
+                Err(s) => return s,
+            }
+        }
+        Status::Ok
+    }
+
+    pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Status {
+        if let Err(s) = self.check("fmi2GetInteger", allowed::GET) {
+            return s;
+        }
+        for (vr, slot) in vrs.iter().zip(out.iter_mut()) {
+            match self.lookup("fmi2GetInteger", BaseType::Integer, *vr) {
+                Ok(v) => match v.access {
+                    Access::Integer { get, .. } => *slot = get(&mut self.s.model),
+                    Access::Real { .. } => unreachable!("looked up as Integer"),
+                },
+                Err(s) => return s,
+            }
+        }
+        Status::Ok
+    }
+
+    /// Types with no variables: any value reference is unknown.
+    pub fn no_variables_of_type(&mut self, function: &str, mask: u8, vrs: &[u32]) -> Status {
+        if let Err(s) = self.check(function, mask) {
+            return s;
+        }
+        match vrs.first() {
+            None => Status::Ok,
+            Some(vr) => self.error(&format!("{function}: unknown value reference {vr}: this FMU has no variables of that type")),
+        }
+    }
+
+    /// Checks that `v` may be written now, with value `x`.
+    fn check_write(&mut self, function: &str, v: &Variable, x: f64) -> Result<(), Status> {
+        let phase = self.s.phase;
+        let why = match (v.causality, v.variability, phase) {
+            (Causality::Output, _, _) => Some(format!("{} is an output and cannot be set", v.name)),
+            (Causality::CalculatedParameter, _, _) => {
+                Some(format!("{} is a calculated parameter: set the parameters it is derived from", v.name))
+            }
+            (Causality::Parameter, Variability::Fixed, Phase::StepComplete) => Some(format!(
+                "{} is a fixed parameter: set it before fmi2ExitInitializationMode (or after fmi2Reset)",
+                v.name
+            )),
+            _ => None,
+        };
+        if let Some(why) = why {
+            return Err(self.error(&format!("{function}: {why}")));
+        }
+        v.check_range(x).map_err(|e| self.error(&format!("{function}: {e}; nothing was set")))
+    }
+
+    /// Sets values, all or none: every value is checked before any is written.
+    fn set_values(&mut self, function: &str, ty: BaseType, vrs: &[u32], values: &[f64]) -> Status {
+        if let Err(s) = self.check(function, allowed::SET) {
+            return s;
+        }
+        for (vr, x) in vrs.iter().zip(values) {
+            let v = match self.lookup(function, ty, *vr) {
+                Ok(v) => v,
+                Err(s) => return s,
+            };
+            if let Err(s) = self.check_write(function, v, *x) {
+                return s;
+            }
+        }
+        let mut parameter_written = false;
+        for (vr, x) in vrs.iter().zip(values) {
+            let v = by_reference(ty, *vr).expect("checked in the first pass");
+            match v.access {
+                Access::Real { set: Some(set), .. } => set(&mut self.s.model, *x),
+                Access::Integer { set: Some(set), .. } => set(&mut self.s.model, *x as i32),
+                _ => unreachable!("outputs refused in check_write"),
+            }
+            parameter_written |= v.causality == Causality::Parameter;
+        }
+        if parameter_written && matches!(self.s.phase, Phase::Instantiated | Phase::InitializationMode) {
+            // Initial states follow their parameters until initialisation ends.
+            self.s.model.initialize();
+        }
+        Status::Ok
+    }
+
+    pub fn set_real(&mut self, vrs: &[u32], values: &[f64]) -> Status {
+        self.set_values("fmi2SetReal", BaseType::Real, vrs, values)
+    }
+
+    pub fn set_integer(&mut self, vrs: &[u32], values: &[i32]) -> Status {
+        let as_f64: Vec<f64> = values.iter().map(|&v| v as f64).collect();
+        self.set_values("fmi2SetInteger", BaseType::Integer, vrs, &as_f64)
+    }
+
+    pub fn do_step(&mut self, t: f64, h: f64) -> Status {
+        if let Err(s) = self.check("fmi2DoStep", allowed::DO_STEP) {
+            return s;
+        }
+        if !(h > 0.0 && h.is_finite()) {
+            return self.error(&format!("fmi2DoStep: communicationStepSize {h} must be positive and finite"));
+        }
+        let now = self.s.time;
+        if !t.is_finite() || (t - now).abs() > 1e-9 * now.abs().max(1.0) {
+            return self.error(&format!(
+                "fmi2DoStep: currentCommunicationPoint {t} does not match the FMU's time {now}"
+            ));
+        }
+        // The model advances by exactly the h the master passed ((t + h) − t may differ from h
+        // in the last bit), unless stopTime cuts the step short.
+        let (mut end, mut advance) = (t + h, h);
+        let mut status = Status::Ok;
+        if let Some(stop) = self.s.stop_time {
+            if end > stop + 1e-9 * stop.abs().max(1.0) {
+                (end, advance) = (stop, stop - t);
+                status = Status::Discard;
+            }
+        }
+        if advance > 0.0 {
+            if let Err(failure) = self.s.model.step(advance) {
+                self.s.phase = Phase::StepFailed;
+                self.s.last_successful_time = t;
+                self.last_step_status = Status::Discard;
+                self.emit(Status::Discard, "logStatusDiscard", LOG_DISCARD, &format!(
+                    "fmi2DoStep: step from t = {t} by {h} discarded: {failure}; state kept at t = {t}"
+                ));
+                return Status::Discard;
+            }
+        }
+        self.s.time = end;
+        self.s.last_successful_time = end;
+        if status == Status::Discard {
+            self.s.phase = Phase::StepFailed;
+            self.s.terminated = true;
+            self.emit(Status::Discard, "logStatusDiscard", LOG_DISCARD, &format!(
+                "fmi2DoStep: step to {} passes stopTime {end}; stopped there (fmi2Terminated = true)",
+                t + h
+            ));
+        }
+        self.last_step_status = status;
+        status
+    }
+
+    pub fn last_step_status(&mut self, function: &str) -> Result<Status, Status> {
+        self.check(function, allowed::STATUS)?;
+        Ok(self.last_step_status)
+    }
+
+    pub fn last_successful_time(&mut self, function: &str) -> Result<f64, Status> {
+        self.check(function, allowed::STATUS)?;
+        Ok(self.s.last_successful_time)
+    }
+
+    pub fn terminated(&mut self, function: &str) -> Result<bool, Status> {
+        self.check(function, allowed::STATUS)?;
+        Ok(self.s.terminated)
+    }
+
+    pub fn unsupported(&mut self, function: &str, why: &str) -> Status {
+        self.error(&format!("{function}: {why}"))
+    }
+
+    pub fn get_state(&mut self) -> Result<Snapshot, Status> {
+        self.check("fmi2GetFMUstate", allowed::FMU_STATE)?;
+        Ok(self.s.clone())
+    }
+
+    pub fn set_state(&mut self, snapshot: &Snapshot) -> Status {
+        if let Err(s) = self.check("fmi2SetFMUstate", allowed::FMU_STATE) {
+            return s;
+        }
+        self.s = snapshot.clone();
+        self.log_event(&format!("FMU state restored at t = {}", self.s.time));
+        Status::Ok
+    }
+}
+
+// ---- serialized FMU state: versioned, pointer-free, checked ----
+
+const MAGIC: &[u8; 8] = b"TVIAFMUS";
+pub const STATE_FORMAT_VERSION: u32 = 1;
+const N_THERMAL: usize = 5;
+
+fn fnv1a64(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf29ce484222325;
+    for &b in bytes {
+        h ^= b as u64;
+        h = h.wrapping_mul(0x100000001b3);
+    }
+    h
+}
+
+/// Layout: magic, format version (u32), GUID (u32 length + bytes), payload length (u64),
+/// payload, FNV-1a 64 of everything before it. Little-endian throughout.
+/// Payload: phase (u8), terminated (u8), has-stop (u8), time, start, stop, last successful time
+/// (f64), then every parameter and input as (value reference u32, f64) in table order, then the
+/// mechanical state (5 f64), the thermal state (5 f64) and the adaptive step (f64).
+pub fn serialize(s: &Snapshot) -> Vec<u8> {
+    let mut payload = Vec::new();
+    payload.push(s.phase as u8);
+    payload.push(s.terminated as u8);
+    payload.push(s.stop_time.is_some() as u8);
+    for x in [s.time, s.start_time, s.stop_time.unwrap_or(0.0), s.last_successful_time] {
+        payload.extend_from_slice(&x.to_le_bytes());
+    }
+    let mut m = s.model.clone();
+    for v in VARIABLES.iter().filter(|v| v.has_start()) {
+        let x = match v.access {
+            Access::Real { get, .. } => get(&mut m),
+            Access::Integer { get, .. } => get(&mut m) as f64,
+        };
+        payload.extend_from_slice(&v.value_reference.to_le_bytes());
+        payload.extend_from_slice(&x.to_le_bytes());
+    }
+    let th = &s.model.thermal;
+    let states = s.model.mechanics.iter().copied().chain([
+        th.housing_temperature,
+        th.pcl_enthalpy,
+        th.pcl_temperature,
+        th.heater_energy,
+        th.heat_lost,
+        s.model.adaptive_step,
+    ]);
+    for x in states {
+        payload.extend_from_slice(&x.to_le_bytes());
+    }
+    let mut out = Vec::with_capacity(payload.len() + 96);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&STATE_FORMAT_VERSION.to_le_bytes());
+    out.extend_from_slice(&(guid().len() as u32).to_le_bytes());
+    out.extend_from_slice(guid().as_bytes());
+    out.extend_from_slice(&(payload.len() as u64).to_le_bytes());
+    out.extend_from_slice(&payload);
+    let sum = fnv1a64(&out);
+    out.extend_from_slice(&sum.to_le_bytes());
+    out
+}
+
+struct Reader<'a> {
+    b: &'a [u8],
+    at: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
+        let end = self.at.checked_add(n).filter(|&e| e <= self.b.len()).ok_or_else(|| {
+            format!("serialized state is truncated: {what} needs {n} bytes at offset {}, {} left", self.at, self.b.len() - self.at.min(self.b.len()))
+        })?;
+        let s = &self.b[self.at..end];
+        self.at = end;
+        Ok(s)
+    }
+    fn u8(&mut self, what: &str) -> Result<u8, String> {
+        Ok(self.take(1, what)?[0])
+    }
+    fn u32(&mut self, what: &str) -> Result<u32, String> {
+        Ok(u32::from_le_bytes(self.take(4, what)?.try_into().expect("4 bytes")))
+    }
+    fn u64(&mut self, what: &str) -> Result<u64, String> {
+        Ok(u64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
+    }
+    fn f64(&mut self, what: &str) -> Result<f64, String> {
+        Ok(f64::from_le_bytes(self.take(8, what)?.try_into().expect("8 bytes")))
+    }
+}
+
+/// Reads a serialized state back, refusing anything not written by this build's interface.
+pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
+    let mut r = Reader { b: bytes, at: 0 };
+    if r.take(8, "magic")? != MAGIC {
+        return Err("not a ThermoVIA FMU state (wrong magic bytes)".into());
+    }
+    let version = r.u32("format version")?;
+    if version != STATE_FORMAT_VERSION {
+        return Err(format!("state format version {version}, this build reads {STATE_FORMAT_VERSION}"));
+    }
+    let glen = r.u32("GUID length")? as usize;
+    let g = r.take(glen, "GUID")?;
+    if g != guid().as_bytes() {
+        return Err(format!(
+            "state was saved by an FMU with GUID {:?}, this is {:?}",
+            String::from_utf8_lossy(g),
+            guid()
+        ));
+    }
+    let plen = r.u64("payload length")? as usize;
+    let header_end = r.at;
+    let expected_total = header_end.checked_add(plen).and_then(|x| x.checked_add(8));
+    if expected_total != Some(bytes.len()) {
+        return Err(format!("state length {} does not match its header ({:?} expected)", bytes.len(), expected_total));
+    }
+    let sum_at = bytes.len() - 8;
+    let stored = u64::from_le_bytes(bytes[sum_at..].try_into().expect("8 bytes"));
+    if stored != fnv1a64(&bytes[..sum_at]) {
+        return Err("state checksum mismatch: the bytes were altered".into());
+    }
+    let phase_bits = r.u8("phase")?;
+    let phase = Phase::from_bits(phase_bits).ok_or_else(|| format!("unknown phase {phase_bits}"))?;
+    let terminated = r.u8("terminated")? != 0;
+    let has_stop = r.u8("has stop time")? != 0;
+    let time = r.f64("time")?;
+    let start_time = r.f64("start time")?;
+    let stop = r.f64("stop time")?;
+    let last_successful_time = r.f64("last successful time")?;
+    let mut model = Model::default();
+    for v in VARIABLES.iter().filter(|v| v.has_start()) {
+        let vr = r.u32("value reference")?;
+        if vr != v.value_reference {
+            return Err(format!("expected value reference {} ({}) in the state, found {vr}", v.value_reference, v.name));
+        }
+        let x = r.f64(v.name)?;
+        v.check_range(x)?;
+        match v.access {
+            Access::Real { set: Some(set), .. } => set(&mut model, x),
+            Access::Integer { set: Some(set), .. } => set(&mut model, x as i32),
+            _ => return Err(format!("{} is not settable", v.name)),
+        }
+    }
+    for i in 0..model.mechanics.len() {
+        model.mechanics[i] = r.f64("mechanical state")?;
+    }
+    let mut th = [0.0; N_THERMAL];
+    for x in th.iter_mut() {
+        *x = r.f64("thermal state")?;
+    }
+    let th_state = &mut model.thermal;
+    th_state.housing_temperature = th[0];
+    th_state.pcl_enthalpy = th[1];
+    th_state.pcl_temperature = th[2];
+    th_state.heater_energy = th[3];
+    th_state.heat_lost = th[4];
+    model.adaptive_step = r.f64("adaptive step")?;
+    if r.at != sum_at {
+        return Err(format!("{} unread bytes in the state payload", sum_at - r.at));
+    }
+    Ok(Snapshot {
+        model,
+        phase,
+        time,
+        start_time,
+        stop_time: has_stop.then_some(stop),
+        last_successful_time,
+        terminated,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn resource_uris_in_every_common_spelling() {
+        for (uri, path) in [
+            ("file:///tmp/fmu/resources", "/tmp/fmu/resources"),
+            ("file:///tmp/fmu/resources/", "/tmp/fmu/resources"),
+            ("file:/tmp/fmu/resources", "/tmp/fmu/resources"),
+            ("file://localhost/tmp/a%20b/resources", "/tmp/a b/resources"),
+        ] {
+            assert_eq!(resource_path_from_uri(uri).unwrap(), std::path::PathBuf::from(path), "{uri}");
+        }
+        assert!(resource_path_from_uri("http://x/y").is_err());
+        assert!(resource_path_from_uri("file:///a%2").is_err());
+    }
+
+    #[test]
+    fn serialized_state_round_trips_and_refuses_damage() {
+        let mut m = Model::default();
+        m.inputs.heater_power = 7.5;
+        m.step(0.25).unwrap();
+        let s = Snapshot {
+            model: m,
+            phase: Phase::StepComplete,
+            time: 0.25,
+            start_time: 0.0,
+            stop_time: Some(3.0),
+            last_successful_time: 0.25,
+            terminated: false,
+        };
+        let bytes = serialize(&s);
+        assert_eq!(deserialize(&bytes).unwrap(), s);
+        assert!(deserialize(&bytes[..bytes.len() - 1]).unwrap_err().contains("length"));
+        let mut flipped = bytes.clone();
+        let mid = flipped.len() / 2;
+        flipped[mid] ^= 0x10;
+        assert!(deserialize(&flipped).unwrap_err().contains("checksum"));
+        let mut other_version = bytes.clone();
+        other_version[8] = 99;
+        assert!(deserialize(&other_version).unwrap_err().contains("version"));
+        assert!(deserialize(b"PNG\x89 not a state").is_err());
+    }
+}

@@ -1,0 +1,490 @@
+//! The one table of FMU variables. `modelDescription.xml`, the value-reference dispatch in the FMI
+//! layer, the start values and the README's variable table are all generated from `VARIABLES`,
+//! so they cannot disagree. Start values are read from `Model::default()` through each row's getter.
+
+use thermovia_model::material::MaterialTable;
+use thermovia_model::{Model, MotorDrive, ThermalDrive};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Causality {
+    Parameter,
+    /// Derived from parameters by the model; readable, never set, no start value.
+    CalculatedParameter,
+    Input,
+    Output,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Variability {
+    Fixed,
+    Tunable,
+    Continuous,
+}
+
+impl Causality {
+    /// The FMI spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Causality::Parameter => "parameter",
+            Causality::CalculatedParameter => "calculatedParameter",
+            Causality::Input => "input",
+            Causality::Output => "output",
+        }
+    }
+}
+
+impl Variability {
+    /// The FMI spelling.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Variability::Fixed => "fixed",
+            Variability::Tunable => "tunable",
+            Variability::Continuous => "continuous",
+        }
+    }
+}
+
+/// Lower bound of a variable's legal range.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lower {
+    None,
+    /// v ≥ bound
+    Inclusive(f64),
+    /// v > bound
+    Exclusive(f64),
+}
+
+pub type RealGet = fn(&mut Model) -> f64;
+pub type RealSet = fn(&mut Model, f64);
+pub type IntGet = fn(&mut Model) -> i32;
+pub type IntSet = fn(&mut Model, i32);
+
+#[derive(Clone, Copy)]
+pub enum Access {
+    Real { get: RealGet, set: Option<RealSet> },
+    Integer { get: IntGet, set: Option<IntSet> },
+}
+
+/// A named Integer type: an FMI Enumeration, so tools show names instead of numbers.
+pub struct Enumeration {
+    pub name: &'static str,
+    /// (value, name, description)
+    pub items: &'static [(i32, &'static str, &'static str)],
+}
+
+#[derive(Clone, Copy)]
+pub struct Variable {
+    pub name: &'static str,
+    pub value_reference: u32,
+    pub causality: Causality,
+    pub variability: Variability,
+    /// FMI unit name ("" for dimensionless).
+    pub unit: &'static str,
+    pub lower: Lower,
+    pub upper: Option<f64>,
+    pub description: &'static str,
+    /// Where the default comes from: PAPER, LIT, EST (with the reasoning) or MODE/NUMERICS.
+    pub source: &'static str,
+    pub access: Access,
+    /// Integer variables only: the enumeration they are declared as.
+    pub enumeration: Option<&'static Enumeration>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum BaseType {
+    Real,
+    Integer,
+}
+
+impl Variable {
+    pub fn base_type(&self) -> BaseType {
+        match self.access {
+            Access::Real { .. } => BaseType::Real,
+            Access::Integer { .. } => BaseType::Integer,
+        }
+    }
+
+    /// Start value as the binary uses it (from the default model).
+    pub fn start(&self) -> f64 {
+        let mut m = Model::default();
+        match self.access {
+            Access::Real { get, .. } => get(&mut m),
+            Access::Integer { get, .. } => get(&mut m) as f64,
+        }
+    }
+
+    /// Checks a value against the variable's range; the error names the variable.
+    pub fn check_range(&self, v: f64) -> Result<(), String> {
+        if !v.is_finite() {
+            return Err(format!("{} = {v} is not a finite number", self.name));
+        }
+        match self.lower {
+            Lower::Inclusive(b) if v < b => {
+                return Err(format!("{} = {v} is below its minimum {b} {}", self.name, self.unit))
+            }
+            Lower::Exclusive(b) if v <= b => {
+                return Err(format!("{} = {v} must be greater than {b} {}", self.name, self.unit))
+            }
+            _ => {}
+        }
+        match self.upper {
+            Some(b) if v > b => Err(format!("{} = {v} is above its maximum {b} {}", self.name, self.unit)),
+            _ => Ok(()),
+        }
+    }
+
+    /// Whether the variable is set from outside (parameters, inputs), so it carries a start value
+    /// and belongs to a saved state; outputs and calculated parameters are derived.
+    pub fn has_start(&self) -> bool {
+        matches!(self.causality, Causality::Parameter | Causality::Input)
+    }
+}
+
+macro_rules! real_param {
+    ($vr:expr, $field:ident, $var:ident, $unit:expr, $lower:expr, $upper:expr, $desc:expr, $src:expr) => {
+        Variable {
+            name: stringify!($field),
+            value_reference: $vr,
+            causality: Causality::Parameter,
+            variability: Variability::$var,
+            unit: $unit,
+            lower: $lower,
+            upper: $upper,
+            description: $desc,
+            source: $src,
+            access: Access::Real {
+                get: |m| m.params().$field,
+                set: Some(|m, v| m.params_mut().$field = v),
+            },
+            enumeration: None,
+        }
+    };
+}
+
+macro_rules! real_calculated {
+    ($vr:expr, $name:ident, $unit:expr, $desc:expr, $src:expr, $get:expr) => {
+        Variable {
+            name: stringify!($name),
+            value_reference: $vr,
+            causality: Causality::CalculatedParameter,
+            variability: Variability::Fixed,
+            unit: $unit,
+            lower: Lower::None,
+            upper: None,
+            description: $desc,
+            source: $src,
+            access: Access::Real { get: $get, set: None },
+            enumeration: None,
+        }
+    };
+}
+
+macro_rules! real_input {
+    ($vr:expr, $field:ident, $unit:expr, $lower:expr, $desc:expr) => {
+        Variable {
+            name: stringify!($field),
+            value_reference: $vr,
+            causality: Causality::Input,
+            variability: Variability::Continuous,
+            unit: $unit,
+            lower: $lower,
+            upper: None,
+            description: $desc,
+            source: "input",
+            access: Access::Real { get: |m| m.inputs.$field, set: Some(|m, v| m.inputs.$field = v) },
+            enumeration: None,
+        }
+    };
+}
+
+macro_rules! real_output {
+    ($vr:expr, $name:ident, $unit:expr, $desc:expr, $get:expr) => {
+        Variable {
+            name: stringify!($name),
+            value_reference: $vr,
+            causality: Causality::Output,
+            variability: Variability::Continuous,
+            unit: $unit,
+            lower: Lower::None,
+            upper: None,
+            description: $desc,
+            source: "output",
+            access: Access::Real { get: $get, set: None },
+            enumeration: None,
+        }
+    };
+}
+
+use Lower::{Exclusive as Gt, Inclusive as Ge};
+const NONE: Lower = Lower::None;
+
+pub static MATERIAL_TABLE: Enumeration = Enumeration {
+    name: "MaterialTable",
+    items: &[
+        (1, "repaired_experimental", "Table 2 experimental columns, small entries read as MPa (default)"),
+        (2, "printed_experimental", "Table 2 experimental columns as printed"),
+        (3, "repaired_estimated", "Table 2 estimated columns, small entries read as MPa"),
+        (4, "printed_estimated", "Table 2 estimated columns as printed"),
+    ],
+};
+
+pub static MOTOR_DRIVE: Enumeration = Enumeration {
+    name: "MotorDrive",
+    items: &[
+        (0, "torque", "motor_torque drives the motor inertia"),
+        (1, "prescribed_angle", "the motor follows motor_angle_command with slope motor_speed_command"),
+    ],
+};
+
+pub static THERMAL_DRIVE: Enumeration = Enumeration {
+    name: "ThermalDrive",
+    items: &[
+        (0, "heater", "heater_power drives the thermal network"),
+        (1, "prescribed_housing", "the housing follows housing_temperature_command"),
+    ],
+};
+
+pub static VARIABLES: &[Variable] = &[
+    // ---- inputs
+    real_input!(0, heater_power, "W", Ge(0.0), "Electrical power into the heaters (>= 0)"),
+    real_input!(1, motor_torque, "N.m", NONE, "Torque from the motor on the motor side (motor_drive = 0)"),
+    real_input!(2, load_torque, "N.m", NONE, "External torque on the output link"),
+    real_input!(3, ambient_temperature, "K", Gt(0.0), "Temperature of the surroundings"),
+    real_input!(4, motor_angle_command, "rad", NONE, "Motor angle at the start of the step (motor_drive = 1)"),
+    real_input!(5, motor_speed_command, "rad/s", NONE, "Motor speed over the step (motor_drive = 1)"),
+    real_input!(6, housing_temperature_command, "K", Gt(0.0), "Measured housing temperature (thermal_drive = 1)"),
+    // ---- outputs
+    real_output!(100, motor_angle, "rad", "Motor / housing angle θm", |m| m.motor_angle()),
+    real_output!(101, motor_speed, "rad/s", "Motor speed θm'", |m| m.motor_speed()),
+    real_output!(102, link_angle, "rad", "Output link angle θl", |m| m.link_angle()),
+    real_output!(103, link_speed, "rad/s", "Output link speed θl'", |m| m.link_speed()),
+    real_output!(104, pcl_temperature, "K", "PCL temperature (no sensor on the device: the model's estimate)", |m| m.thermal.pcl_temperature),
+    real_output!(105, housing_temperature, "K", "Housing surface temperature, where the thermocouple sits", |m| m.thermal.housing_temperature),
+    real_output!(106, transmitted_torque, "N.m", "Torque through springs + PCL (+ Maxwell branch)", |m| m.transmitted_torque()),
+    real_output!(107, effective_stiffness, "N.m/rad", "K_eff = Re K*(ω) at the excitation frequency and current PCL temperature", |m| m.effective_stiffness()),
+    real_output!(108, effective_damping, "N.m.s/rad", "C_eff = Im K*(ω)/ω at the excitation frequency and current PCL temperature", |m| m.effective_damping()),
+    real_output!(109, storage_modulus, "Pa", "E'(T) of the PCL at its current temperature", |m| m.coefficients().storage_modulus),
+    real_output!(110, loss_modulus, "Pa", "E''(T) of the PCL at its current temperature", |m| m.coefficients().loss_modulus),
+    real_output!(111, pcl_melt_fraction, "", "Melt fraction χ of the PCL (0 solid, 1 melt)", |m| m.melt_fraction()),
+    real_output!(112, heater_energy, "J", "Electrical energy into the heaters since initialisation", |m| m.thermal.heater_energy),
+    real_output!(113, heat_lost, "J", "Heat lost to ambient since initialisation", |m| m.thermal.heat_lost),
+    // ---- mechanical parameters
+    real_param!(200, motor_inertia, Fixed, "kg.m2", Gt(0.0), None, "J_m, motor + gearbox inertia on the housing side", "EST: rotor inertia reflected through the gearbox; the paper gives none"),
+    real_param!(201, motor_damping, Fixed, "N.m.s/rad", Ge(0.0), None, "B_m, viscous loss of motor and gearbox", "EST: small; the motor is position-controlled in the experiments"),
+    real_param!(202, link_inertia, Fixed, "kg.m2", Gt(0.0), None, "J_l, output link with its 0.91 kg mass", "EST: 0.91 kg at 0.14 m plus a light PETG link (the paper's value is lost)"),
+    real_param!(203, link_damping, Fixed, "N.m.s/rad", Ge(0.0), None, "B_l, viscous link damping to ground (effect link_damping)", "PAPER: bearing friction minimised in the experiments; off"),
+    real_param!(204, spring_stiffness, Fixed, "N/m", Ge(0.0), None, "Stiffness of each compression spring", "PAPER Table 1: 1.16 N/mm"),
+    real_param!(205, spring_count, Fixed, "", Ge(0.0), None, "Number of springs", "PAPER Table 1: 12 (total 13.92 N/mm)"),
+    real_param!(206, spring_radius, Fixed, "m", Gt(0.0), None, "r_s, distance of the springs from the axis", "PAPER Table 1: 22.20 mm (K_s r_s² = 6.86 N·m/rad)"),
+    real_param!(207, pcl_radius, Fixed, "m", Gt(0.0), None, "r_p, mean distance of the PCL from the axis", "PAPER Table 1: 20.75 mm"),
+    real_param!(208, pcl_shape_factor, Fixed, "m", Gt(0.0), None, "κ = 3A/L0, PCL cavities' area over thickness", "EST: A ≈ 143 mm², L0 ≈ 6.7 mm per cavity, so cold PCL adds ~4× the spring stiffness"),
+    real_calculated!(280, spring_bank_stiffness, "N.m/rad", "K_s = k·n·r_s², torsional stiffness of the spring bank", "from spring_stiffness, spring_count, spring_radius", |m| m.params().spring_torsional_stiffness()),
+    real_calculated!(281, modulus_to_torsion, "m3/rad", "κ·r_p²: PCL torsional stiffness per pascal of modulus (K_pcl = E'·this)", "from pcl_shape_factor, pcl_radius", |m| m.params().modulus_to_torsion()),
+    real_param!(209, excitation_frequency, Tunable, "Hz", Gt(0.0), None, "Frequency of the harmonic run: C = K''/ω (hysteretic loss)", "PAPER: 0.5 and 1 Hz"),
+    real_param!(210, storage_modulus_scale, Tunable, "", Gt(0.0), None, "Multiplies E'(T) of the material table (calibration of the storage modulus)", "CALIBRATION: 1 = the table as it is"),
+    real_param!(211, loss_modulus_scale, Tunable, "", Gt(0.0), None, "Multiplies E''(T) of the material table (calibration of the loss modulus)", "CALIBRATION: 1 = the table as it is"),
+    // ---- effects, all off by default
+    real_param!(220, maxwell_stiffness, Fixed, "N.m/rad", Ge(0.0), None, "K_M of a Maxwell branch (effect frequency_dependent_modulus)", "EFFECT: off"),
+    real_param!(221, maxwell_relaxation_time, Fixed, "s", Gt(0.0), None, "λ of the Maxwell branch", "EFFECT: 0.1 s placeholder while K_M = 0"),
+    real_param!(222, coulomb_friction, Fixed, "N.m", Ge(0.0), None, "Coulomb friction torque on the link (effect coulomb_friction)", "EFFECT: off"),
+    real_param!(223, stribeck_friction, Fixed, "N.m", Ge(0.0), None, "Static friction above Coulomb, fading with speed", "EFFECT: off"),
+    real_param!(224, stribeck_velocity, Fixed, "rad/s", Gt(0.0), None, "Speed scale of the Stribeck excess", "EST: 0.05 rad/s"),
+    real_param!(225, friction_smoothing_velocity, Fixed, "rad/s", Gt(0.0), None, "tanh smoothing of sign(θl') in the friction law", "NUMERICS: 1e-3 rad/s"),
+    real_param!(226, backlash_width, Fixed, "rad", Ge(0.0), None, "Total play of the transmission; dead zone ±width/2 that never pulls (effect backlash)", "EFFECT: off"),
+    real_param!(227, gravity_link_mass, Fixed, "kg", Ge(0.0), None, "Mass on a link in a vertical plane (effect gravity)", "EFFECT: off (the device carries 0.91 kg, PAPER)"),
+    real_param!(228, gravity_com_distance, Fixed, "m", Ge(0.0), None, "Distance of that mass's centre from the axis", "PAPER: link length 140 mm"),
+    real_param!(229, gravity_offset, Fixed, "rad", NONE, None, "Link angle of the hanging rest position", "EFFECT: 0"),
+    real_param!(230, thermal_lag_time_constant, Fixed, "s", Ge(0.0), None, "Lag of the PCL behind the prescribed housing temperature (thermal_drive = 1; effect thermal_lag)", "EFFECT: off"),
+    // ---- thermal parameters
+    real_param!(240, pcl_mass, Fixed, "kg", Gt(0.0), None, "PCL mass, all cavities", "PAPER Table 1: 1.10 g × 3 cavities"),
+    real_param!(241, pcl_specific_heat_solid, Fixed, "J/(kg.K)", Gt(0.0), None, "c_s of solid PCL", "LIT: ≈ 1.7 J/(g·K)"),
+    real_param!(242, pcl_specific_heat_melt, Fixed, "J/(kg.K)", Gt(0.0), None, "c_l of molten PCL", "LIT: ≈ 2.1 J/(g·K)"),
+    real_param!(243, pcl_latent_heat, Fixed, "J/kg", Ge(0.0), None, "Heat of fusion of this PCL", "LIT/PAPER: ≈ 70 J/g"),
+    real_param!(244, pcl_melting_temperature, Fixed, "K", Gt(0.0), None, "Centre of the melting range", "LIT: melting 56–64 °C; 58 °C"),
+    real_param!(245, pcl_melting_width, Fixed, "K", Gt(0.0), None, "Half-width of the tanh melting step", "EST: 2.5 K (onset 50–55 °C, LIT)"),
+    real_param!(246, housing_heat_capacity, Fixed, "J/K", Gt(0.0), None, "C_h of heater foils and housing skin that heat quickly", "EST: the paper's 250–500 J budget leaves room for little more than the PCL"),
+    real_param!(247, heater_pcl_conductance, Fixed, "W/K", Gt(0.0), None, "G_hp from heaters into the PCL", "EST: k = 0.2 W/(m·K) (LIT) over ≈ 18 cm² heater contact, 3 mm path, ×3 for the slab mean"),
+    real_param!(248, housing_ambient_conductance, Fixed, "W/K", Ge(0.0), None, "G_ha from housing to ambient", "EST: natural convection ≈ 8 W/(m²·K) over ≈ 25 cm² exposed"),
+    // ---- initial state
+    real_param!(260, initial_motor_angle, Fixed, "rad", NONE, None, "θm at initialisation", "0"),
+    real_param!(261, initial_link_angle, Fixed, "rad", NONE, None, "θl at initialisation", "0"),
+    real_param!(262, initial_housing_temperature, Fixed, "K", Gt(0.0), None, "Housing temperature at initialisation", "PAPER: room 22 °C"),
+    real_param!(263, initial_pcl_temperature, Fixed, "K", Gt(0.0), None, "PCL temperature at initialisation", "PAPER: room 22 °C"),
+    // ---- numerics
+    real_param!(270, max_internal_step, Fixed, "s", Gt(0.0), None, "Longest internal sub-step, independent of the communication step", "NUMERICS"),
+    real_param!(271, solver_tolerance, Fixed, "", Gt(0.0), Some(1e-2), "Error tolerance of the adaptive solver (used when friction, backlash or gravity is on)", "NUMERICS"),
+    // ---- modes (Integer)
+    Variable {
+        name: "material_table",
+        value_reference: 300,
+        causality: Causality::Parameter,
+        variability: Variability::Fixed,
+        unit: "",
+        lower: Ge(1.0),
+        upper: Some(4.0),
+        description: "PCL moduli: 1 repaired experimental (default), 2 printed experimental, 3 repaired estimated, 4 printed estimated",
+        source: "PAPER Table 2; repair EST (docs/physics.md §4)",
+        access: Access::Integer {
+            get: |m| m.params().material_table as i32,
+            set: Some(|m, v| {
+                m.params_mut().material_table = MaterialTable::from_index(v).expect("range-checked")
+            }),
+        },
+        enumeration: Some(&MATERIAL_TABLE),
+    },
+    Variable {
+        name: "motor_drive",
+        value_reference: 301,
+        causality: Causality::Parameter,
+        variability: Variability::Fixed,
+        unit: "",
+        lower: Ge(0.0),
+        upper: Some(1.0),
+        description: "0: motor_torque drives the motor; 1: the motor follows motor_angle_command",
+        source: "MODE",
+        access: Access::Integer {
+            get: |m| m.params().motor_drive as i32,
+            set: Some(|m, v| {
+                m.params_mut().motor_drive = if v == 0 { MotorDrive::Torque } else { MotorDrive::PrescribedAngle }
+            }),
+        },
+        enumeration: Some(&MOTOR_DRIVE),
+    },
+    Variable {
+        name: "thermal_drive",
+        value_reference: 302,
+        causality: Causality::Parameter,
+        variability: Variability::Fixed,
+        unit: "",
+        lower: Ge(0.0),
+        upper: Some(1.0),
+        description: "0: heater_power drives the thermal network; 1: the housing follows housing_temperature_command",
+        source: "MODE",
+        access: Access::Integer {
+            get: |m| m.params().thermal_drive as i32,
+            set: Some(|m, v| {
+                m.params_mut().thermal_drive =
+                    if v == 0 { ThermalDrive::Heater } else { ThermalDrive::PrescribedHousing }
+            }),
+        },
+        enumeration: Some(&THERMAL_DRIVE),
+    },
+];
+
+/// The row with this name.
+pub fn by_name(name: &str) -> Option<&'static Variable> {
+    VARIABLES.iter().find(|v| v.name == name)
+}
+
+/// The row with this value reference and base type.
+pub fn by_reference(ty: BaseType, vr: u32) -> Option<&'static Variable> {
+    use std::sync::OnceLock;
+    // Read-only after first use: one dense row-index table per base type (value references are
+    // small), so the C API's hot get/set path costs an array access, not a search.
+    static INDEX: OnceLock<[Vec<Option<u16>>; 2]> = OnceLock::new();
+    let index = INDEX.get_or_init(|| {
+        let mut tables = [Vec::new(), Vec::new()];
+        for (i, v) in VARIABLES.iter().enumerate() {
+            let t = &mut tables[v.base_type() as usize];
+            let r = v.value_reference as usize;
+            if t.len() <= r {
+                t.resize(r + 1, None);
+            }
+            t[r] = Some(i as u16);
+        }
+        tables
+    });
+    let row = (*index[ty as usize].get(vr as usize)?)?;
+    Some(&VARIABLES[row as usize])
+}
+
+/// The README's variable table (Markdown), generated from `VARIABLES`.
+pub fn markdown_table() -> String {
+    let mut s = String::from("| name | causality | variability | type | unit | start | range | description | source |\n|---|---|---|---|---|---|---|---|---|\n");
+    for v in VARIABLES {
+        let start = if v.has_start() { format_number(v.start()) } else { String::new() };
+        let lo = match v.lower {
+            Lower::None => String::new(),
+            Lower::Inclusive(b) => format!("≥ {}", format_number(b)),
+            Lower::Exclusive(b) => format!("> {}", format_number(b)),
+        };
+        let hi = v.upper.map(|b| format!("≤ {}", format_number(b))).unwrap_or_default();
+        let range = [lo, hi].into_iter().filter(|s| !s.is_empty()).collect::<Vec<_>>().join(", ");
+        s += &format!(
+            "| `{}` | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            v.name,
+            v.causality.as_str(),
+            v.variability.as_str(),
+            v.enumeration.map_or(format!("{:?}", v.base_type()), |e| format!("Enumeration {}", e.name)),
+            v.unit,
+            start,
+            range,
+            v.description,
+            if matches!(v.source, "input" | "output") { "" } else { v.source }
+        );
+    }
+    s
+}
+
+/// Shortest text that reads back to the same f64 (what the XML and README print).
+pub fn format_number(v: f64) -> String {
+    let s = format!("{v}");
+    if s.len() > 12 {
+        format!("{v:e}")
+    } else {
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn value_references_are_unique_per_base_type_and_names_unique() {
+        let mut seen = std::collections::HashSet::new();
+        let mut names = std::collections::HashSet::new();
+        for v in VARIABLES {
+            assert!(seen.insert((v.base_type(), v.value_reference)), "duplicate vr {}", v.value_reference);
+            assert!(names.insert(v.name), "duplicate name {}", v.name);
+        }
+    }
+
+    #[test]
+    fn enumerations_cover_their_variables_ranges() {
+        for v in VARIABLES {
+            if let Some(e) = v.enumeration {
+                let values: Vec<f64> = e.items.iter().map(|(x, _, _)| *x as f64).collect();
+                assert_eq!(v.base_type(), BaseType::Integer, "{}", v.name);
+                let (Lower::Inclusive(lo), Some(hi)) = (v.lower, v.upper) else { panic!("{} needs a range", v.name) };
+                let expected: Vec<f64> = (lo as i32..=hi as i32).map(f64::from).collect();
+                assert_eq!(values, expected, "{}", v.name);
+            }
+        }
+    }
+
+    #[test]
+    fn every_start_value_is_inside_its_own_range() {
+        for v in VARIABLES.iter().filter(|v| v.has_start()) {
+            v.check_range(v.start()).unwrap();
+        }
+    }
+
+    #[test]
+    fn lookup_by_reference_finds_every_row() {
+        for v in VARIABLES {
+            assert_eq!(by_reference(v.base_type(), v.value_reference).unwrap().name, v.name);
+        }
+        assert!(by_reference(BaseType::Real, 99_999).is_none());
+        assert!(by_reference(BaseType::Integer, 0).is_none());
+    }
+
+    #[test]
+    fn range_check_names_the_variable() {
+        let e = by_name("link_inertia").unwrap().check_range(-1.0).unwrap_err();
+        assert!(e.contains("link_inertia"), "{e}");
+        let e = by_name("heater_power").unwrap().check_range(-0.5).unwrap_err();
+        assert!(e.contains("heater_power"), "{e}");
+        assert!(by_name("heater_power").unwrap().check_range(f64::NAN).is_err());
+    }
+}

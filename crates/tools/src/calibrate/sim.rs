@@ -1,0 +1,186 @@
+//! Simulating runs through the packaged FMU (the C API, via the harness): the measured motor angle
+//! drives the link (motor_drive = 1, piecewise linear between samples), the measured housing
+//! temperature drives the PCL (thermal_drive = 1). Several instances run in parallel threads.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
+use thermovia_importer::{Fmu, Handle, HarnessError, Instance};
+
+/// g, m/s² (the FMU uses the same standard gravity).
+pub const STANDARD_GRAVITY: f64 = 9.80665;
+
+/// What drives one simulated run.
+#[derive(Clone, Debug)]
+pub struct SimInput {
+    pub time: Vec<f64>,
+    pub motor: Vec<f64>,
+    /// Housing temperature per sample, K.
+    pub housing_k: Vec<f64>,
+    pub frequency_hz: f64,
+    pub link_inertia: Option<f64>,
+    pub link0: f64,
+    /// Centre-of-mass distance used to turn m·g·d into the FMU's `gravity_link_mass`, m.
+    pub com_distance: f64,
+}
+
+/// Values of the effect library, in the FMU's own terms except gravity, which is held as
+/// a = m g d cos(offset), b = m g d sin(offset) so that τ_g = −a sin θ + b cos θ is linear in both.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct EffectValues {
+    pub coulomb_friction: f64,
+    pub backlash_width: f64,
+    pub gravity_a: f64,
+    pub gravity_b: f64,
+    pub link_damping: f64,
+    pub thermal_lag: f64,
+    pub maxwell_stiffness: f64,
+    pub maxwell_time: f64,
+}
+
+impl EffectValues {
+    pub fn gravity_mgl(&self) -> f64 {
+        self.gravity_a.hypot(self.gravity_b)
+    }
+    pub fn gravity_offset(&self) -> f64 {
+        self.gravity_b.atan2(self.gravity_a)
+    }
+}
+
+/// Everything the fit varies for one run.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RunModel {
+    pub storage_scale: f64,
+    pub loss_scale: f64,
+    pub effects: EffectValues,
+    pub solver_tolerance: f64,
+}
+
+impl Default for RunModel {
+    fn default() -> Self {
+        RunModel { storage_scale: 1.0, loss_scale: 1.0, effects: EffectValues::default(), solver_tolerance: 1e-8 }
+    }
+}
+
+/// Samples closer than this relative amount to the nominal step use the nominal step, so the FMU's
+/// cached propagator stays valid (CSV times carry rounding in their last digits).
+const STEP_SNAP: f64 = 1e-6;
+
+struct Handles {
+    motor_cmd: u32,
+    speed_cmd: u32,
+    housing_cmd: u32,
+    link: u32,
+}
+
+fn handles(inst: &Instance) -> Result<Handles, HarnessError> {
+    let vr = |n: &str| inst.handle(n).map(|h: Handle| h.value_reference);
+    Ok(Handles {
+        motor_cmd: vr("motor_angle_command")?,
+        speed_cmd: vr("motor_speed_command")?,
+        housing_cmd: vr("housing_temperature_command")?,
+        link: vr("link_angle")?,
+    })
+}
+
+/// One run through one instance; returns the model's link angle at every sample.
+pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<Vec<f64>, HarnessError> {
+    let h = handles(inst)?;
+    inst.reset()?;
+    let e = &m.effects;
+    let mgl = e.gravity_mgl();
+    let mut params: Vec<(&str, f64)> = vec![
+        ("motor_drive", 1.0),
+        ("thermal_drive", 1.0),
+        ("initial_motor_angle", input.motor[0]),
+        ("initial_link_angle", input.link0),
+        ("initial_housing_temperature", input.housing_k[0]),
+        ("initial_pcl_temperature", input.housing_k[0]),
+        ("excitation_frequency", input.frequency_hz),
+        ("storage_modulus_scale", m.storage_scale),
+        ("loss_modulus_scale", m.loss_scale),
+        ("coulomb_friction", e.coulomb_friction.max(0.0)),
+        ("backlash_width", e.backlash_width.max(0.0)),
+        ("link_damping", e.link_damping.max(0.0)),
+        ("thermal_lag_time_constant", e.thermal_lag.max(0.0)),
+        ("maxwell_stiffness", e.maxwell_stiffness.max(0.0)),
+        ("solver_tolerance", m.solver_tolerance),
+    ];
+    if e.maxwell_time > 0.0 {
+        params.push(("maxwell_relaxation_time", e.maxwell_time));
+    }
+    if mgl > 0.0 {
+        params.push(("gravity_com_distance", input.com_distance));
+        params.push(("gravity_link_mass", mgl / (STANDARD_GRAVITY * input.com_distance)));
+        params.push(("gravity_offset", e.gravity_offset()));
+    }
+    if let Some(j) = input.link_inertia {
+        params.push(("link_inertia", j));
+    }
+    inst.initialize(input.time[0], None, &params)?;
+    let n = input.time.len();
+    let mut out = Vec::with_capacity(n);
+    out.push(input.link0);
+    let nominal = (input.time[n - 1] - input.time[0]) / (n - 1) as f64;
+    let vrs = [h.motor_cmd, h.speed_cmd, h.housing_cmd];
+    let mut y = [0.0];
+    for k in 0..n - 1 {
+        let mut dt = input.time[k + 1] - input.time[k];
+        if (dt - nominal).abs() <= STEP_SNAP * nominal {
+            dt = nominal;
+        }
+        let slope = (input.motor[k + 1] - input.motor[k]) / dt;
+        let housing = 0.5 * (input.housing_k[k] + input.housing_k[k + 1]);
+        inst.set_reals(&vrs, &[input.motor[k], slope, housing])?;
+        inst.step(dt)?;
+        inst.get_reals(&[h.link], &mut y)?;
+        out.push(y[0]);
+    }
+    Ok(out)
+}
+
+/// A pool of FMU instances for simulating many (run, model) jobs in parallel.
+pub struct Simulator {
+    pub fmu: Fmu,
+    instances: Vec<Mutex<Instance>>,
+    /// Number of FMU simulations done (for reporting the cost of a fit).
+    pub simulations: AtomicUsize,
+}
+
+impl Simulator {
+    pub fn new(fmu: Fmu, threads: usize) -> Result<Self, HarnessError> {
+        let instances = (0..threads.max(1)).map(|_| fmu.instantiate(None).map(Mutex::new)).collect::<Result<_, _>>()?;
+        Ok(Simulator { fmu, instances, simulations: AtomicUsize::new(0) })
+    }
+
+    pub fn threads(&self) -> usize {
+        self.instances.len()
+    }
+
+    /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
+    /// absurd trial parameter) is returned as an error for that job only.
+    pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<Result<Vec<f64>, String>> {
+        let next = AtomicUsize::new(0);
+        let results: Vec<Mutex<Option<Result<Vec<f64>, String>>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+        let workers = self.instances.len().min(jobs.len()).max(1);
+        std::thread::scope(|s| {
+            for w in 0..workers {
+                let (next, results, inst) = (&next, &results, &self.instances[w]);
+                s.spawn(move || {
+                    let mut inst = inst.lock().unwrap_or_else(|p| p.into_inner());
+                    loop {
+                        let j = next.fetch_add(1, Ordering::Relaxed);
+                        if j >= jobs.len() {
+                            break;
+                        }
+                        let (run, model) = &jobs[j];
+                        let r = simulate(&mut inst, &inputs[*run], model).map_err(|e| e.to_string());
+                        *results[j].lock().unwrap() = Some(r);
+                    }
+                });
+            }
+        });
+        self.simulations.fetch_add(jobs.len(), Ordering::Relaxed);
+        results.into_iter().map(|m| m.into_inner().unwrap().expect("every job ran")).collect()
+    }
+}
