@@ -10,9 +10,9 @@
 
 use std::time::Instant;
 
+use thermovia_importer::Fmu;
 use thermovia_tools::arm::dynamics::ArmConfig;
 use thermovia_tools::arm::sim::{cosimulate, Scenario};
-use thermovia_importer::Fmu;
 
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(|a, b| a.partial_cmp(b).unwrap());
@@ -33,7 +33,8 @@ fn measure(runs: usize, simulated: f64, mut f: impl FnMut()) -> (f64, f64, f64) 
 }
 
 fn main() {
-    let fmu = Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
+    let fmu =
+        Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
     let (h, runs) = (1e-3, 15);
     for scenario in [Scenario::cold(), Scenario::hot()] {
         let cfg = ArmConfig { duration: 10.0, ..ArmConfig::default() };
@@ -69,9 +70,12 @@ fn main() {
     let mut b = fmu.instantiate(None).unwrap();
     a.initialize(0.0, None, &[("link_inertia", 0.067)]).unwrap();
     b.initialize(0.0, None, &[("link_inertia", 0.007)]).unwrap();
-    let inputs: Vec<u32> = ["motor_torque", "load_torque"].iter().map(|n| a.handle(n).unwrap().value_reference).collect();
-    let outputs: Vec<u32> =
-        ["link_angle", "link_speed", "motor_angle", "motor_speed", "transmitted_torque"].iter().map(|n| a.handle(n).unwrap().value_reference).collect();
+    let inputs: Vec<u32> =
+        ["motor_torque", "load_torque"].iter().map(|n| a.handle(n).unwrap().value_reference).collect();
+    let outputs: Vec<u32> = ["link_angle", "link_speed", "motor_angle", "motor_speed", "transmitted_torque"]
+        .iter()
+        .map(|n| a.handle(n).unwrap().value_reference)
+        .collect();
     let mut out = [0.0; 5];
     let mut k = 0u64;
     let (wall, _, _) = measure(runs, 10.0, || {

@@ -3,21 +3,26 @@
 //! the whole loop (baseline fit, diagnosis, effect search, refit, report without plots) is timed.
 //! Prints each repetition and the median.
 
+use thermovia_importer::Fmu;
 use thermovia_tools::calibrate::synthetic::{generate, write_atomically, SynthArgs};
 use thermovia_tools::calibrate::{calibrate, CalibrateArgs};
-use thermovia_importer::Fmu;
 
 fn main() {
     let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("target").join("bench-calibrate");
     let data = dir.join("data");
     let data_s = data.to_str().unwrap().to_string();
     let synth = SynthArgs::from_cli(&["--coulomb-friction", "0.05", "--out", &data_s]).unwrap();
-    let files = generate(&synth, Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build")).unwrap();
+    let files = generate(
+        &synth,
+        Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build"),
+    )
+    .unwrap();
     write_atomically(&data, &files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect::<Vec<_>>()).unwrap();
     let reps: usize = std::env::var("CALIBRATE_BENCH_REPS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
     let mut times = Vec::new();
     for rep in 0..reps {
-        let args = CalibrateArgs::from_cli(&[&data_s, "--out", dir.join("report").to_str().unwrap(), "--no-plots"]).unwrap();
+        let args =
+            CalibrateArgs::from_cli(&[&data_s, "--out", dir.join("report").to_str().unwrap(), "--no-plots"]).unwrap();
         let t = std::time::Instant::now();
         let c = calibrate(&args).unwrap();
         let s = t.elapsed().as_secs_f64();
@@ -31,5 +36,8 @@ fn main() {
         times.push(s);
     }
     times.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    println!("calibrate 8 runs x 20 s at 1 kHz with effect search: median {:.2} s over {reps} (target < 10 s)", times[reps / 2]);
+    println!(
+        "calibrate 8 runs x 20 s at 1 kHz with effect search: median {:.2} s over {reps} (target < 10 s)",
+        times[reps / 2]
+    );
 }

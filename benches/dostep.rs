@@ -21,12 +21,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 fn run(fmu: &Fmu, temperature_c: f64) -> f64 {
     let mut inst = fmu.instantiate(None).unwrap();
     let t_k = 273.15 + temperature_c;
-    inst.initialize(
-        0.0,
-        None,
-        &[("initial_housing_temperature", t_k), ("initial_pcl_temperature", t_k)],
-    )
-    .unwrap();
+    inst.initialize(0.0, None, &[("initial_housing_temperature", t_k), ("initial_pcl_temperature", t_k)]).unwrap();
     inst.set("ambient_temperature", t_k).unwrap();
     let torque = inst.handle("motor_torque").unwrap().value_reference;
     let link = inst.handle("link_angle").unwrap().value_reference;
@@ -44,7 +39,8 @@ fn run(fmu: &Fmu, temperature_c: f64) -> f64 {
 }
 
 fn main() {
-    let fmu = Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
+    let fmu =
+        Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
     for (label, temp) in [("cold PCL (22 °C)", 22.0), ("hot PCL (60 °C)", 60.0)] {
         run(&fmu, temp); // warm caches
         let samples: Vec<f64> = (0..15).map(|_| run(&fmu, temp)).collect();

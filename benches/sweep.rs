@@ -60,9 +60,8 @@ fn main() {
     println!("  {} doSteps per sweep: {:.2} µs per doStep incl. master and set/get", steps, med / steps as f64 * 1e6);
     println!("  under the 2 s budget: {}", if med < 2.0 { "yes" } else { "NO" });
 
-    let python = std::env::var("SWEEP_BENCH_PYTHON").unwrap_or_else(|_| {
-        Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python").display().to_string()
-    });
+    let python = std::env::var("SWEEP_BENCH_PYTHON")
+        .unwrap_or_else(|_| Path::new(env!("CARGO_MANIFEST_DIR")).join(".venv/bin/python").display().to_string());
     let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/sweep_fmpy_bench.py");
     let fmpy_runs = env_usize("SWEEP_BENCH_FMPY_RUNS", 3);
     let output = Command::new(&python).arg(&script).arg(&fmu).arg("--repeat").arg(fmpy_runs.to_string()).output();

@@ -8,7 +8,6 @@ use thermovia_tools::arm::dynamics::ArmConfig;
 use thermovia_tools::arm::sim::{cosimulate, probe, Scenario};
 use thermovia_tools::arm::{compare, reference, stability, thermal, ArmArgs};
 
-
 /// The bound: at a 1 ms communication step the co-simulated tip stays within 1 % of the
 /// tip's travel of the monolithic solution, cold and hot; and the error behaves as a first-order
 /// scheme's should (halving the step roughly halves it), so the bound is not luck.
@@ -26,7 +25,13 @@ fn coupling_error_at_1ms_is_under_one_percent_and_first_order() {
         assert!(e1.relative_error < 0.01, "{}: {:.3} % at 1 ms", sc.name, 100.0 * e1.relative_error);
         for (a, b) in [(&e05, &e1), (&e1, &e2)] {
             let ratio = b.relative_error / a.relative_error;
-            assert!((1.5..3.0).contains(&ratio), "{}: error ratio {ratio} from {} to {} s", sc.name, a.step_s, b.step_s);
+            assert!(
+                (1.5..3.0).contains(&ratio),
+                "{}: error ratio {ratio} from {} to {} s",
+                sc.name,
+                a.step_s,
+                b.step_s
+            );
         }
         // the reference is an independent solution, not the co-simulation again
         assert!(e1.tip_error_m > 0.0, "{e1:?}");
@@ -45,8 +50,8 @@ fn a_held_pose_stays_put_in_both_simulations() {
     let (r, _) = reference::simulate(&cfg, &props, 1e-3, 1e-10).unwrap();
     for tr in [&co, &r] {
         for (k, q) in tr.q.iter().enumerate() {
-            for i in 0..2 {
-                assert!((q[i] - tr.q[0][i]).abs() < 1e-9, "t = {}: q{i} drifted {} rad", tr.t[k], q[i] - tr.q[0][i]);
+            for (i, (qi, q0)) in q.iter().zip(&tr.q[0]).enumerate() {
+                assert!((qi - q0).abs() < 1e-9, "t = {}: q{i} drifted {} rad", tr.t[k], qi - q0);
             }
         }
     }
@@ -70,7 +75,13 @@ fn stability_limit_is_predicted_checked_and_enforced() {
 
     let amplitude = |h: f64| match cosimulate(&fmu, &cfg, &sc, h, None, |_| {}) {
         Err(_) => f64::INFINITY,
-        Ok(tr) => tr.t.iter().zip(&tr.qd).filter(|(t, _)| **t > 3.0).map(|(_, v)| v[0].abs().max(v[1].abs())).fold(0.0, f64::max),
+        Ok(tr) => {
+            tr.t.iter()
+                .zip(&tr.qd)
+                .filter(|(t, _)| **t > 3.0)
+                .map(|(_, v)| v[0].abs().max(v[1].abs()))
+                .fold(0.0, f64::max)
+        }
     };
     let below = amplitude(0.95 * limit);
     let above = amplitude(1.05 * limit);
@@ -102,7 +113,8 @@ fn bad_arm_configurations_are_refused_with_the_reason() {
     assert!(base.validate().is_ok());
 
     let fmu = common::fmu();
-    let e = cosimulate(&fmu, &ArmConfig { m1: 0.0, ..base.clone() }, &Scenario::cold(), 1e-3, None, |_| {}).unwrap_err();
+    let e =
+        cosimulate(&fmu, &ArmConfig { m1: 0.0, ..base.clone() }, &Scenario::cold(), 1e-3, None, |_| {}).unwrap_err();
     assert!(e.contains("m1"), "{e}");
     let e = cosimulate(&fmu, &base, &Scenario::cold(), -1e-3, None, |_| {}).unwrap_err();
     assert!(e.contains("positive"), "{e}");
@@ -176,11 +188,20 @@ fn the_command_writes_report_and_plots() {
 
     thermovia_tools::arm::run(&args(1e-3), &thermovia_tools::output::Silent).unwrap();
     assert!(!out.join("stale.txt").exists(), "the folder was not replaced as a whole");
-    for f in ["report.md", "report.json", "tip_path.svg", "joint_torques.svg", "contact_force.svg", "coupling_error.svg", "impedance_switch_stiffness.svg"] {
+    for f in [
+        "report.md",
+        "report.json",
+        "tip_path.svg",
+        "joint_torques.svg",
+        "contact_force.svg",
+        "coupling_error.svg",
+        "impedance_switch_stiffness.svg",
+    ] {
         let meta = std::fs::metadata(out.join(f)).unwrap_or_else(|e| panic!("{f}: {e}"));
         assert!(meta.len() > 200, "{f} is nearly empty");
     }
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
     let h1 = json["step_for_one_percent_s"].as_f64().unwrap();
     assert!(h1 >= 1e-3, "1 % step {h1}");
     assert_eq!(json["tasks"].as_array().unwrap().len(), 2);

@@ -10,13 +10,18 @@ use thermovia_importer::cosim::Master;
 #[test]
 fn master_matches_a_hand_written_jacobi_loop() {
     let fmu = common::fmu();
-    let params = [[("link_inertia", 0.02), ("initial_link_angle", 0.3)], [("link_inertia", 0.05), ("initial_link_angle", -0.1)]];
+    let params =
+        [[("link_inertia", 0.02), ("initial_link_angle", 0.3)], [("link_inertia", 0.05), ("initial_link_angle", -0.1)]];
     let k = 3.0;
     let (h, n) = (1e-3, 500);
 
     let mut master = Master::new(0.0, None);
-    let a = master.add(&fmu, "a", &params[0], &["load_torque", "motor_torque"], &["link_angle", "pcl_temperature"]).unwrap();
-    let b = master.add(&fmu, "b", &params[1], &["load_torque", "motor_torque"], &["link_angle", "pcl_temperature"]).unwrap();
+    let a = master
+        .add(&fmu, "a", &params[0], &["load_torque", "motor_torque"], &["link_angle", "pcl_temperature"])
+        .unwrap();
+    let b = master
+        .add(&fmu, "b", &params[1], &["load_torque", "motor_torque"], &["link_angle", "pcl_temperature"])
+        .unwrap();
     master.read_every(a, &["pcl_temperature"], 7).unwrap();
     let (ya, yb) = (master.output(a, "link_angle").unwrap(), master.output(b, "link_angle").unwrap());
     let (ua, ub) = (master.input(a, "load_torque").unwrap(), master.input(b, "load_torque").unwrap());

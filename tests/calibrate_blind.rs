@@ -50,7 +50,11 @@ fn check_single(name: &str, truth: &[&str], effect: &str, parameter: &str, value
     let got = added(&c);
     let fin = c.report["final"]["rmse_rad"].as_f64().unwrap();
     let base = c.report["baseline"]["rmse_rad"].as_f64().unwrap();
-    eprintln!("{name}: added {got:?}, baseline {base:.3e}, final {fin:.3e}, floor {:.3e}, report {}", synth.noise_floor(), c.report["added_effects"]);
+    eprintln!(
+        "{name}: added {got:?}, baseline {base:.3e}, final {fin:.3e}, floor {:.3e}, report {}",
+        synth.noise_floor(),
+        c.report["added_effects"]
+    );
     assert_eq!(got, vec![effect.to_string()], "{}", c.report["diagnosis"]);
     let p = param(&c, effect, parameter);
     assert!(within(p, value, 0.2), "{effect}.{parameter} = {p}, truth {value}");
@@ -61,7 +65,13 @@ fn check_single(name: &str, truth: &[&str], effect: &str, parameter: &str, value
 /// The keys interfaces.md fixes for report.json.
 fn check_schema(r: &serde_json::Value) {
     for run in r["runs"].as_array().unwrap() {
-        assert!(run["file"].is_string() && run["temperature_c"].is_f64() && run["frequency_hz"].is_f64() && run["samples"].is_u64(), "{run}");
+        assert!(
+            run["file"].is_string()
+                && run["temperature_c"].is_f64()
+                && run["frequency_hz"].is_f64()
+                && run["samples"].is_u64(),
+            "{run}"
+        );
     }
     for k in ["baseline", "final"] {
         for f in ["rmse_rad", "nrmse", "fit_percent", "bic"] {

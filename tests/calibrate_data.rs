@@ -104,10 +104,10 @@ fn folders_expand_to_their_csv_files_and_the_first_bad_file_stops_everything() {
     let d = tmp("calib-data-folder");
     std::fs::write(d.join("a.csv"), GOOD).unwrap();
     std::fs::write(d.join("notes.txt"), "not a run").unwrap();
-    let runs = read_inputs(&[d.clone()]).unwrap();
+    let runs = read_inputs(std::slice::from_ref(&d)).unwrap();
     assert_eq!(runs.len(), 1);
     std::fs::write(d.join("b.csv"), GOOD.replace("0.0005", "x")).unwrap();
-    let e = read_inputs(&[d.clone()]).unwrap_err().to_string();
+    let e = read_inputs(std::slice::from_ref(&d)).unwrap_err().to_string();
     assert!(e.contains("b.csv:6:3"), "{e}");
 }
 

@@ -63,7 +63,16 @@ fn simulate_defaults_come_from_the_fmu() {
 fn output_interval_is_separate_from_the_step() {
     let dir = scratch("interval");
     let (fine, coarse) = (dir.join("fine.csv"), dir.join("coarse.csv"));
-    let common = ["--stop-time", "0.2", "--set", "heater_power=8", "--set", "motor_torque=0.1", "--output", "link_angle,pcl_temperature"];
+    let common = [
+        "--stop-time",
+        "0.2",
+        "--set",
+        "heater_power=8",
+        "--set",
+        "motor_torque=0.1",
+        "--output",
+        "link_angle,pcl_temperature",
+    ];
     let path = fmu();
     let run = |out: &Path, extra: &[&str]| {
         let mut a = vec!["simulate", path.as_str()];
@@ -93,8 +102,16 @@ fn enumeration_items_are_set_by_name_and_unknown_names_get_suggestions() {
     let dir = scratch("enum");
     let out = dir.join("r.csv");
     let o = thermovia(&[
-        "simulate", &fmu(), "--stop-time", "0.01", "--set", "motor_drive=prescribed_angle", "--output", "motor_drive,motor_angle",
-        "--out", out.to_str().unwrap(),
+        "simulate",
+        &fmu(),
+        "--stop-time",
+        "0.01",
+        "--set",
+        "motor_drive=prescribed_angle",
+        "--output",
+        "motor_drive,motor_angle",
+        "--out",
+        out.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let (_, rows) = read_csv(&out);
@@ -136,11 +153,28 @@ fn output_paths_are_created_or_named_and_never_half_written() {
     let bad = blocker.join("r.csv");
     let e = error_line(&thermovia(&["simulate", &fmu(), "--stop-time", "0.01", "--out", bad.to_str().unwrap()]));
     assert!(e.contains(blocker.to_str().unwrap()), "{e}");
-    let e = error_line(&thermovia(&["sweep", "--out", blocker.join("sweep").to_str().unwrap(), "--temperatures", "22", "--frequencies", "1"]));
+    let e = error_line(&thermovia(&[
+        "sweep",
+        "--out",
+        blocker.join("sweep").to_str().unwrap(),
+        "--temperatures",
+        "22",
+        "--frequencies",
+        "1",
+    ]));
     assert!(e.contains(blocker.to_str().unwrap()), "{e}");
     // a run that fails leaves no file behind, not even a partial one
     let failed = dir.join("failed.csv");
-    error_line(&thermovia(&["simulate", &fmu(), "--stop-time", "0.01", "--output", "no_such_output", "--out", failed.to_str().unwrap()]));
+    error_line(&thermovia(&[
+        "simulate",
+        &fmu(),
+        "--stop-time",
+        "0.01",
+        "--output",
+        "no_such_output",
+        "--out",
+        failed.to_str().unwrap(),
+    ]));
     let left: Vec<_> = std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(!left.iter().any(|n| n.to_string_lossy().contains("failed")), "{left:?}");
     let _ = std::fs::remove_dir_all(&dir);

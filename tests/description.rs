@@ -46,13 +46,11 @@ fn structure_indices_point_at_outputs_and_every_unit_is_defined() {
     let fmu = common::fmu();
     let md = &fmu.description;
     let xml = model_description();
-    let outputs: Vec<usize> = md.variables.iter().enumerate().filter(|(_, v)| v.causality == "output").map(|(i, _)| i + 1).collect();
+    let outputs: Vec<usize> =
+        md.variables.iter().enumerate().filter(|(_, v)| v.causality == "output").map(|(i, _)| i + 1).collect();
     let section = &xml[xml.find("<Outputs>").unwrap()..xml.find("</Outputs>").unwrap()];
-    let listed: Vec<usize> = section
-        .split("index=\"")
-        .skip(1)
-        .map(|s| s[..s.find('"').unwrap()].parse().unwrap())
-        .collect();
+    let listed: Vec<usize> =
+        section.split("index=\"").skip(1).map(|s| s[..s.find('"').unwrap()].parse().unwrap()).collect();
     assert_eq!(listed, outputs);
     for v in &md.variables {
         if let Some(u) = &v.unit {
@@ -66,7 +64,9 @@ fn start_values_are_what_the_binary_uses() {
     let fmu = common::fmu();
     let mut inst = fmu.instantiate(None).unwrap();
     inst.initialize(0.0, None, &[]).unwrap();
-    for v in fmu.description.variables.iter().filter(|v| v.causality != "output" && v.causality != "calculatedParameter") {
+    for v in
+        fmu.description.variables.iter().filter(|v| v.causality != "output" && v.causality != "calculatedParameter")
+    {
         let declared: f64 = v.start.as_ref().unwrap_or_else(|| panic!("{} has no start", v.name)).parse().unwrap();
         let used = inst.get(&v.name).unwrap();
         assert_eq!(declared, used, "{}", v.name);
@@ -84,11 +84,16 @@ fn the_binary_needs_nothing_beyond_the_system_c_library() {
     let out = std::process::Command::new("readelf").arg("-d").arg(&so).output().expect("readelf (binutils)");
     let _ = std::fs::remove_file(&so);
     let text = String::from_utf8_lossy(&out.stdout);
-    let needed: Vec<&str> = text.lines().filter(|l| l.contains("(NEEDED)")).filter_map(|l| l.split('[').nth(1)?.split(']').next()).collect();
+    let needed: Vec<&str> = text
+        .lines()
+        .filter(|l| l.contains("(NEEDED)"))
+        .filter_map(|l| l.split('[').nth(1)?.split(']').next())
+        .collect();
     assert!(!needed.is_empty(), "readelf found no NEEDED entries: {text}");
     for lib in needed {
         assert!(
-            ["libc.so.6", "libm.so.6", "libgcc_s.so.1", "libpthread.so.0", "libdl.so.2", "ld-linux-x86-64.so.2"].contains(&lib),
+            ["libc.so.6", "libm.so.6", "libgcc_s.so.1", "libpthread.so.0", "libdl.so.2", "ld-linux-x86-64.so.2"]
+                .contains(&lib),
             "unexpected runtime dependency {lib}"
         );
     }

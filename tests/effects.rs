@@ -13,7 +13,6 @@ const E2_22: f64 = 834.45e3;
 const ROOM: f64 = 295.15;
 const H: f64 = 1e-3;
 
-
 /// An instance with the motor following commands (motor_drive = 1) and the housing held at 22 °C.
 fn prescribed(fmu: &Fmu, params: &[(&str, f64)]) -> Instance {
     let mut i = fmu.instantiate(None).unwrap();
@@ -149,7 +148,15 @@ fn maxwell_branch_matches_the_complex_stiffness() {
         (nre.hypot(nim)) / (dre.hypot(dim))
     };
     let simulate = |km: f64| {
-        let mut i = prescribed(&f, &[("excitation_frequency", freq), ("maxwell_stiffness", km), ("maxwell_relaxation_time", lam), ("link_inertia", j)]);
+        let mut i = prescribed(
+            &f,
+            &[
+                ("excitation_frequency", freq),
+                ("maxwell_stiffness", km),
+                ("maxwell_relaxation_time", lam),
+                ("link_inertia", j),
+            ],
+        );
         let n = 6000;
         let (mut s, mut cs, mut m) = (0.0, 0.0, 0.0);
         for kk in 0..n {

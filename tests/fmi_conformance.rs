@@ -5,10 +5,9 @@ mod common;
 
 use std::ptr;
 
-use thermovia_importer::loader::RawInstance;
 use thermovia_fmi2::*;
+use thermovia_importer::loader::RawInstance;
 use thermovia_importer::{Fmu, HarnessError, Instance};
-
 
 fn vr(inst: &Instance, name: &str) -> u32 {
     inst.handle(name).unwrap().value_reference
@@ -48,7 +47,8 @@ fn wrong_guid_and_bad_arguments_to_instantiate_return_null_with_a_reason() {
     }
     // No callback struct at all: NULL, no crash.
     let api = f.library().api;
-    let c = unsafe { (api.instantiate)(c"x".as_ptr(), FMI2_CO_SIMULATION, c"g".as_ptr(), ptr::null(), ptr::null(), 0, 0) };
+    let c =
+        unsafe { (api.instantiate)(c"x".as_ptr(), FMI2_CO_SIMULATION, c"g".as_ptr(), ptr::null(), ptr::null(), 0, 0) };
     assert!(c.is_null());
 }
 
@@ -108,7 +108,7 @@ fn null_pointers_nan_unknown_references_and_outputs_are_refused() {
         assert_eq!((api.do_step)(ptr::null_mut(), 0.0, 1e-3, 0), FMI2_ERROR);
         assert_eq!((api.get_real_status)(c, FMI2_LAST_SUCCESSFUL_TIME, ptr::null_mut()), FMI2_ERROR);
         (api.free_instance)(ptr::null_mut()); // must not crash
-        // zero-length requests with null arrays are legal
+                                              // zero-length requests with null arrays are legal
         assert_eq!((api.get_boolean)(ptr::null_mut(), ptr::null(), 0, ptr::null_mut()), FMI2_ERROR);
     }
     assert!(last_log(raw).contains("null pointer"));
@@ -183,7 +183,8 @@ fn stop_time_discards_the_overshooting_step_and_reports_it() {
 }
 
 fn run(i: &mut Instance, steps: usize) -> Vec<f64> {
-    let (torque, heater, link, pcl) = (vr(i, "motor_torque"), vr(i, "heater_power"), vr(i, "link_angle"), vr(i, "pcl_temperature"));
+    let (torque, heater, link, pcl) =
+        (vr(i, "motor_torque"), vr(i, "heater_power"), vr(i, "link_angle"), vr(i, "pcl_temperature"));
     let mut out = Vec::new();
     for k in 0..steps {
         let t = i.time();
@@ -231,9 +232,24 @@ fn fmu_state_restores_and_serializes_bit_identically() {
     // Truncated, altered and foreign bytes are refused with a reason.
     for (bad, why) in [
         (bytes[..bytes.len() - 3].to_vec(), "length"),
-        ({ let mut x = bytes.clone(); let n = x.len(); x[n - 20] ^= 1; x }, "checksum"),
+        (
+            {
+                let mut x = bytes.clone();
+                let n = x.len();
+                x[n - 20] ^= 1;
+                x
+            },
+            "checksum",
+        ),
         (b"not a state at all, just bytes".to_vec(), "magic"),
-        ({ let mut x = bytes.clone(); x[20] ^= 0x20; x }, "GUID"),
+        (
+            {
+                let mut x = bytes.clone();
+                x[20] ^= 0x20;
+                x
+            },
+            "GUID",
+        ),
     ] {
         let err = b.deserialize_state(&bad, 0.0).err().expect(why).to_string();
         assert!(err.contains(why), "{why}: {err}");
@@ -277,7 +293,10 @@ fn unsupported_capabilities_exist_and_say_so() {
     let api = *api;
     let mut x = 0.0;
     unsafe {
-        assert_eq!((api.get_directional_derivative)(c, ptr::null(), 0, ptr::null(), 0, ptr::null(), &mut x), FMI2_ERROR);
+        assert_eq!(
+            (api.get_directional_derivative)(c, ptr::null(), 0, ptr::null(), 0, ptr::null(), &mut x),
+            FMI2_ERROR
+        );
     }
     assert!(last_log(raw).contains("providesDirectionalDerivative"));
     raw.reset();

@@ -125,7 +125,8 @@ fn unknown_variable_names_are_errors_with_suggestions() {
 fn variables_are_listed_by_name_from_the_description() {
     let fmu = packaged();
     let names: Vec<&str> = fmu.description.variables.iter().map(|v| v.name.as_str()).collect();
-    for n in ["heater_power", "motor_torque", "load_torque", "link_angle", "housing_temperature", "effective_stiffness"] {
+    for n in ["heater_power", "motor_torque", "load_torque", "link_angle", "housing_temperature", "effective_stiffness"]
+    {
         assert!(names.contains(&n), "{n} missing from {names:?}");
     }
     assert_eq!(fmu.variable("motor_torque").unwrap().causality, "input");
@@ -149,7 +150,12 @@ fn two_instances_side_by_side_keep_their_own_parameters_and_state() {
     let mut a = fmu.instantiate(Some("light")).unwrap();
     let mut b = fmu.instantiate(Some("heavy")).unwrap();
     a.initialize(0.0, None, &[("link_inertia", 0.018)]).unwrap();
-    b.initialize(0.0, None, &[("link_inertia", 0.072), ("initial_pcl_temperature", 333.15), ("initial_housing_temperature", 333.15)]).unwrap();
+    b.initialize(
+        0.0,
+        None,
+        &[("link_inertia", 0.072), ("initial_pcl_temperature", 333.15), ("initial_housing_temperature", 333.15)],
+    )
+    .unwrap();
     assert_eq!(a.get("link_inertia").unwrap(), 0.018);
     assert_eq!(b.get("link_inertia").unwrap(), 0.072);
     // interleaved stepping
@@ -176,7 +182,11 @@ fn two_instances_side_by_side_keep_their_own_parameters_and_state() {
     assert_eq!(torque_step(&mut solo, 300), ta);
     let mut solo_b = fmu.instantiate(None).unwrap();
     solo_b
-        .initialize(0.0, None, &[("link_inertia", 0.072), ("initial_pcl_temperature", 333.15), ("initial_housing_temperature", 333.15)])
+        .initialize(
+            0.0,
+            None,
+            &[("link_inertia", 0.072), ("initial_pcl_temperature", 333.15), ("initial_housing_temperature", 333.15)],
+        )
         .unwrap();
     assert_eq!(torque_step(&mut solo_b, 300), tb);
 }

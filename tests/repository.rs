@@ -56,7 +56,8 @@ fn every_named_doc_and_data_file_exists() {
                     if at > 0 && !" `([\"'".contains(line.as_bytes()[at - 1] as char) {
                         continue;
                     }
-                    let name: String = line[at..].chars().take_while(|c| c.is_alphanumeric() || "/._-".contains(*c)).collect();
+                    let name: String =
+                        line[at..].chars().take_while(|c| c.is_alphanumeric() || "/._-".contains(*c)).collect();
                     let name = name.trim_end_matches(['.', '/']);
                     if !name.contains('.') {
                         continue; // a folder or prose, not a file
@@ -82,7 +83,11 @@ fn dependencies(package: &str) -> Vec<String> {
         .output()
         .expect("cargo tree runs");
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8_lossy(&out.stdout).lines().filter_map(|l| l.split_whitespace().next()).map(str::to_string).collect()
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.split_whitespace().next())
+        .map(str::to_string)
+        .collect()
 }
 
 #[test]

@@ -22,7 +22,9 @@ fn the_fmi_crate_reads_the_description_and_steps_the_binary_bit_identically() {
     assert_eq!(md.fmi_version, "2.0");
     assert_eq!(md.guid, thermovia_fmu::description::guid());
     assert_eq!(md.co_simulation.as_ref().expect("CoSimulation").model_identifier, "ThermoVIA");
-    let vr = |name: &str| md.get_model_variables().find(|v| v.name == name).unwrap_or_else(|| panic!("{name}")).value_reference;
+    let vr = |name: &str| {
+        md.get_model_variables().find(|v| v.name == name).unwrap_or_else(|| panic!("{name}")).value_reference
+    };
     let (torque_vr, heater_vr, link_vr) = (vr("motor_torque"), vr("heater_power"), vr("link_angle"));
     assert_eq!(md.get_model_variables().count(), thermovia_fmu::variables::VARIABLES.len());
 

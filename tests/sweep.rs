@@ -60,7 +60,12 @@ fn sweep_through_the_fmu_matches_the_independent_frequency_response() {
         // motor tracking is good: the PD loop keeps within 1 % of θ0
         assert!(c.motor_tracking_error_rad < 0.01 * c.commanded_amplitude_rad);
         // the closed form recovers what the FMU used, on the FMU's own data (stated tolerance 1e-3)
-        assert!(c.e_storage_error.abs() < 1e-3 && c.e_loss_error.abs() < 1e-3, "{} {}", c.e_storage_error, c.e_loss_error);
+        assert!(
+            c.e_storage_error.abs() < 1e-3 && c.e_loss_error.abs() < 1e-3,
+            "{} {}",
+            c.e_storage_error,
+            c.e_loss_error
+        );
         assert!((c.k_eff_nm_per_rad / c.model_k_eff_nm_per_rad - 1.0).abs() < 1e-4);
         assert!((c.c_eff_nms_per_rad / c.model_c_eff_nms_per_rad - 1.0).abs() < 1e-3);
     }
@@ -128,12 +133,23 @@ fn ill_conditioning_is_reported_instead_of_nonsense() {
         Err(EstimateError::IllConditioned { h_minus_1, .. }) => assert!(h_minus_1 < 1e-11),
         other => panic!("{other:?}"),
     }
-    assert!(matches!(estimator::closed_form(Complex::new(1.0, 0.0), w, &k, 0.0, 0.1), Err(EstimateError::IllConditioned { .. })));
-    assert!(matches!(estimator::closed_form(Complex::new(f64::NAN, 0.0), w, &k, 1e-9, 0.1), Err(EstimateError::IllConditioned { .. })));
+    assert!(matches!(
+        estimator::closed_form(Complex::new(1.0, 0.0), w, &k, 0.0, 0.1),
+        Err(EstimateError::IllConditioned { .. })
+    ));
+    assert!(matches!(
+        estimator::closed_form(Complex::new(f64::NAN, 0.0), w, &k, 1e-9, 0.1),
+        Err(EstimateError::IllConditioned { .. })
+    ));
     // The device at 22 °C, 0.5 Hz with H read to one encoder count: an estimate exists, but its
     // predicted error is far above 10 %, so it is flagged, with the numbers.
     let (e1, e2) = MaterialTable::RepairedExperimental.moduli_pa(22.0);
-    let h = estimator::link_over_motor(k.spring_stiffness + e1 * k.modulus_to_torsion, e2 * k.modulus_to_torsion / w, w, k.link_inertia);
+    let h = estimator::link_over_motor(
+        k.spring_stiffness + e1 * k.modulus_to_torsion,
+        e2 * k.modulus_to_torsion / w,
+        w,
+        k.link_inertia,
+    );
     let dh = sweep::ENCODER_COUNT_RAD / 30f64.to_radians();
     match estimator::closed_form(h, w, &k, dh, 0.1) {
         Err(e @ EstimateError::TooUncertain { conditioning, .. }) => {
@@ -144,7 +160,10 @@ fn ill_conditioning_is_reported_instead_of_nonsense() {
     }
     // A link amplitude below the motor's with little phase delay (the paper's positive Decay) has
     // no solution of Eq. 15 with K > J_l ω².
-    assert!(matches!(estimator::paper_iterative(0.99, 0.001, w, &k, 1e-12, 1000), Err(EstimateError::NoFixedPoint { .. })));
+    assert!(matches!(
+        estimator::paper_iterative(0.99, 0.001, w, &k, 1e-12, 1000),
+        Err(EstimateError::NoFixedPoint { .. })
+    ));
     // A link that lags less than the damper allows gives negative damping: not physical.
     let lead = Complex::new(1.01, 0.001);
     assert!(matches!(estimator::closed_form(lead, w, &k, 1e-9, 0.1), Err(EstimateError::NotPhysical { .. })));
@@ -152,11 +171,21 @@ fn ill_conditioning_is_reported_instead_of_nonsense() {
 
 #[test]
 fn warm_up_keeps_the_mechanics_at_rest_and_holds_the_housing() {
-    let a = SweepArgs { temperatures: vec![50.0], frequencies: vec![1.0], soak: 120.0, settle_cycles: 2, cycles: 1, ..args() };
+    let a = SweepArgs {
+        temperatures: vec![50.0],
+        frequencies: vec![1.0],
+        soak: 120.0,
+        settle_cycles: 2,
+        cycles: 1,
+        ..args()
+    };
     let r = sweep::simulate(&a, |_| {}).unwrap();
     let (w, trace) = &r.warmups[0];
     let col = |n: &str| trace.columns().into_iter().find(|(c, _)| *c == n).unwrap().1;
-    assert!(col("motor_angle").iter().chain(col("link_angle")).all(|v| *v == 0.0), "the mechanics moved during the warm-up");
+    assert!(
+        col("motor_angle").iter().chain(col("link_angle")).all(|v| *v == 0.0),
+        "the mechanics moved during the warm-up"
+    );
     assert!(col("heater_power").iter().all(|p| (0.0..=a.heater_max_w).contains(p)));
     let reached = w.housing_reached_s.expect("housing reached the target");
     assert!(reached > 0.0 && w.pcl_reached_s.unwrap_or(f64::INFINITY) > reached, "the PCL lags the housing");
@@ -199,7 +228,14 @@ fn warm_up_step_does_not_change_the_thermal_result() {
 
 #[test]
 fn outputs_are_complete_and_written_atomically() {
-    let a = SweepArgs { temperatures: vec![22.0, 40.0], frequencies: vec![1.0], soak: 30.0, settle_cycles: 2, cycles: 2, ..args() };
+    let a = SweepArgs {
+        temperatures: vec![22.0, 40.0],
+        frequencies: vec![1.0],
+        soak: 30.0,
+        settle_cycles: 2,
+        cycles: 2,
+        ..args()
+    };
     let r = sweep::simulate(&a, |_| {}).unwrap();
     let base = std::env::temp_dir().join(format!("thermovia-sweep-test-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&base);
@@ -208,18 +244,42 @@ fn outputs_are_complete_and_written_atomically() {
     std::fs::write(out.join("stale.txt"), "from an older run").unwrap();
     let n = sweep::report::write_all(&r, &out).unwrap();
     assert!(!out.join("stale.txt").exists(), "the folder is replaced as a whole");
-    let files: Vec<String> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    let files: Vec<String> =
+        std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
     assert_eq!(files.len(), n, "{files:?}");
-    for f in ["summary.json", "report.md", "run_22C_1Hz.csv", "run_40C_1Hz.csv", "warmup_40C.csv", "fig6_trajectories_1Hz.svg", "fig7_decay_normalized.svg", "fig4_moduli.svg", "warmup.svg"] {
+    for f in [
+        "summary.json",
+        "report.md",
+        "run_22C_1Hz.csv",
+        "run_40C_1Hz.csv",
+        "warmup_40C.csv",
+        "fig6_trajectories_1Hz.svg",
+        "fig7_decay_normalized.svg",
+        "fig4_moduli.svg",
+        "warmup.svg",
+    ] {
         assert!(files.contains(&f.to_string()), "{f} missing from {files:?}");
     }
     // no temporary folders left next to it
     assert_eq!(std::fs::read_dir(&base).unwrap().count(), 1);
 
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
     let conds = json["conditions"].as_array().unwrap();
     assert_eq!(conds.len(), 2);
-    for key in ["temperature_c", "frequency_hz", "motor_amplitude_rad", "link_amplitude_rad", "decay_rad", "decay_normalized", "phase_deg", "k_eff_nm_per_rad", "c_eff_nms_per_rad", "e_storage_kpa", "e_loss_kpa"] {
+    for key in [
+        "temperature_c",
+        "frequency_hz",
+        "motor_amplitude_rad",
+        "link_amplitude_rad",
+        "decay_rad",
+        "decay_normalized",
+        "phase_deg",
+        "k_eff_nm_per_rad",
+        "c_eff_nms_per_rad",
+        "e_storage_kpa",
+        "e_loss_kpa",
+    ] {
         assert!(conds.iter().all(|c| c[key].is_number()), "{key} missing or not a number");
     }
     assert_eq!(conds[1]["temperature_c"].as_f64(), Some(40.0));

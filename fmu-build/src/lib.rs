@@ -7,7 +7,8 @@ use std::path::{Path, PathBuf};
 pub const SOURCE_HASH_ENTRY: &str = "documentation/source-hash.txt";
 
 /// The folders and files whose content goes into the FMU binary and its description.
-const SOURCES: [&str; 6] = ["crates/fmi2", "crates/model", "crates/fmu", "Cargo.lock", "Cargo.toml", "fmu-build/src/main.rs"];
+const SOURCES: [&str; 6] =
+    ["crates/fmi2", "crates/model", "crates/fmu", "Cargo.lock", "Cargo.toml", "fmu-build/src/main.rs"];
 
 pub fn workspace_root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("fmu-build sits in the workspace").to_path_buf()

@@ -41,7 +41,8 @@ fn sync_docs() {
     std::fs::create_dir_all(xml_path.parent().unwrap()).unwrap_or_else(|e| fail(format!("{e}")));
     std::fs::write(&xml_path, model_description()).unwrap_or_else(|e| fail(format!("{}: {e}", xml_path.display())));
     let readme_path = root.join("README.md");
-    let readme = std::fs::read_to_string(&readme_path).unwrap_or_else(|e| fail(format!("{}: {e}", readme_path.display())));
+    let readme =
+        std::fs::read_to_string(&readme_path).unwrap_or_else(|e| fail(format!("{}: {e}", readme_path.display())));
     let new = readme_with_table(&readme)
         .unwrap_or_else(|| fail(format!("{} lacks the markers {README_BEGIN} … {README_END}", readme_path.display())));
     std::fs::write(&readme_path, new).unwrap_or_else(|e| fail(format!("{}: {e}", readme_path.display())));
@@ -63,7 +64,15 @@ fn documentation() -> String {
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.iter().any(|a| a == "--help" || a == "-h") {
-        println!("{}", include_str!("main.rs").lines().take_while(|l| l.starts_with("//!")).map(|l| l.trim_start_matches("//!").trim_start_matches(' ')).collect::<Vec<_>>().join("\n"));
+        println!(
+            "{}",
+            include_str!("main.rs")
+                .lines()
+                .take_while(|l| l.starts_with("//!"))
+                .map(|l| l.trim_start_matches("//!").trim_start_matches(' '))
+                .collect::<Vec<_>>()
+                .join("\n")
+        );
         return;
     }
     if let Some(bad) = args.iter().find(|a| *a != "--sync-docs") {

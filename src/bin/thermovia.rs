@@ -86,7 +86,8 @@ fn simulate(a: &SimulateArgs) -> Result<(), Box<dyn std::error::Error>> {
     use thermovia_importer::simulate::{parse_value, simulate, InputTable, SimulateOptions};
     let fmu = thermovia_importer::Fmu::open(&a.fmu)?;
     let md = &fmu.description;
-    let mut options = SimulateOptions::with_defaults(md, a.start_time, a.stop_time, a.step, a.output_interval, a.output.clone());
+    let mut options =
+        SimulateOptions::with_defaults(md, a.start_time, a.stop_time, a.step, a.output_interval, a.output.clone());
     options.parameters = a
         .set
         .iter()
@@ -117,13 +118,18 @@ fn info(a: &InfoArgs) -> Result<(), Box<dyn std::error::Error>> {
 /// own checks, which name the option and the range, judge them rather than the parser.
 fn parse_command_line() -> Cli {
     fn allow_negative(cmd: clap::Command) -> clap::Command {
-        cmd.mut_args(|a| if a.get_num_args().is_none_or(|n| n.takes_values()) { a.allow_negative_numbers(true) } else { a })
-            .mut_subcommands(allow_negative)
+        cmd.mut_args(
+            |a| if a.get_num_args().is_none_or(|n| n.takes_values()) { a.allow_negative_numbers(true) } else { a },
+        )
+        .mut_subcommands(allow_negative)
     }
     let parsed = allow_negative(Cli::command()).try_get_matches().and_then(|m| Cli::from_arg_matches(&m));
     parsed.unwrap_or_else(|e| {
         use clap::error::ErrorKind;
-        if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand) {
+        if matches!(
+            e.kind(),
+            ErrorKind::DisplayHelp | ErrorKind::DisplayVersion | ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand
+        ) {
             e.exit();
         }
         // One line: clap's message with its tips, without the usage block.
@@ -177,10 +183,15 @@ impl thermovia_tools::output::Progress for Bar {
 fn main() {
     let cli = parse_command_line();
     let result = match &cli.command {
-        Command::Sweep(a) => thermovia_tools::sweep::run(a, &Bar::new(a.quiet, "{spinner} sweep [{bar:30}] {pos}/{len} {msg} ({elapsed})")),
+        Command::Sweep(a) => thermovia_tools::sweep::run(
+            a,
+            &Bar::new(a.quiet, "{spinner} sweep [{bar:30}] {pos}/{len} {msg} ({elapsed})"),
+        ),
         Command::Calibrate(a) => thermovia_tools::calibrate::run(a),
         Command::Synth(a) => thermovia_tools::calibrate::synth(a),
-        Command::Arm(a) => thermovia_tools::arm::run(a, &Bar::new(false, "{msg:32} [{bar:40}] {percent:>3}% {elapsed}")),
+        Command::Arm(a) => {
+            thermovia_tools::arm::run(a, &Bar::new(false, "{msg:32} [{bar:40}] {percent:>3}% {elapsed}"))
+        }
         Command::Simulate(a) => simulate(a),
         Command::Info(a) => info(a),
     };

@@ -14,10 +14,13 @@ pub fn fmu_path() -> PathBuf {
     let path = fmu_build::fmu_path();
     let rebuild = "run `cargo run --release -p fmu-build` (scripts/test-all.sh does it first)";
     let file = std::fs::File::open(&path).unwrap_or_else(|e| panic!("{}: {e}: {rebuild}", path.display()));
-    let mut zip = zip::ZipArchive::new(file).unwrap_or_else(|e| panic!("{}: not a zip archive ({e}): {rebuild}", path.display()));
+    let mut zip =
+        zip::ZipArchive::new(file).unwrap_or_else(|e| panic!("{}: not a zip archive ({e}): {rebuild}", path.display()));
     let mut packaged = String::new();
     zip.by_name(fmu_build::SOURCE_HASH_ENTRY)
-        .unwrap_or_else(|_| panic!("{} has no {}: it predates the check; {rebuild}", path.display(), fmu_build::SOURCE_HASH_ENTRY))
+        .unwrap_or_else(|_| {
+            panic!("{} has no {}: it predates the check; {rebuild}", path.display(), fmu_build::SOURCE_HASH_ENTRY)
+        })
         .read_to_string(&mut packaged)
         .expect("readable hash");
     let current = fmu_build::source_hash(&fmu_build::workspace_root()).expect("sources readable");

@@ -32,9 +32,8 @@ pub const FMI2_LAST_SUCCESSFUL_TIME: Fmi2StatusKind = 2;
 pub const FMI2_TERMINATED: Fmi2StatusKind = 3;
 
 /// `fmi2CallbackLogger`: variadic in C; the message is a printf format.
-pub type Fmi2CallbackLogger = Option<
-    unsafe extern "C" fn(Fmi2ComponentEnvironment, Fmi2String, Fmi2Status, Fmi2String, Fmi2String, ...),
->;
+pub type Fmi2CallbackLogger =
+    Option<unsafe extern "C" fn(Fmi2ComponentEnvironment, Fmi2String, Fmi2Status, Fmi2String, Fmi2String, ...)>;
 pub type Fmi2CallbackAllocateMemory = Option<unsafe extern "C" fn(usize, usize) -> *mut c_void>;
 pub type Fmi2CallbackFreeMemory = Option<unsafe extern "C" fn(*mut c_void)>;
 pub type Fmi2StepFinished = Option<unsafe extern "C" fn(Fmi2ComponentEnvironment, Fmi2Status)>;

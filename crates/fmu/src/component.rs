@@ -3,8 +3,8 @@
 //! only convert pointers and delegate here.
 
 use crate::description::guid;
-use thermovia_model::Model;
 use crate::variables::{by_reference, Access, BaseType, Causality, Variability, Variable, VARIABLES};
+use thermovia_model::Model;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(i32)]
@@ -50,7 +50,8 @@ pub mod allowed {
     const fn m(p: super::Phase) -> u8 {
         p as u8
     }
-    pub const ANY_BUT_FATAL: u8 = m(Instantiated) | m(InitializationMode) | m(StepComplete) | m(StepFailed) | m(Terminated) | m(Error);
+    pub const ANY_BUT_FATAL: u8 =
+        m(Instantiated) | m(InitializationMode) | m(StepComplete) | m(StepFailed) | m(Terminated) | m(Error);
     pub const SETUP: u8 = m(Instantiated);
     pub const ENTER_INIT: u8 = m(Instantiated);
     pub const EXIT_INIT: u8 = m(InitializationMode);
@@ -266,9 +267,7 @@ impl Component {
             if !(tol > 0.0 && tol.is_finite()) {
                 return self.error(&format!("fmi2SetupExperiment: tolerance {tol} is not positive"));
             }
-            self.log_event(&format!(
-                "tolerance {tol} noted; the adaptive solver uses the parameter solver_tolerance"
-            ));
+            self.log_event(&format!("tolerance {tol} noted; the adaptive solver uses the parameter solver_tolerance"));
         }
         self.s.start_time = start;
         self.s.time = start;
@@ -291,11 +290,23 @@ impl Component {
     }
 
     pub fn enter_initialization_mode(&mut self) -> Status {
-        self.transition("fmi2EnterInitializationMode", allowed::ENTER_INIT, Phase::InitializationMode, true, "entered initialization mode")
+        self.transition(
+            "fmi2EnterInitializationMode",
+            allowed::ENTER_INIT,
+            Phase::InitializationMode,
+            true,
+            "entered initialization mode",
+        )
     }
 
     pub fn exit_initialization_mode(&mut self) -> Status {
-        self.transition("fmi2ExitInitializationMode", allowed::EXIT_INIT, Phase::StepComplete, true, "exited initialization mode")
+        self.transition(
+            "fmi2ExitInitializationMode",
+            allowed::EXIT_INIT,
+            Phase::StepComplete,
+            true,
+            "exited initialization mode",
+        )
     }
 
     pub fn terminate(&mut self) -> Status {
@@ -315,9 +326,8 @@ impl Component {
     }
 
     fn lookup(&mut self, function: &str, ty: BaseType, vr: u32) -> Result<&'static Variable, Status> {
-        by_reference(ty, vr).ok_or_else(|| {
-            self.error(&format!("{function}: unknown value reference {vr} for type {ty:?}"))
-        })
+        by_reference(ty, vr)
+            .ok_or_else(|| self.error(&format!("{function}: unknown value reference {vr} for type {ty:?}")))
     }
 
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Status {
@@ -359,7 +369,9 @@ impl Component {
         }
         match vrs.first() {
             None => Status::Ok,
-            Some(vr) => self.error(&format!("{function}: unknown value reference {vr}: this FMU has no variables of that type")),
+            Some(vr) => {
+                self.error(&format!("{function}: unknown value reference {vr}: this FMU has no variables of that type"))
+            }
         }
     }
 
@@ -432,9 +444,8 @@ impl Component {
         }
         let now = self.s.time;
         if !t.is_finite() || (t - now).abs() > 1e-9 * now.abs().max(1.0) {
-            return self.error(&format!(
-                "fmi2DoStep: currentCommunicationPoint {t} does not match the FMU's time {now}"
-            ));
+            return self
+                .error(&format!("fmi2DoStep: currentCommunicationPoint {t} does not match the FMU's time {now}"));
         }
         // The model advances by exactly the h the master passed ((t + h) − t may differ from h
         // in the last bit), unless stopTime cuts the step short.
@@ -451,9 +462,12 @@ impl Component {
                 self.s.phase = Phase::StepFailed;
                 self.s.last_successful_time = t;
                 self.last_step_status = Status::Discard;
-                self.emit(Status::Discard, "logStatusDiscard", LOG_DISCARD, &format!(
-                    "fmi2DoStep: step from t = {t} by {h} discarded: {failure}; state kept at t = {t}"
-                ));
+                self.emit(
+                    Status::Discard,
+                    "logStatusDiscard",
+                    LOG_DISCARD,
+                    &format!("fmi2DoStep: step from t = {t} by {h} discarded: {failure}; state kept at t = {t}"),
+                );
                 return Status::Discard;
             }
         }
@@ -462,10 +476,12 @@ impl Component {
         if status == Status::Discard {
             self.s.phase = Phase::StepFailed;
             self.s.terminated = true;
-            self.emit(Status::Discard, "logStatusDiscard", LOG_DISCARD, &format!(
-                "fmi2DoStep: step to {} passes stopTime {end}; stopped there (fmi2Terminated = true)",
-                t + h
-            ));
+            self.emit(
+                Status::Discard,
+                "logStatusDiscard",
+                LOG_DISCARD,
+                &format!("fmi2DoStep: step to {} passes stopTime {end}; stopped there (fmi2Terminated = true)", t + h),
+            );
         }
         self.last_step_status = status;
         status
@@ -574,7 +590,11 @@ struct Reader<'a> {
 impl<'a> Reader<'a> {
     fn take(&mut self, n: usize, what: &str) -> Result<&'a [u8], String> {
         let end = self.at.checked_add(n).filter(|&e| e <= self.b.len()).ok_or_else(|| {
-            format!("serialized state is truncated: {what} needs {n} bytes at offset {}, {} left", self.at, self.b.len() - self.at.min(self.b.len()))
+            format!(
+                "serialized state is truncated: {what} needs {n} bytes at offset {}, {} left",
+                self.at,
+                self.b.len() - self.at.min(self.b.len())
+            )
         })?;
         let s = &self.b[self.at..end];
         self.at = end;
@@ -636,7 +656,10 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     for v in VARIABLES.iter().filter(|v| v.has_start()) {
         let vr = r.u32("value reference")?;
         if vr != v.value_reference {
-            return Err(format!("expected value reference {} ({}) in the state, found {vr}", v.value_reference, v.name));
+            return Err(format!(
+                "expected value reference {} ({}) in the state, found {vr}",
+                v.value_reference, v.name
+            ));
         }
         let x = r.f64(v.name)?;
         v.check_range(x)?;

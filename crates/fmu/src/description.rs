@@ -181,12 +181,8 @@ fn render(guid: &str) -> String {
     put(Event::End(BytesEnd::new("ModelVariables")));
 
     put(Event::Start(BytesStart::new("ModelStructure")));
-    let outputs: Vec<usize> = VARIABLES
-        .iter()
-        .enumerate()
-        .filter(|(_, v)| v.causality == Causality::Output)
-        .map(|(i, _)| i + 1)
-        .collect();
+    let outputs: Vec<usize> =
+        VARIABLES.iter().enumerate().filter(|(_, v)| v.causality == Causality::Output).map(|(i, _)| i + 1).collect();
     for (section, with_dependencies) in [("Outputs", true), ("InitialUnknowns", false)] {
         put(Event::Start(BytesStart::new(section)));
         for i in &outputs {

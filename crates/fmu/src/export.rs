@@ -338,12 +338,18 @@ pub unsafe extern "C" fn fmi2FreeFMUstate(c: Fmi2Component, state: *mut Fmi2FmuS
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2SerializedFMUstateSize(c: Fmi2Component, state: Fmi2FmuState, size: *mut usize) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
+    c: Fmi2Component,
+    state: Fmi2FmuState,
+    size: *mut usize,
+) -> Fmi2Status {
     with_instance(c, |inst| {
         if let Err(s) = inst.check("fmi2SerializedFMUstateSize", allowed::FMU_STATE) {
             return s;
         }
-        let Some(b) = state_ref(state) else { return inst.error("fmi2SerializedFMUstateSize: FMUstate is null or foreign") };
+        let Some(b) = state_ref(state) else {
+            return inst.error("fmi2SerializedFMUstateSize: FMUstate is null or foreign");
+        };
         if size.is_null() {
             return null_arg(inst, "fmi2SerializedFMUstateSize", "size");
         }
@@ -492,7 +498,8 @@ pub unsafe extern "C" fn fmi2GetRealStatus(c: Fmi2Component, kind: Fmi2StatusKin
             return null_arg(inst, "fmi2GetRealStatus", "value");
         }
         if kind != FMI2_LAST_SUCCESSFUL_TIME {
-            return inst.error(&format!("fmi2GetRealStatus: only fmi2LastSuccessfulTime (2) is a Real status, not {kind}"));
+            return inst
+                .error(&format!("fmi2GetRealStatus: only fmi2LastSuccessfulTime (2) is a Real status, not {kind}"));
         }
         match inst.last_successful_time("fmi2GetRealStatus") {
             Ok(t) => {
@@ -505,18 +512,29 @@ pub unsafe extern "C" fn fmi2GetRealStatus(c: Fmi2Component, kind: Fmi2StatusKin
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2GetIntegerStatus(c: Fmi2Component, kind: Fmi2StatusKind, _value: *mut Fmi2Integer) -> Fmi2Status {
-    with_instance(c, |inst| inst.error(&format!("fmi2GetIntegerStatus: FMI 2.0 defines no Integer status (kind {kind})")))
+pub unsafe extern "C" fn fmi2GetIntegerStatus(
+    c: Fmi2Component,
+    kind: Fmi2StatusKind,
+    _value: *mut Fmi2Integer,
+) -> Fmi2Status {
+    with_instance(c, |inst| {
+        inst.error(&format!("fmi2GetIntegerStatus: FMI 2.0 defines no Integer status (kind {kind})"))
+    })
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2GetBooleanStatus(c: Fmi2Component, kind: Fmi2StatusKind, value: *mut Fmi2Boolean) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2GetBooleanStatus(
+    c: Fmi2Component,
+    kind: Fmi2StatusKind,
+    value: *mut Fmi2Boolean,
+) -> Fmi2Status {
     with_instance(c, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetBooleanStatus", "value");
         }
         if kind != FMI2_TERMINATED {
-            return inst.error(&format!("fmi2GetBooleanStatus: only fmi2Terminated (3) is a Boolean status, not {kind}"));
+            return inst
+                .error(&format!("fmi2GetBooleanStatus: only fmi2Terminated (3) is a Boolean status, not {kind}"));
         }
         match inst.terminated("fmi2GetBooleanStatus") {
             Ok(t) => {
@@ -529,9 +547,17 @@ pub unsafe extern "C" fn fmi2GetBooleanStatus(c: Fmi2Component, kind: Fmi2Status
 }
 
 #[no_mangle]
-pub unsafe extern "C" fn fmi2GetStringStatus(c: Fmi2Component, kind: Fmi2StatusKind, _value: *mut Fmi2String) -> Fmi2Status {
+pub unsafe extern "C" fn fmi2GetStringStatus(
+    c: Fmi2Component,
+    kind: Fmi2StatusKind,
+    _value: *mut Fmi2String,
+) -> Fmi2Status {
     with_instance(c, |inst| {
-        let why = if kind == FMI2_PENDING_STATUS { "no asynchronous step is ever pending" } else { "no String status of that kind" };
+        let why = if kind == FMI2_PENDING_STATUS {
+            "no asynchronous step is ever pending"
+        } else {
+            "no String status of that kind"
+        };
         inst.error(&format!("fmi2GetStringStatus: {why} (kind {kind})"))
     })
 }

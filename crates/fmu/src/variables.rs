@@ -152,10 +152,7 @@ macro_rules! real_param {
             upper: $upper,
             description: $desc,
             source: $src,
-            access: Access::Real {
-                get: |m| m.params().$field,
-                set: Some(|m, v| m.params_mut().$field = v),
-            },
+            access: Access::Real { get: |m| m.params().$field, set: Some(|m, v| m.params_mut().$field = v) },
             enumeration: None,
         }
     };

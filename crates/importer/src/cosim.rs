@@ -167,7 +167,10 @@ impl Master {
 
     fn port(names: &[String], participant: usize, who: &str, name: &str, kind: &str) -> Result<Port, HarnessError> {
         names.iter().position(|n| n == name).map(|index| Port { participant, index }).ok_or_else(|| {
-            HarnessError::UnknownVariable { name: format!("{name} (not declared as an {kind} of {who} in Master::add)"), close: names.to_vec() }
+            HarnessError::UnknownVariable {
+                name: format!("{name} (not declared as an {kind} of {who} in Master::add)"),
+                close: names.to_vec(),
+            }
         })
     }
 
@@ -244,9 +247,11 @@ impl Master {
                 }
             }
             if !p.changed_vrs.is_empty() {
-                p.instance
-                    .set_reals(&p.changed_vrs, &p.changed_values)
-                    .map_err(|source| CosimError::Fmu { participant: p.name.clone(), time: t, source })?;
+                p.instance.set_reals(&p.changed_vrs, &p.changed_values).map_err(|source| CosimError::Fmu {
+                    participant: p.name.clone(),
+                    time: t,
+                    source,
+                })?;
                 p.sent.copy_from_slice(&p.inputs);
             }
         }

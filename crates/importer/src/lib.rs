@@ -24,7 +24,9 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 
-pub use model_description::{did_you_mean, DefaultExperiment, EnumerationItem, ModelDescription, VariableInfo, VariableType};
+pub use model_description::{
+    did_you_mean, DefaultExperiment, EnumerationItem, ModelDescription, VariableInfo, VariableType,
+};
 
 use crate::loader::{FmuState, Library, LogRecord, RawInstance};
 use thermovia_fmi2::{FMI2_DISCARD, FMI2_OK, FMI2_WARNING};
@@ -212,7 +214,12 @@ impl Instance {
     }
 
     /// fmi2SetupExperiment + enter and exit initialisation, after `parameters` are set by name.
-    pub fn initialize(&mut self, start_time: f64, stop_time: Option<f64>, parameters: &[(&str, f64)]) -> Result<(), HarnessError> {
+    pub fn initialize(
+        &mut self,
+        start_time: f64,
+        stop_time: Option<f64>,
+        parameters: &[(&str, f64)],
+    ) -> Result<(), HarnessError> {
         let s = self.raw.setup_experiment(None, start_time, stop_time);
         self.check("fmi2SetupExperiment", s)?;
         for (name, value) in parameters {
@@ -241,7 +248,11 @@ impl Instance {
             }
             VariableType::Boolean => self.raw.set_boolean(&[h.value_reference], &[i32::from(value != 0.0)]),
             other => {
-                return Err(HarnessError::Call { call: format!("set on {}", self.name), status: 3, log: vec![format!("{other:?} variables are not supported by the harness")] })
+                return Err(HarnessError::Call {
+                    call: format!("set on {}", self.name),
+                    status: 3,
+                    log: vec![format!("{other:?} variables are not supported by the harness")],
+                })
             }
         };
         self.check("fmi2SetReal/Integer/Boolean", s)

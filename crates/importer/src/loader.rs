@@ -120,7 +120,11 @@ unsafe extern "C" fn collect_log(
         return;
     }
     let text = |p: *const std::os::raw::c_char| {
-        if p.is_null() { String::new() } else { CStr::from_ptr(p).to_string_lossy().into_owned() }
+        if p.is_null() {
+            String::new()
+        } else {
+            CStr::from_ptr(p).to_string_lossy().into_owned()
+        }
     };
     let fmt = text(format);
     let message = if fmt == "%s" { text(first_arg) } else { fmt };
@@ -158,7 +162,14 @@ impl RawInstance {
         // SAFETY: the logger's real signature is variadic; see `collect_log`.
         let logger: Fmi2CallbackLogger = unsafe {
             Some(std::mem::transmute::<
-                unsafe extern "C" fn(Fmi2ComponentEnvironment, Fmi2String, Fmi2Status, Fmi2String, Fmi2String, *const std::os::raw::c_char),
+                unsafe extern "C" fn(
+                    Fmi2ComponentEnvironment,
+                    Fmi2String,
+                    Fmi2Status,
+                    Fmi2String,
+                    Fmi2String,
+                    *const std::os::raw::c_char,
+                ),
                 unsafe extern "C" fn(Fmi2ComponentEnvironment, Fmi2String, Fmi2Status, Fmi2String, Fmi2String, ...),
             >(collect_log))
         };
@@ -185,7 +196,8 @@ impl RawInstance {
             )
         };
         if c.is_null() {
-            let msgs: Vec<String> = log.lock().map(|l| l.iter().map(|r| r.message.clone()).collect()).unwrap_or_default();
+            let msgs: Vec<String> =
+                log.lock().map(|l| l.iter().map(|r| r.message.clone()).collect()).unwrap_or_default();
             return Err(format!("fmi2Instantiate returned NULL: {}", msgs.join("; ")));
         }
         Ok(RawInstance { lib: lib.clone(), c, log, _callbacks: callbacks, states: Vec::new() })
@@ -335,7 +347,9 @@ impl RawInstance {
     pub fn deserialize_fmu_state(&mut self, bytes: &[u8]) -> Result<FmuState, Fmi2Status> {
         let mut p: Fmi2FmuState = std::ptr::null_mut();
         // SAFETY: `bytes` is valid for its length.
-        let s = unsafe { (self.lib.api.deserialize_fmu_state)(self.c, bytes.as_ptr() as *const Fmi2Byte, bytes.len(), &mut p) };
+        let s = unsafe {
+            (self.lib.api.deserialize_fmu_state)(self.c, bytes.as_ptr() as *const Fmi2Byte, bytes.len(), &mut p)
+        };
         if s != FMI2_OK {
             return Err(s);
         }

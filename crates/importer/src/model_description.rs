@@ -120,12 +120,19 @@ impl ModelDescription {
                 }
                 b"CoSimulation" => {
                     md.model_identifier = get("modelIdentifier").ok_or("CoSimulation has no modelIdentifier")?;
-                    md.capabilities =
-                        attrs.iter().filter(|(k, _)| k.as_str() != "modelIdentifier").map(|(k, v)| (k.clone(), v.clone())).collect();
+                    md.capabilities = attrs
+                        .iter()
+                        .filter(|(k, _)| k.as_str() != "modelIdentifier")
+                        .map(|(k, v)| (k.clone(), v.clone()))
+                        .collect();
                 }
                 b"DefaultExperiment" => {
                     let number = |k: &str| -> Result<Option<f64>, String> {
-                        get(k).map(|v| v.trim().parse().map_err(|_| format!("DefaultExperiment {k}={v:?} is not a number"))).transpose()
+                        get(k)
+                            .map(|v| {
+                                v.trim().parse().map_err(|_| format!("DefaultExperiment {k}={v:?} is not a number"))
+                            })
+                            .transpose()
                     };
                     md.default_experiment = DefaultExperiment {
                         start_time: number("startTime")?,
@@ -148,7 +155,11 @@ impl ModelDescription {
                         let value = get("value")
                             .and_then(|v| v.trim().parse().ok())
                             .ok_or_else(|| format!("Item {name:?} of {type_name} has no integer value"))?;
-                        items.push(EnumerationItem { name, value, description: get("description").unwrap_or_default() });
+                        items.push(EnumerationItem {
+                            name,
+                            value,
+                            description: get("description").unwrap_or_default(),
+                        });
                     }
                 }
                 b"ScalarVariable" => {

@@ -149,7 +149,10 @@ pub fn parse_value(md: &ModelDescription, name: &str, text: &str) -> Result<f64,
                 return Ok(f64::from(k));
             }
             let list: Vec<String> = items.iter().map(|i| format!("{} ({})", i.name, i.value)).collect();
-            Err(expected(&format!("one of {}", if list.is_empty() { "the integer values".into() } else { list.join(", ") })))
+            Err(expected(&format!(
+                "one of {}",
+                if list.is_empty() { "the integer values".into() } else { list.join(", ") }
+            )))
         }
         VariableType::String => Err(format!("{name}: String variables cannot be set here")),
     }
@@ -224,7 +227,8 @@ pub fn write_csv(path: &Path, columns: &[(&str, &[f64])]) -> std::io::Result<()>
 
 impl Trajectory {
     pub fn write_csv(&self, path: &Path) -> std::io::Result<()> {
-        let cols: Vec<(&str, &[f64])> = self.names.iter().map(String::as_str).zip(self.columns.iter().map(Vec::as_slice)).collect();
+        let cols: Vec<(&str, &[f64])> =
+            self.names.iter().map(String::as_str).zip(self.columns.iter().map(Vec::as_slice)).collect();
         write_csv(path, &cols)
     }
 }

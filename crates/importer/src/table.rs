@@ -118,7 +118,13 @@ pub fn parse(path: &Path, text: &str, select: Columns) -> Result<Table, DataErro
                 message,
             };
             let cell = match cells.get(c) {
-                None => return Err(col_err(format!("missing cell (the row has {} of {} columns)", cells.len(), names.len()))),
+                None => {
+                    return Err(col_err(format!(
+                        "missing cell (the row has {} of {} columns)",
+                        cells.len(),
+                        names.len()
+                    )))
+                }
                 Some(s) => s.trim(),
             };
             if cell.is_empty() {

@@ -50,10 +50,9 @@ pub enum StepFailure {
 impl std::fmt::Display for StepFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            StepFailure::SolverStalled { at_time_in_step } => write!(
-                f,
-                "the adaptive solver could not meet solver_tolerance {at_time_in_step} s into the step"
-            ),
+            StepFailure::SolverStalled { at_time_in_step } => {
+                write!(f, "the adaptive solver could not meet solver_tolerance {at_time_in_step} s into the step")
+            }
             StepFailure::NonFinite => write!(f, "a state became NaN or infinite"),
         }
     }
@@ -155,11 +154,8 @@ impl Model {
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
-        let substeps = if h <= self.params.max_internal_step {
-            1
-        } else {
-            (h / self.params.max_internal_step).ceil() as usize
-        };
+        let substeps =
+            if h <= self.params.max_internal_step { 1 } else { (h / self.params.max_internal_step).ceil() as usize };
         let hs = h / substeps as f64;
         let before = (self.mechanics, self.thermal.clone(), self.adaptive_step);
         if self.params.motor_drive == MotorDrive::PrescribedAngle {

@@ -45,15 +45,9 @@ impl MaterialTable {
     /// (E' kPa, E'' kPa) at each row of [`TABLE_TEMPERATURES_C`].
     pub fn rows_kpa(self) -> ([f64; 4], [f64; 4]) {
         match self {
-            MaterialTable::RepairedExperimental => {
-                ([985.34, 920.0, 400.0, 180.0], [834.45, 1820.0, 1230.0, 120.0])
-            }
-            MaterialTable::PrintedExperimental => {
-                ([985.34, 0.92, 0.4, 0.18], [834.45, 1820.0, 1.23, 0.12])
-            }
-            MaterialTable::RepairedEstimated => {
-                ([1000.0, 900.0, 250.0, 20.0], [1000.0, 1800.0, 1000.0, 100.0])
-            }
+            MaterialTable::RepairedExperimental => ([985.34, 920.0, 400.0, 180.0], [834.45, 1820.0, 1230.0, 120.0]),
+            MaterialTable::PrintedExperimental => ([985.34, 0.92, 0.4, 0.18], [834.45, 1820.0, 1.23, 0.12]),
+            MaterialTable::RepairedEstimated => ([1000.0, 900.0, 250.0, 20.0], [1000.0, 1800.0, 1000.0, 100.0]),
             MaterialTable::PrintedEstimated => ([1000.0, 0.9, 0.25, 0.02], [1000.0, 1800.0, 1.0, 0.1]),
         }
     }

@@ -191,9 +191,8 @@ pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
         MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
         MotorDrive::PrescribedAngle => 0.0,
     };
-    let link_torque = tau + u[1] - p.link_damping * x[LINK_SPEED]
-        + link_friction(p, x[LINK_SPEED])
-        + link_gravity(p, x[LINK_ANGLE]);
+    let link_torque =
+        tau + u[1] - p.link_damping * x[LINK_SPEED] + link_friction(p, x[LINK_SPEED]) + link_gravity(p, x[LINK_ANGLE]);
     State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
 }
 
@@ -216,15 +215,8 @@ pub fn integrate_adaptive(
         [35.0 / 384.0, 0.0, 500.0 / 1113.0, 125.0 / 192.0, -2187.0 / 6784.0, 11.0 / 84.0],
     ];
     // 5th-order weights are A[5]; these are 5th minus 4th-order weights.
-    const E: [f64; 7] = [
-        71.0 / 57600.0,
-        0.0,
-        -71.0 / 16695.0,
-        71.0 / 1920.0,
-        -17253.0 / 339200.0,
-        22.0 / 525.0,
-        -1.0 / 40.0,
-    ];
+    const E: [f64; 7] =
+        [71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0];
     let tol = p.solver_tolerance;
     let mut t = 0.0;
     let mut dt = if *step_guess > 0.0 { step_guess.min(h) } else { h };

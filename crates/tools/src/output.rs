@@ -4,6 +4,9 @@
 
 use std::path::{Path, PathBuf};
 
+/// Files built in memory, (relative name, bytes), to be written together.
+pub type Files = Vec<(String, Vec<u8>)>;
+
 /// `.NAME.TAG-PID` beside `out`.
 fn sibling(out: &Path, tag: &str) -> PathBuf {
     let parent = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));

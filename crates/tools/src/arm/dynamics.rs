@@ -126,7 +126,10 @@ impl ArmConfig {
             self.inverse_kinematics(p).map_err(|e| format!("{name} {p:?}: {e}"))?;
         }
         if self.start_tip[0] >= self.wall_x {
-            return Err(format!("the start tip x = {} m is already at or behind the wall x = {} m", self.start_tip[0], self.wall_x));
+            return Err(format!(
+                "the start tip x = {} m is already at or behind the wall x = {} m",
+                self.start_tip[0], self.wall_x
+            ));
         }
         if self.move_start + self.move_duration > self.duration {
             return Err(format!(
@@ -183,10 +186,7 @@ impl ArmConfig {
         let (m1, lc1, _) = self.body1();
         let (m2, lc2, _) = self.body2();
         let c12 = (q[0] + q[1]).cos();
-        [
-            self.gravity * ((m1 * lc1 + m2 * self.l1) * q[0].cos() + m2 * lc2 * c12),
-            self.gravity * m2 * lc2 * c12,
-        ]
+        [self.gravity * ((m1 * lc1 + m2 * self.l1) * q[0].cos() + m2 * lc2 * c12), self.gravity * m2 * lc2 * c12]
     }
 
     pub fn tip(&self, q: V2) -> V2 {

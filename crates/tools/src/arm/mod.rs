@@ -214,7 +214,10 @@ pub fn task_metrics(cfg: &ArmConfig, scenario: &Scenario, joints: [JointProps; 2
         rebounds,
         settling_time_s: settling,
         max_tracking_error_mm: track * 1e3,
-        peak_transmitted_torque_nm: [peak_of(&|k| tr.transmitted_torque[k][0]), peak_of(&|k| tr.transmitted_torque[k][1])],
+        peak_transmitted_torque_nm: [
+            peak_of(&|k| tr.transmitted_torque[k][0]),
+            peak_of(&|k| tr.transmitted_torque[k][1]),
+        ],
         peak_motor_torque_nm: [peak_of(&|k| tr.motor_torque[k][0]), peak_of(&|k| tr.motor_torque[k][1])],
     }
 }
@@ -236,7 +239,11 @@ pub struct StepError {
 /// Compares a co-simulated trace with a reference sampled every `ref_dt` (h a multiple of it).
 pub fn compare(cosim: &Trace, reference: &Trace, h: f64, ref_dt: f64, scenario: &str) -> StepError {
     let stride = (h / ref_dt).round() as usize;
-    let travel = reference.tip.iter().map(|p| (p[0] - reference.tip[0][0]).hypot(p[1] - reference.tip[0][1])).fold(0.0, f64::max);
+    let travel = reference
+        .tip
+        .iter()
+        .map(|p| (p[0] - reference.tip[0][0]).hypot(p[1] - reference.tip[0][1]))
+        .fold(0.0, f64::max);
     let range = |i: usize| {
         let v = reference.q.iter().map(|q| q[i]);
         v.clone().fold(f64::NEG_INFINITY, f64::max) - v.fold(f64::INFINITY, f64::min)
@@ -303,7 +310,11 @@ fn probe_stability(fmu: &thermovia_importer::Fmu, cfg: &ArmConfig, scenario: &Sc
         Err(_) => (h, f64::INFINITY, true),
         Ok(tr) => {
             let amp = |a: f64, b: f64| {
-                tr.t.iter().zip(&tr.qd).filter(|(t, _)| **t >= a && **t < b).map(|(_, v)| v[0].abs().max(v[1].abs())).fold(0.0, f64::max)
+                tr.t.iter()
+                    .zip(&tr.qd)
+                    .filter(|(t, _)| **t >= a && **t < b)
+                    .map(|(_, v)| v[0].abs().max(v[1].abs()))
+                    .fold(0.0, f64::max)
             };
             let early = amp(end_move + 0.5, end_move + 1.0);
             let late = amp(c.duration - 0.5, c.duration + 1.0);
@@ -353,8 +364,10 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
         .into());
     }
     let limiting = if limit_hot.unwrap_or(f64::INFINITY) <= limit_cold.unwrap_or(f64::INFINITY) { &hot } else { &cold };
-    let check_below = if limit.is_finite() { probe_stability(&fmu, &cfg, limiting, 0.95 * limit) } else { (0.0, 0.0, false) };
-    let check_above = if limit.is_finite() { probe_stability(&fmu, &cfg, limiting, 1.05 * limit) } else { (0.0, 0.0, false) };
+    let check_below =
+        if limit.is_finite() { probe_stability(&fmu, &cfg, limiting, 0.95 * limit) } else { (0.0, 0.0, false) };
+    let check_above =
+        if limit.is_finite() { probe_stability(&fmu, &cfg, limiting, 1.05 * limit) } else { (0.0, 0.0, false) };
 
     // 2. the task, cold and hot, at the chosen step
     let mut traces = Vec::new();
@@ -363,7 +376,9 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
     for (k, (sc, props)) in [(&cold, props_cold), (&hot, props_hot)].into_iter().enumerate() {
         stage(1 + k as u64, if k == 0 { "task, cold joints" } else { "task, hot joints" });
         let t0 = std::time::Instant::now();
-        let tr = sim::cosimulate(&fmu, &cfg, sc, args.step, Some(limit), |f| progress.set_position(100 * (1 + k as u64) + (100.0 * f) as u64))?;
+        let tr = sim::cosimulate(&fmu, &cfg, sc, args.step, Some(limit), |f| {
+            progress.set_position(100 * (1 + k as u64) + (100.0 * f) as u64)
+        })?;
         wall_time += t0.elapsed().as_secs_f64();
         tasks.push(task_metrics(&cfg, sc, props, &tr));
         traces.push(tr);
@@ -383,7 +398,11 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
     let mut accuracy = Vec::new();
     let steps: Vec<f64> = [5e-4, 1e-3, 2e-3, 5e-3].into_iter().filter(|h| *h < limit).collect();
     if steps.is_empty() {
-        return Err(format!("the stability limit {:.3} ms is below the smallest compared step (0.5 ms): lower --kd or --kp", limit * 1e3).into());
+        return Err(format!(
+            "the stability limit {:.3} ms is below the smallest compared step (0.5 ms): lower --kd or --kp",
+            limit * 1e3
+        )
+        .into());
     }
     for (i, h) in steps.iter().enumerate() {
         for (j, sc) in [&cold, &hot].into_iter().enumerate() {
@@ -395,7 +414,8 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
     // first order: e ≈ c·h; c from the smallest step (the cleanest asymptotic value), then checked
     let c = accuracy.iter().filter(|e| e.step_s == steps[0]).map(|e| e.relative_error / e.step_s).fold(0.0, f64::max);
     // on the reference's sample grid, below the stability limit
-    let mut h1 = if c > 0.0 { ((0.01 / c).min(0.999 * limit) / ref_dt).floor() * ref_dt } else { steps[steps.len() - 1] };
+    let mut h1 =
+        if c > 0.0 { ((0.01 / c).min(0.999 * limit) / ref_dt).floor() * ref_dt } else { steps[steps.len() - 1] };
     let mut one_percent_check = Vec::new();
     while h1 >= ref_dt {
         one_percent_check.clear();
@@ -439,12 +459,13 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
         reference_steps,
         real_time_factor,
     };
-    crate::output::replace_folder(&args.out, |dir| write_report(dir, &cfg, &report, &traces, &refs).map_err(std::io::Error::other))?;
+    crate::output::replace_folder(&args.out, |dir| {
+        write_report(dir, &cfg, &report, &traces, &refs).map_err(std::io::Error::other)
+    })?;
     println!("{}", summary(&report));
     println!("report: {}", args.out.join("report.md").display());
     Ok(())
 }
-
 
 fn ms(v: Option<f64>) -> String {
     v.map_or("none".into(), |v| format!("{:.2} ms", v * 1e3))
@@ -463,7 +484,13 @@ pub fn summary(r: &ArmReport) -> String {
         r.step_s * 1e3
     );
     for e in &r.accuracy {
-        s += &format!("  h = {:.1} ms {:4}: tip error {:.3} mm = {:.3} % of the motion\n", e.step_s * 1e3, e.scenario, e.tip_error_m * 1e3, 100.0 * e.relative_error);
+        s += &format!(
+            "  h = {:.1} ms {:4}: tip error {:.3} mm = {:.3} % of the motion\n",
+            e.step_s * 1e3,
+            e.scenario,
+            e.tip_error_m * 1e3,
+            100.0 * e.relative_error
+        );
     }
     s += &format!("error < 1 % for h ≤ {:.1} ms\n", r.step_for_one_percent_s * 1e3);
     for t in &r.tasks {
@@ -523,11 +550,26 @@ fn write_report(dir: &Path, cfg: &ArmConfig, r: &ArmReport, traces: &[Trace], re
         "t (s)",
         "x (m)",
         &[
-            Series { name: "planned", points: ts(&traces[0], &|k| cfg.tip(cfg.plan(traces[0].t[k]).0)[0]), color: GREY_, markers: false },
-            Series { name: "wall", points: vec![(0.0, cfg.wall_x), (cfg.duration, cfg.wall_x)], color: GREEN_, markers: false },
+            Series {
+                name: "planned",
+                points: ts(&traces[0], &|k| cfg.tip(cfg.plan(traces[0].t[k]).0)[0]),
+                color: GREY_,
+                markers: false,
+            },
+            Series {
+                name: "wall",
+                points: vec![(0.0, cfg.wall_x), (cfg.duration, cfg.wall_x)],
+                color: GREEN_,
+                markers: false,
+            },
             Series { name: "cold", points: ts(&traces[0], &|k| traces[0].tip[k][0]), color: BLUE_, markers: false },
             Series { name: "heated", points: ts(&traces[1], &|k| traces[1].tip[k][0]), color: RED_, markers: false },
-            Series { name: "monolithic reference (cold, heated)", points: reference_points(&refs[0]), color: GREY_, markers: true },
+            Series {
+                name: "monolithic reference (cold, heated)",
+                points: reference_points(&refs[0]),
+                color: GREY_,
+                markers: true,
+            },
             Series { name: "", points: reference_points(&refs[1]), color: GREY_, markers: true },
         ],
         false,
@@ -538,8 +580,18 @@ fn write_report(dir: &Path, cfg: &ArmConfig, r: &ArmReport, traces: &[Trace], re
         "t (s)",
         "force (N)",
         &[
-            Series { name: "cold", points: ts(&traces[0], &|k| traces[0].contact_force[k]), color: BLUE_, markers: false },
-            Series { name: "heated", points: ts(&traces[1], &|k| traces[1].contact_force[k]), color: RED_, markers: false },
+            Series {
+                name: "cold",
+                points: ts(&traces[0], &|k| traces[0].contact_force[k]),
+                color: BLUE_,
+                markers: false,
+            },
+            Series {
+                name: "heated",
+                points: ts(&traces[1], &|k| traces[1].contact_force[k]),
+                color: RED_,
+                markers: false,
+            },
         ],
         false,
     )?;
@@ -549,14 +601,40 @@ fn write_report(dir: &Path, cfg: &ArmConfig, r: &ArmReport, traces: &[Trace], re
         "t (s)",
         "torque (N·m)",
         &[
-            Series { name: "shoulder, cold", points: ts(&traces[0], &|k| traces[0].transmitted_torque[k][0]), color: BLUE_, markers: false },
-            Series { name: "elbow, cold", points: ts(&traces[0], &|k| traces[0].transmitted_torque[k][1]), color: PURPLE_, markers: false },
-            Series { name: "shoulder, heated", points: ts(&traces[1], &|k| traces[1].transmitted_torque[k][0]), color: RED_, markers: false },
-            Series { name: "elbow, heated", points: ts(&traces[1], &|k| traces[1].transmitted_torque[k][1]), color: ORANGE_, markers: false },
+            Series {
+                name: "shoulder, cold",
+                points: ts(&traces[0], &|k| traces[0].transmitted_torque[k][0]),
+                color: BLUE_,
+                markers: false,
+            },
+            Series {
+                name: "elbow, cold",
+                points: ts(&traces[0], &|k| traces[0].transmitted_torque[k][1]),
+                color: PURPLE_,
+                markers: false,
+            },
+            Series {
+                name: "shoulder, heated",
+                points: ts(&traces[1], &|k| traces[1].transmitted_torque[k][0]),
+                color: RED_,
+                markers: false,
+            },
+            Series {
+                name: "elbow, heated",
+                points: ts(&traces[1], &|k| traces[1].transmitted_torque[k][1]),
+                color: ORANGE_,
+                markers: false,
+            },
         ],
         false,
     )?;
-    let err = |sc: &str| r.accuracy.iter().filter(|e| e.scenario == sc).map(|e| ((e.step_s * 1e3).log10(), (100.0 * e.relative_error).log10())).collect::<Vec<_>>();
+    let err = |sc: &str| {
+        r.accuracy
+            .iter()
+            .filter(|e| e.scenario == sc)
+            .map(|e| ((e.step_s * 1e3).log10(), (100.0 * e.relative_error).log10()))
+            .collect::<Vec<_>>()
+    };
     let hs: Vec<f64> = r.accuracy.iter().map(|e| (e.step_s * 1e3).log10()).collect();
     let (hlo, hhi) = hs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
     chart(
@@ -655,7 +733,11 @@ fn markdown(cfg: &ArmConfig, r: &ArmReport) -> String {
         ms(st.estimates_cold.motor_proportional),
         ms(st.estimates_hot.motor_proportional)
     );
-    m += &format!("| wall spring–damper held, min(2d/k, 2m/d) | {} | {} |\n\n", ms(st.estimates_cold.contact), ms(st.estimates_hot.contact));
+    m += &format!(
+        "| wall spring–damper held, min(2d/k, 2m/d) | {} | {} |\n\n",
+        ms(st.estimates_cold.contact),
+        ms(st.estimates_hot.contact)
+    );
     m += &format!(
         "Check through the FMU (nonlinear, limiting scenario, run 3 s past the move): at {} the speed amplitude grows by ×{:.3e} \
          ({}); at {} by ×{:.3e} ({}).\n\n",
@@ -705,8 +787,12 @@ fn markdown(cfg: &ArmConfig, r: &ArmReport) -> String {
     m += &row("final pressing force (N)", &|t| format!("{:.1}", t.final_contact_force_n));
     m += &row("rebounds off the wall", &|t| format!("{}", t.rebounds));
     m += &row("settling after contact (tip within 1 mm)", &|t| secs(t.settling_time_s));
-    m += &row("peak transmitted torque shoulder / elbow (N·m)", &|t| format!("{:.2} / {:.2}", t.peak_transmitted_torque_nm[0], t.peak_transmitted_torque_nm[1]));
-    m += &row("peak motor torque shoulder / elbow (N·m)", &|t| format!("{:.2} / {:.2}", t.peak_motor_torque_nm[0], t.peak_motor_torque_nm[1]));
+    m += &row("peak transmitted torque shoulder / elbow (N·m)", &|t| {
+        format!("{:.2} / {:.2}", t.peak_transmitted_torque_nm[0], t.peak_transmitted_torque_nm[1])
+    });
+    m += &row("peak motor torque shoulder / elbow (N·m)", &|t| {
+        format!("{:.2} / {:.2}", t.peak_motor_torque_nm[0], t.peak_motor_torque_nm[1])
+    });
     m += "\nPlots: `tip_path.svg`, `tip_x.svg`, `contact_force.svg`, `joint_torques.svg`, `coupling_error.svg`.\n\n";
     let sw = &r.switching;
     m += "## Switching the impedance\n\n";
@@ -717,7 +803,11 @@ fn markdown(cfg: &ArmConfig, r: &ArmReport) -> String {
     );
     m += "| | time |\n|---|---|\n";
     m += &format!("| heating: PCL reaches {} °C | {} |\n", sw.hot_temperature_c, secs(sw.heat_time_s));
-    m += &format!("| heating: K_eff 50 % / 90 % of the way to hot | {} / {} |\n", secs(sw.soften_50_s), secs(sw.soften_90_s));
+    m += &format!(
+        "| heating: K_eff 50 % / 90 % of the way to hot | {} / {} |\n",
+        secs(sw.soften_50_s),
+        secs(sw.soften_90_s)
+    );
     m += &format!("| peak housing (thermocouple) temperature while heating | {:.1} °C |\n", sw.peak_housing_c);
     m += &format!(
         "| passive cooling: K_eff back 50 % / 90 % of the way to cold | {} / {} (simulated {:.0} s) |\n\n",

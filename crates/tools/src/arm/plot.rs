@@ -36,7 +36,14 @@ fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
 }
 
 /// A chart of lines and/or markers. `equal_aspect` keeps x and y scales equal (tip paths).
-pub fn chart(path: &std::path::Path, title: &str, xlabel: &str, ylabel: &str, series: &[Series], equal_aspect: bool) -> Result<(), String> {
+pub fn chart(
+    path: &std::path::Path,
+    title: &str,
+    xlabel: &str,
+    ylabel: &str,
+    series: &[Series],
+    equal_aspect: bool,
+) -> Result<(), String> {
     let ((x0, x1), (mut y0, mut y1)) = bounds(series);
     let (w, h) = (900u32, 560u32);
     if equal_aspect {
@@ -62,15 +69,19 @@ pub fn chart(path: &std::path::Path, title: &str, xlabel: &str, ylabel: &str, se
     for s in series {
         let color = s.color;
         if s.markers {
-            let drawn = c.draw_series(s.points.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|x| e(&x))?;
+            let drawn =
+                c.draw_series(s.points.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|x| e(&x))?;
             if !s.name.is_empty() {
                 drawn.label(s.name).legend(move |(x, y)| Circle::new((x + 10, y), 3, color.filled()));
             }
         } else {
-            c.draw_series(LineSeries::new(s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()), color.stroke_width(2)))
-                .map_err(|x| e(&x))?
-                .label(s.name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            c.draw_series(LineSeries::new(
+                s.points.iter().copied().filter(|p| p.0.is_finite() && p.1.is_finite()),
+                color.stroke_width(2),
+            ))
+            .map_err(|x| e(&x))?
+            .label(s.name)
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
         }
     }
     c.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw().map_err(|x| e(&x))?;

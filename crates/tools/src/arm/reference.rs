@@ -43,7 +43,12 @@ fn axpy(y: &Y, terms: &[(f64, &Y)]) -> Y {
 
 /// Integrates from the rest state to `cfg.duration`, sampling every `dt_out` seconds.
 /// Returns the trace and the number of accepted steps.
-pub fn simulate(cfg: &ArmConfig, props: &[JointProps; 2], dt_out: f64, tolerance: f64) -> Result<(Trace, usize), String> {
+pub fn simulate(
+    cfg: &ArmConfig,
+    props: &[JointProps; 2],
+    dt_out: f64,
+    tolerance: f64,
+) -> Result<(Trace, usize), String> {
     cfg.validate()?;
     let (q0, m0) = cfg.initial_angles([props[0].stiffness, props[1].stiffness]);
     let mut y: Y = [m0[0], m0[1], 0.0, 0.0, q0[0], q0[1], 0.0, 0.0];
@@ -54,7 +59,8 @@ pub fn simulate(cfg: &ArmConfig, props: &[JointProps; 2], dt_out: f64, tolerance
         let tau = [0, 1].map(|i| props[i].stiffness * (th[i] - q[i]) + props[i].damping * (thd[i] - qd[i]));
         let stiffness = [props[0].stiffness, props[1].stiffness];
         let u = cfg.motor_torque(t, th, thd, stiffness);
-        let y = JointOutputs { q, qd, motor_angle: th, motor_speed: thd, tau, stiffness, pcl_temperature_c: [f64::NAN; 2] };
+        let y =
+            JointOutputs { q, qd, motor_angle: th, motor_speed: thd, tau, stiffness, pcl_temperature_c: [f64::NAN; 2] };
         trace.push(t, &y, u);
     };
     record(&mut trace, 0.0, &y);
@@ -117,7 +123,8 @@ pub fn simulate(cfg: &ArmConfig, props: &[JointProps; 2], dt_out: f64, tolerance
             );
             let k7 = rhs(cfg, props, t + h, &y5);
             // error = 5th − 4th order solution
-            let e = [71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0];
+            let e =
+                [71.0 / 57600.0, 0.0, -71.0 / 16695.0, 71.0 / 1920.0, -17253.0 / 339200.0, 22.0 / 525.0, -1.0 / 40.0];
             let ks = [&k1, &k2, &k3, &k4, &k5, &k6, &k7];
             let mut err: f64 = 0.0;
             for i in 0..8 {

@@ -122,8 +122,15 @@ impl Trace {
     }
 }
 
-const OUTPUTS: [&str; 7] =
-    ["link_angle", "link_speed", "motor_angle", "motor_speed", "transmitted_torque", "effective_stiffness", "pcl_temperature"];
+const OUTPUTS: [&str; 7] = [
+    "link_angle",
+    "link_speed",
+    "motor_angle",
+    "motor_speed",
+    "transmitted_torque",
+    "effective_stiffness",
+    "pcl_temperature",
+];
 const INPUTS: [&str; 3] = ["motor_torque", "load_torque", "heater_power"];
 
 /// Ports of one joint in the master.

@@ -44,7 +44,12 @@ pub fn switching(
     let e = |e: thermovia_importer::HarnessError| e.to_string();
     let stiffness_at = |c: f64| -> Result<f64, String> {
         let mut p = fmu.instantiate(Some("probe")).map_err(e)?;
-        p.initialize(0.0, None, &[("initial_pcl_temperature", ZERO_C + c), ("initial_housing_temperature", ZERO_C + c)]).map_err(e)?;
+        p.initialize(
+            0.0,
+            None,
+            &[("initial_pcl_temperature", ZERO_C + c), ("initial_housing_temperature", ZERO_C + c)],
+        )
+        .map_err(e)?;
         p.get("effective_stiffness").map_err(e)
     };
     let mut r = SwitchResult {
@@ -56,7 +61,8 @@ pub fn switching(
     };
     let mut inst = fmu.instantiate(Some("switch")).map_err(e)?;
     inst.initialize(0.0, None, &[("max_internal_step", dt)]).map_err(e)?;
-    let [hp, tp, th, k] = ["heater_power", "pcl_temperature", "housing_temperature", "effective_stiffness"].map(|n| inst.handle(n));
+    let [hp, tp, th, k] =
+        ["heater_power", "pcl_temperature", "housing_temperature", "effective_stiffness"].map(|n| inst.handle(n));
     let (hp, tp, th, k) = (hp.map_err(e)?, tp.map_err(e)?, th.map_err(e)?, k.map_err(e)?);
     let (kc, kh) = (r.stiffness_cold, r.stiffness_hot);
     let softened = |kv: f64, frac: f64| kv <= kc - frac * (kc - kh);
@@ -70,7 +76,8 @@ pub fn switching(
         inst.step(dt).map_err(e)?;
         n += 1;
         let t = n as f64 * dt;
-        let (pcl, housing, kv) = (inst.get_handle(tp).map_err(e)?, inst.get_handle(th).map_err(e)?, inst.get_handle(k).map_err(e)?);
+        let (pcl, housing, kv) =
+            (inst.get_handle(tp).map_err(e)?, inst.get_handle(th).map_err(e)?, inst.get_handle(k).map_err(e)?);
         if n.is_multiple_of(sample_every) {
             r.samples.push([t, pcl - ZERO_C, housing - ZERO_C, kv]);
         }

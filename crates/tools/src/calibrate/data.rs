@@ -58,7 +58,12 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
         }
     }
     if out.is_empty() {
-        return Err(DataError { file: PathBuf::from("(command line)"), line: None, column: None, message: "no run files given".into() });
+        return Err(DataError {
+            file: PathBuf::from("(command line)"),
+            line: None,
+            column: None,
+            message: "no run files given".into(),
+        });
     }
     Ok(out)
 }
@@ -87,12 +92,17 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
     let temperature_c = if has_temperature_column {
         std::mem::take(&mut cols[3])
     } else if let Some(v) = meta.get("temperature_c") {
-        let t: f64 = v.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {
-            file_error(path, format!("metadata temperature_c={v:?} is not a number"))
-        })?;
+        let t: f64 = v
+            .parse()
+            .ok()
+            .filter(|t: &f64| t.is_finite())
+            .ok_or_else(|| file_error(path, format!("metadata temperature_c={v:?} is not a number")))?;
         vec![t; n]
     } else {
-        return Err(file_error(path, "the run has no temperature: neither a temperature_c column nor `# temperature_c=` metadata".into()));
+        return Err(file_error(
+            path,
+            "the run has no temperature: neither a temperature_c column nor `# temperature_c=` metadata".into(),
+        ));
     };
     let mut run = Run {
         file: path.to_path_buf(),
@@ -121,7 +131,10 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
         }
         None => {
             run.frequency_hz = dominant_frequency(&run.time, &run.motor).ok_or_else(|| {
-                file_error(path, "cannot measure the excitation frequency from the motor angle (declare `# frequency_hz=`)".into())
+                file_error(
+                    path,
+                    "cannot measure the excitation frequency from the motor angle (declare `# frequency_hz=`)".into(),
+                )
             })?
         }
     }
@@ -141,7 +154,8 @@ pub fn dominant_frequency(t: &[f64], x: &[f64]) -> Option<f64> {
     // the DFT magnitude, whose peak leaks toward the negative-frequency image on short records)
     let power_every = |f: f64, stride: usize| {
         let w = 2.0 * std::f64::consts::PI * f;
-        let (mut sc, mut ss, mut scc, mut sss, mut scs, mut syc, mut sys, mut m) = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let (mut sc, mut ss, mut scc, mut sss, mut scs, mut syc, mut sys, mut m) =
+            (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0);
         for i in (0..n).step_by(stride) {
             let (si, ci) = (w * t[i]).sin_cos();
             let y = x[i] - mean;

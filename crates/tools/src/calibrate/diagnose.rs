@@ -91,7 +91,11 @@ fn harmonics(t: &[f64], e: &[f64], w: f64, orders: &[usize], t0: f64, t1: f64) -
             1.0
         } else {
             let k = orders[(j - 1) / 2] as f64;
-            if (j - 1) % 2 == 0 { (k * w * tt).cos() } else { (k * w * tt).sin() }
+            if (j - 1) % 2 == 0 {
+                (k * w * tt).cos()
+            } else {
+                (k * w * tt).sin()
+            }
         }
     });
     let y = DVector::from_iterator(idx.len(), idx.iter().map(|&k| e[k]));
@@ -102,7 +106,8 @@ fn harmonics(t: &[f64], e: &[f64], w: f64, orders: &[usize], t0: f64, t1: f64) -
 
 pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     let mut offset = 0;
-    let (mut all_e, mut speed, mut sinl, mut cosl, mut dead, mut time) = (vec![], vec![], vec![], vec![], vec![], vec![]);
+    let (mut all_e, mut speed, mut sinl, mut cosl, mut dead, mut time) =
+        (vec![], vec![], vec![], vec![], vec![], vec![]);
     let mut runs = Vec::new();
     let mut noise_num = 0.0f64;
     let mut noise_den = 0.0f64;
@@ -166,11 +171,21 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
         let third = (t1 - t0) / 3.0;
         let rms_between = |a: f64, b: f64| {
             let v: Vec<f64> = (0..n).filter(|&k| t[k] >= a && t[k] < b).map(|k| e[k] * e[k]).collect();
-            if v.is_empty() { 0.0 } else { (v.iter().sum::<f64>() / v.len() as f64).sqrt() }
+            if v.is_empty() {
+                0.0
+            } else {
+                (v.iter().sum::<f64>() / v.len() as f64).sqrt()
+            }
         };
         runs.push(RunResidual {
             rmse: (e.iter().map(|x| x * x).sum::<f64>() / n as f64).sqrt(),
-            harmonics: [dc.abs(), hs[0].0.hypot(hs[0].1), hs[1].0.hypot(hs[1].1), hs[2].0.hypot(hs[2].1), hs[3].0.hypot(hs[3].1)],
+            harmonics: [
+                dc.abs(),
+                hs[0].0.hypot(hs[0].1),
+                hs[1].0.hypot(hs[1].1),
+                hs[2].0.hypot(hs[2].1),
+                hs[3].0.hypot(hs[3].1),
+            ],
             fundamental_in_phase: in_phase,
             fundamental_quadrature: quadrature,
             early_rms: rms_between(t0, t0 + third),
@@ -244,7 +259,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
         let mut best: Option<(f64, Vec<f64>)> = None;
         for (size, lam) in settings {
             let mut p0 = fit.p.clone();
-            p0.extend(std::iter::repeat(0.0).take(k));
+            p0.extend(std::iter::repeat_n(0.0, k));
             let probe_cols: Vec<usize> = if effect == Effect::FrequencyDependentModulus {
                 p0[base + 1] = lam.ln();
                 vec![base]
@@ -277,7 +292,13 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
                     }
                 }
             }
-            let m = DMatrix::from_fn(fit.n, base + probe_cols.len(), |i, j| if j < base { fit.jacobian[(i, j)] } else { s[(i, j - base)] });
+            let m = DMatrix::from_fn(fit.n, base + probe_cols.len(), |i, j| {
+                if j < base {
+                    fit.jacobian[(i, j)]
+                } else {
+                    s[(i, j - base)]
+                }
+            });
             let (sse_aug, beta) = projected(&m, &r);
             let mut start = p0[base..].to_vec();
             let mut physical = true;
@@ -288,7 +309,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
                 }
             }
             let gain = if physical { (sse_now - sse_aug).max(0.0) } else { 0.0 };
-            if best.as_ref().map_or(true, |b| gain > b.0) {
+            if best.as_ref().is_none_or(|b| gain > b.0) {
                 best = Some((gain, start));
             }
         }
@@ -309,7 +330,11 @@ pub fn thermocouple_varies(prob: &Problem) -> bool {
 
 fn mean(v: impl Iterator<Item = f64>) -> f64 {
     let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
-    if n == 0 { 0.0 } else { s / n as f64 }
+    if n == 0 {
+        0.0
+    } else {
+        s / n as f64
+    }
 }
 
 fn evidence_text(prob: &Problem, effect: Effect, sig: &Signatures, score: f64, dbic: f64, start: &[f64]) -> String {

@@ -55,7 +55,9 @@ impl Effect {
             Effect::Gravity => &[("a_nm", 0.1, None), ("b_nm", 0.1, None)],
             Effect::LinkDamping => &[("damping_nms", 0.02, Some(0.0))],
             Effect::ThermalLag => &[("time_constant_s", 0.5, Some(0.0))],
-            Effect::FrequencyDependentModulus => &[("stiffness_nm_per_rad", 0.5, Some(0.0)), ("ln_relaxation_time", 0.2, Some(-6.907755278982137))] /* ln 1 ms */,
+            Effect::FrequencyDependentModulus => {
+                &[("stiffness_nm_per_rad", 0.5, Some(0.0)), ("ln_relaxation_time", 0.2, Some(-6.907755278982137))]
+            } /* ln 1 ms */,
         }
     }
 
@@ -164,7 +166,12 @@ impl<'a> Problem<'a> {
         for (o, eff) in spec.offsets(self.n_groups) {
             eff.apply(&p[o..o + eff.params().len()], &mut e);
         }
-        RunModel { storage_scale: p[2 * g].exp(), loss_scale: p[2 * g + 1].exp(), effects: e, solver_tolerance: self.solver_tolerance }
+        RunModel {
+            storage_scale: p[2 * g].exp(),
+            loss_scale: p[2 * g + 1].exp(),
+            effects: e,
+            solver_tolerance: self.solver_tolerance,
+        }
     }
 
     /// Indices of the parameters run `r` depends on.
@@ -206,7 +213,15 @@ impl<'a> Problem<'a> {
             }
         }
         let res = self.sim.run_jobs(&self.inputs, &jobs);
-        let offsets: Vec<usize> = self.measured.iter().scan(0, |s, m| { let o = *s; *s += m.len(); Some(o) }).collect();
+        let offsets: Vec<usize> = self
+            .measured
+            .iter()
+            .scan(0, |s, m| {
+                let o = *s;
+                *s += m.len();
+                Some(o)
+            })
+            .collect();
         let mut jac = DMatrix::zeros(self.n_samples(), p.len());
         for ((r, j, h), out) in meta.into_iter().zip(res) {
             let out = out.ok()?;

@@ -168,7 +168,9 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
 pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
     if let Some(path) = &args.paper {
         let (origin, text) = match path {
-            Some(p) => (p.display().to_string(), std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?),
+            Some(p) => {
+                (p.display().to_string(), std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?)
+            }
             None => ("data/paper-reported.json (built in)".to_string(), paper::REPORTED_JSON.to_string()),
         };
         let source: serde_json::Value = serde_json::from_str(&text).map_err(|e| format!("{origin}: {e}"))?;

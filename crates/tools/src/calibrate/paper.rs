@@ -8,8 +8,8 @@
 
 use serde_json::{json, Value};
 
-use super::sim::{EffectValues, RunModel, SimInput, Simulator};
 use super::fit::Effect;
+use super::sim::{EffectValues, RunModel, SimInput, Simulator};
 
 /// The paper's reported numbers as the repository keeps them, the default of `calibrate --paper`.
 pub const REPORTED_JSON: &str = include_str!("../../../../data/paper-reported.json");
@@ -83,9 +83,16 @@ pub fn summarise(sim: &Simulator, effects: EffectValues, temps: &[f64], freqs: &
         let from = (CYCLES - 2.0) / f;
         let (am, pm) = fundamental(&inp.time, &inp.motor, w, from);
         let (al, pl) = fundamental(&inp.time, &y, w, from);
-        conditions.push(Condition { temperature_c: tc, frequency_hz: f, decay_rad: am - al, phase_deg: (pm - pl).to_degrees() });
+        conditions.push(Condition {
+            temperature_c: tc,
+            frequency_hz: f,
+            decay_rad: am - al,
+            phase_deg: (pm - pl).to_degrees(),
+        });
     }
-    let d = |t: f64, f: f64| conditions.iter().find(|c| c.temperature_c == t && c.frequency_hz == f).map(|c| c.decay_rad).unwrap_or(f64::NAN);
+    let d = |t: f64, f: f64| {
+        conditions.iter().find(|c| c.temperature_c == t && c.frequency_hz == f).map(|c| c.decay_rad).unwrap_or(f64::NAN)
+    };
     let ratio = |f: f64| if d(22.0, f) > 0.0 { d(60.0, f) / d(22.0, f) } else { f64::NAN };
     let (r05, r1) = (ratio(0.5), ratio(1.0));
     let max_abs_phase_deg = conditions.iter().map(|c| c.phase_deg.abs()).fold(0.0, f64::max);
@@ -169,16 +176,21 @@ fn scan(sim: &Simulator, temps: &[f64], freqs: &[f64], target: f64) -> Result<Sc
         let Some((mut a, mut b)) = found else {
             // the scanned value whose ratio comes nearest the target (in log)
             let miss = |r: f64| (r / target).ln().abs();
-            let top = scanned.iter().filter(|x| x.2 && x.1 > 0.0).cloned().fold(None, |m: Option<(f64, f64, bool)>, x| match m {
-                Some(y) if miss(y.1) <= miss(x.1) => Some(y),
-                _ => Some(x),
-            });
+            let top = scanned.iter().filter(|x| x.2 && x.1 > 0.0).cloned().fold(
+                None,
+                |m: Option<(f64, f64, bool)>, x| match m {
+                    Some(y) if miss(y.1) <= miss(x.1) => Some(y),
+                    _ => Some(x),
+                },
+            );
             let why = match top {
-                Some((v, r, _)) => format!("no value in [{lo}, {hi}] reaches D60/D22 = {target} at 0.5 Hz; closest {r:.2} at {pname} = {v:.3}"),
+                Some((v, r, _)) => format!(
+                    "no value in [{lo}, {hi}] reaches D60/D22 = {target} at 0.5 Hz; closest {r:.2} at {pname} = {v:.3}"
+                ),
                 None => format!("no value in [{lo}, {hi}] gives a positive Decay at every condition"),
             };
             if let Some((v, r, _)) = top {
-                if closest.as_ref().map_or(true, |c: &(Effect, f64, f64)| miss(r) < miss(c.2)) {
+                if closest.as_ref().is_none_or(|c: &(Effect, f64, f64)| miss(r) < miss(c.2)) {
                     closest = Some((effect, v, r));
                 }
             }
@@ -189,7 +201,11 @@ fn scan(sim: &Simulator, temps: &[f64], freqs: &[f64], target: f64) -> Result<Sc
         for _ in 0..14 {
             let m = (a * b).sqrt();
             let em = (summarise(sim, with(effect, m), temps, freqs)?.ratio_half_hz / target).ln();
-            if em.signum() == ea.signum() { a = m } else { b = m }
+            if em.signum() == ea.signum() {
+                a = m
+            } else {
+                b = m
+            }
         }
         let v = (a * b).sqrt();
         let s = summarise(sim, with(effect, v), temps, freqs)?;
@@ -198,7 +214,7 @@ fn scan(sim: &Simulator, temps: &[f64], freqs: &[f64], target: f64) -> Result<Sc
             "why": format!("D60/D22 = {:.2} at 0.5 Hz, {:.2} at 1 Hz ({}), max |phase| {:.1}° ({})",
                 s.ratio_half_hz, s.ratio_one_hz, if s.less_pronounced_at_1hz { "less pronounced at 1 Hz, as reported" } else { "NOT less pronounced at 1 Hz" },
                 s.max_abs_phase_deg, if s.minimal_phase { "minimal" } else { "not minimal" })}));
-        if explains && best.as_ref().map_or(true, |bst| s.max_abs_phase_deg < bst.2.max_abs_phase_deg) {
+        if explains && best.as_ref().is_none_or(|bst| s.max_abs_phase_deg < bst.2.max_abs_phase_deg) {
             best = Some((effect, v, s));
         }
     }
@@ -213,7 +229,8 @@ fn transmission_stiffness(sim: &Simulator, t_c: f64) -> Result<f64, String> {
     let mut inst = sim.fmu.instantiate(None).map_err(e)?;
     let t_k = t_c + crate::sweep::rig::ZERO_CELSIUS;
     inst.initialize(0.0, None, &[("initial_pcl_temperature", t_k), ("initial_housing_temperature", t_k)]).map_err(e)?;
-    Ok(inst.get("spring_bank_stiffness").map_err(e)? + inst.get("storage_modulus").map_err(e)? * inst.get("modulus_to_torsion").map_err(e)?)
+    Ok(inst.get("spring_bank_stiffness").map_err(e)?
+        + inst.get("storage_modulus").map_err(e)? * inst.get("modulus_to_torsion").map_err(e)?)
 }
 
 pub fn run(sim: &Simulator, source: &Value) -> Result<(Value, String), String> {
@@ -255,9 +272,16 @@ pub fn run(sim: &Simulator, source: &Value) -> Result<(Value, String), String> {
     md += &format!("Motor amplitude {AMPLITUDE} rad (assumed: the paper's is lost), steady cycles, table moduli. Target: D(60 °C)/D(22 °C) = {target} at 0.5 Hz, smaller at 1 Hz, |phase| ≤ {MINIMAL_PHASE_DEG}°.\n\n");
     md += "| model | D22 0.5 Hz (mrad) | D60 0.5 Hz (mrad) | ratio 0.5 Hz | ratio 1 Hz | max abs phase (°) | ln(ratio/5) |\n|---|---|---|---|---|---|---|\n";
     let line = |name: &str, s: &Summary| {
-        let d = |t: f64, f: f64| s.conditions.iter().find(|c| c.temperature_c == t && c.frequency_hz == f).map(|c| c.decay_rad * 1e3).unwrap_or(f64::NAN);
+        let d = |t: f64, f: f64| {
+            s.conditions
+                .iter()
+                .find(|c| c.temperature_c == t && c.frequency_hz == f)
+                .map(|c| c.decay_rad * 1e3)
+                .unwrap_or(f64::NAN)
+        };
         // A ratio of Decays is only defined for positive Decays: the nominal model has none.
-        let num = |x: f64, digits: usize| if x.is_finite() { format!("{x:.digits$}") } else { "— (Decay < 0)".to_string() };
+        let num =
+            |x: f64, digits: usize| if x.is_finite() { format!("{x:.digits$}") } else { "— (Decay < 0)".to_string() };
         format!(
             "| {name} | {:+.2} | {:+.2} | {} | {} | {:.2} | {} |\n",
             d(22.0, 0.5),
@@ -278,11 +302,21 @@ pub fn run(sim: &Simulator, source: &Value) -> Result<(Value, String), String> {
     md += &line(&format!("+ gravity, paper's load m g d = {paper_mgl:.3} N·m"), &paper_gravity);
     md += "\n| effect | explains the summary? | evidence |\n|---|---|---|\n";
     for r in &rows {
-        md += &format!("| {} | {} | {} |\n", r["effect"].as_str().unwrap_or(""), r["explains"], r["why"].as_str().unwrap_or(""));
+        md += &format!(
+            "| {} | {} | {} |\n",
+            r["effect"].as_str().unwrap_or(""),
+            r["explains"],
+            r["why"].as_str().unwrap_or("")
+        );
     }
     md += &format!("\nThe paper's other figure, a 30 % increase (D60/D22 = {alt_target}):\n\n| effect | explains it? | evidence |\n|---|---|---|\n");
     for r in &alt_rows {
-        md += &format!("| {} | {} | {} |\n", r["effect"].as_str().unwrap_or(""), r["explains"], r["why"].as_str().unwrap_or(""));
+        md += &format!(
+            "| {} | {} | {} |\n",
+            r["effect"].as_str().unwrap_or(""),
+            r["explains"],
+            r["why"].as_str().unwrap_or("")
+        );
     }
     md += &format!(
         "\nTransmission stiffness K(22 °C)/K(60 °C) = {stiffness_ratio:.2} with the table's moduli and the 6.86 N·m/rad springs: \

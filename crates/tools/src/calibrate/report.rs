@@ -27,7 +27,9 @@ pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
 
 /// (name, value, standard error) of an effect's parameters in the SI units of interfaces.md.
 pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f64)> {
-    let (o, _) = fit.spec.offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2)
+    let (o, _) = fit
+        .spec
+        .offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2)
         .into_iter()
         .find(|(_, e)| *e == effect)
         .expect("effect in the fit");
@@ -164,16 +166,28 @@ fn fmt_params(fit: &Fit, e: Effect) -> String {
 pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     let m = |k: &str, f: &str| j[k][f].as_f64().unwrap_or(f64::NAN);
     let mut s = String::from("# Calibration report\n\n");
-    s += &format!("{} runs, {} samples. Noise floor estimated from the data (second differences): {:.3e} rad.\n\n", j["runs"].as_array().map_or(0, |a| a.len()), o.baseline.n, j["noise_floor_rad"].as_f64().unwrap_or(0.0));
+    s += &format!(
+        "{} runs, {} samples. Noise floor estimated from the data (second differences): {:.3e} rad.\n\n",
+        j["runs"].as_array().map_or(0, |a| a.len()),
+        o.baseline.n,
+        j["noise_floor_rad"].as_f64().unwrap_or(0.0)
+    );
     s += "| model | RMSE (rad) | NRMSE | fit % | BIC |\n|---|---|---|---|---|\n";
     for k in ["baseline", "final"] {
-        s += &format!("| {k} | {:.3e} | {:.4} | {:.2} | {:.0} |\n", m(k, "rmse_rad"), m(k, "nrmse"), m(k, "fit_percent"), m(k, "bic"));
+        s += &format!(
+            "| {k} | {:.3e} | {:.4} | {:.2} | {:.0} |\n",
+            m(k, "rmse_rad"),
+            m(k, "nrmse"),
+            m(k, "fit_percent"),
+            m(k, "bic")
+        );
     }
     s += "\n## Chain of evidence\n\n";
     for (i, r) in o.rounds.iter().enumerate() {
         s += &format!("### Round {} (residual structure {:.1}× white noise)\n\n| effect | score | predicted ΔBIC | evidence |\n|---|---|---|---|\n", i + 1, r.signatures.structure_ratio);
         for c in &r.candidates {
-            s += &format!("| {} | {:.3} | {:+.0} | {} |\n", c.effect.name(), c.score, c.predicted_delta_bic, c.evidence);
+            s +=
+                &format!("| {} | {:.3} | {:+.0} | {} |\n", c.effect.name(), c.score, c.predicted_delta_bic, c.evidence);
         }
         for a in &r.attempts {
             s += &format!(
@@ -219,7 +233,11 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
             );
         }
     }
-    s += &format!("\n## Residual\n\n{}\n\nunexplained: **{}**\n\n", remaining_structure(&o.final_signatures), o.unexplained);
+    s += &format!(
+        "\n## Residual\n\n{}\n\nunexplained: **{}**\n\n",
+        remaining_structure(&o.final_signatures),
+        o.unexplained
+    );
     s += "Plots: `plots/fit_*.svg` (measured vs model before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
     s
 }
@@ -239,7 +257,12 @@ fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
     }
 }
 
-fn line_plot(title: &str, ylabel: &str, t: &[f64], series: &[(&str, &[f64], RGBColor)]) -> Result<String, Box<dyn std::error::Error>> {
+fn line_plot(
+    title: &str,
+    ylabel: &str,
+    t: &[f64],
+    series: &[(&str, &[f64], RGBColor)],
+) -> Result<String, Box<dyn std::error::Error>> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
@@ -284,7 +307,7 @@ pub fn amplitude_spectrum(t: &[f64], e: &[f64], freqs: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<Vec<(String, Vec<u8>)>, Box<dyn std::error::Error>> {
+pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output::Files, Box<dyn std::error::Error>> {
     let mut files = Vec::new();
     let mut offset = 0;
     let blue = RGBColor(31, 119, 180);
@@ -303,10 +326,19 @@ pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<Vec<(String, V
             &format!("{}: measured link angle and the model before/after", run.name()),
             "link angle (rad)",
             &run.time,
-            &[("measured", &prob.measured[r], RGBColor(0, 0, 0)), ("baseline", &o.baseline.outputs[r], orange), ("final", &o.final_fit.outputs[r], blue)],
+            &[
+                ("measured", &prob.measured[r], RGBColor(0, 0, 0)),
+                ("baseline", &o.baseline.outputs[r], orange),
+                ("final", &o.final_fit.outputs[r], blue),
+            ],
         )?;
         files.push((format!("plots/fit_{stem}.svg"), svg.into_bytes()));
-        let svg = line_plot(&format!("{}: residual before and after", run.name()), "measured − model (rad)", &run.time, &[("baseline", &e0, orange), ("final", &e1, blue)])?;
+        let svg = line_plot(
+            &format!("{}: residual before and after", run.name()),
+            "measured − model (rad)",
+            &run.time,
+            &[("baseline", &e0, orange), ("final", &e1, blue)],
+        )?;
         files.push((format!("plots/residual_{stem}.svg"), svg.into_bytes()));
         for (acc, e) in [(&mut spec_before, &e0), (&mut spec_after, &e1)] {
             for (a, v) in acc.iter_mut().zip(amplitude_spectrum(&run.time, e, &freqs)) {

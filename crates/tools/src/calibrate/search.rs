@@ -68,7 +68,11 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
             // softer PCL): also try the table's moduli as the start and keep the better one.
             let mut p_table = p.clone();
             p_table[..2 * prob.n_groups].iter_mut().for_each(|x| *x = 0.0);
-            let cost = |q: &[f64]| prob.outputs(&spec, q).map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>()).unwrap_or(f64::INFINITY);
+            let cost = |q: &[f64]| {
+                prob.outputs(&spec, q)
+                    .map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>())
+                    .unwrap_or(f64::INFINITY)
+            };
             if cost(&p_table) < cost(&p) {
                 p = p_table;
             }
@@ -84,8 +88,15 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
             let excess = |x: f64| (x - 1.0).max(0.0);
             let keep = refit.bic() < current.bic() - BIC_MARGIN
                 && excess(refit_sig.structure_ratio) <= (1.0 - STRUCTURE_DROP) * excess(sig.structure_ratio);
-            round.attempts.push((c.effect, current.bic(), refit.bic(), sig.structure_ratio, refit_sig.structure_ratio, keep));
-            if keep && accepted.as_ref().map_or(true, |a| refit.bic() < a.0.bic()) {
+            round.attempts.push((
+                c.effect,
+                current.bic(),
+                refit.bic(),
+                sig.structure_ratio,
+                refit_sig.structure_ratio,
+                keep,
+            ));
+            if keep && accepted.as_ref().is_none_or(|a| refit.bic() < a.0.bic()) {
                 accepted = Some((refit, refit_sig));
             }
         }
@@ -139,5 +150,13 @@ pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
         }
     }
     let unexplained = !sig.white();
-    Ok(Outcome { baseline, baseline_signatures, final_fit: current, final_signatures: sig, rounds, pruned, unexplained })
+    Ok(Outcome {
+        baseline,
+        baseline_signatures,
+        final_fit: current,
+        final_signatures: sig,
+        rounds,
+        pruned,
+        unexplained,
+    })
 }

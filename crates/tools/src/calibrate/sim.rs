@@ -139,6 +139,9 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
     Ok(out)
 }
 
+/// One simulated link-angle trace, or why the simulation failed.
+pub type JobResult = Result<Vec<f64>, String>;
+
 /// A pool of FMU instances for simulating many (run, model) jobs in parallel.
 pub struct Simulator {
     pub fmu: Fmu,
@@ -159,9 +162,9 @@ impl Simulator {
 
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
     /// absurd trial parameter) is returned as an error for that job only.
-    pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<Result<Vec<f64>, String>> {
+    pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<JobResult> {
         let next = AtomicUsize::new(0);
-        let results: Vec<Mutex<Option<Result<Vec<f64>, String>>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+        let results: Vec<Mutex<Option<JobResult>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
         let workers = self.instances.len().min(jobs.len()).max(1);
         std::thread::scope(|s| {
             for w in 0..workers {

@@ -191,10 +191,8 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
             let time: Vec<f64> = (0..n).map(|k| k as f64 / args.rate).collect();
             let w = 2.0 * std::f64::consts::PI * f;
             let motor: Vec<f64> = time.iter().map(|t| args.amplitude * (w * t).sin()).collect();
-            let temp_c: Vec<f64> = time
-                .iter()
-                .map(|t| temp - args.heating_k * (-3.0 * t / args.duration).exp())
-                .collect();
+            let temp_c: Vec<f64> =
+                time.iter().map(|t| temp - args.heating_k * (-3.0 * t / args.duration).exp()).collect();
             let input = SimInput {
                 housing_k: temp_c.iter().map(|t| t + 273.15).collect(),
                 time: time.clone(),

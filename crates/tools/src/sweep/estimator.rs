@@ -109,11 +109,9 @@ impl std::fmt::Display for EstimateError {
                 100.0 * limit,
                 conditioning.amplification
             ),
-            EstimateError::NotPhysical { estimate } => write!(
-                f,
-                "not physical: K_eff {:.3} N·m/rad, C_eff {:.3} N·m·s/rad",
-                estimate.k_eff, estimate.c_eff
-            ),
+            EstimateError::NotPhysical { estimate } => {
+                write!(f, "not physical: K_eff {:.3} N·m/rad, C_eff {:.3} N·m·s/rad", estimate.k_eff, estimate.c_eff)
+            }
             EstimateError::NoFixedPoint { reason } => write!(f, "no fixed point: {reason}"),
         }
     }
@@ -123,7 +121,13 @@ impl std::error::Error for EstimateError {}
 
 /// Closed form K* = J ω² H/(H − 1). `dh`: absolute uncertainty of H; `limit`: largest acceptable
 /// predicted relative error of E' or E''.
-pub fn closed_form(h: Complex, omega: f64, k: &Known, dh: f64, limit: f64) -> Result<(Estimate, Conditioning), EstimateError> {
+pub fn closed_form(
+    h: Complex,
+    omega: f64,
+    k: &Known,
+    dh: f64,
+    limit: f64,
+) -> Result<(Estimate, Conditioning), EstimateError> {
     let hm1 = h - Complex::new(1.0, 0.0);
     // Below 3 standard uncertainties the sign and size of H − 1 are noise.
     if !h.re.is_finite() || !h.im.is_finite() || hm1.norm() <= 3.0 * dh {
@@ -152,7 +156,14 @@ pub struct Iterated {
 /// of K is below `tol`. Its fixed point is K = J ω² M/(M − cos φ) (eliminate C), which exists
 /// with K > J ω² only when M > cos φ: a link amplitude below the motor's with little phase delay
 /// has no solution.
-pub fn paper_iterative(m: f64, phase_delay: f64, omega: f64, k: &Known, tol: f64, max_iter: usize) -> Result<Iterated, EstimateError> {
+pub fn paper_iterative(
+    m: f64,
+    phase_delay: f64,
+    omega: f64,
+    k: &Known,
+    tol: f64,
+    max_iter: usize,
+) -> Result<Iterated, EstimateError> {
     let jw2 = k.link_inertia * omega * omega;
     if m.is_nan() || phase_delay.is_nan() || m <= phase_delay.cos() {
         return Err(EstimateError::NoFixedPoint {

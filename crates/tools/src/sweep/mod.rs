@@ -13,17 +13,17 @@
 
 pub mod analysis;
 pub mod estimator;
-pub mod rig;
 pub mod plots;
 pub mod report;
+pub mod rig;
 
 use std::path::PathBuf;
 use std::time::Instant;
 
-use thermovia_importer::{Fmu, HarnessError};
 use analysis::Complex;
 use estimator::{Conditioning, Estimate, EstimateError, Iterated, Known};
 use rig::{HeaterLoop, MotorLoop, Trace, Vrs, WarmupResult, ZERO_CELSIUS};
+use thermovia_importer::{Fmu, HarnessError};
 
 /// Encoder resolution of the device: 2500 ppr, ×4 decoding [PAPER].
 pub const ENCODER_COUNT_RAD: f64 = 2.0 * std::f64::consts::PI / 10_000.0;
@@ -190,7 +190,8 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
         return Err("need at least one temperature and one frequency".into());
     }
     // Signs and ranges first, so a negative step is called negative, not "does not divide".
-    let positive = [("--step", a.step, "s"), ("--warmup-step", a.warmup_step, "s"), ("--heater-max-w", a.heater_max_w, "W")];
+    let positive =
+        [("--step", a.step, "s"), ("--warmup-step", a.warmup_step, "s"), ("--heater-max-w", a.heater_max_w, "W")];
     for (option, value, unit) in positive {
         if !(value > 0.0) || !value.is_finite() {
             return Err(format!("{option} {value}: must be a finite number > 0 {unit}"));
@@ -301,8 +302,22 @@ pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<Swee
                 let mut inst = fmu.instantiate(None)?;
                 inst.initialize(0.0, None, &[("max_internal_step", args.warmup_step)])?;
                 let vrs = Vrs::resolve(&inst)?;
-                let heater = HeaterLoop { target_k: top + ZERO_CELSIUS, kp: args.heater_kp, ki: args.heater_ki, p_max: p, integral: 0.0 };
-                heating.push(rig::heating_study(&mut inst, &vrs, heater, hold, args.reach_tolerance, args.warmup_step, 1800.0)?);
+                let heater = HeaterLoop {
+                    target_k: top + ZERO_CELSIUS,
+                    kp: args.heater_kp,
+                    ki: args.heater_ki,
+                    p_max: p,
+                    integral: 0.0,
+                };
+                heating.push(rig::heating_study(
+                    &mut inst,
+                    &vrs,
+                    heater,
+                    hold,
+                    args.reach_tolerance,
+                    args.warmup_step,
+                    1800.0,
+                )?);
             }
         }
         progress("heating study");
@@ -441,7 +456,14 @@ fn analyse(args: &SweepArgs, k: &Known, temp_c: f64, f: f64, motor: &MotorLoop, 
         paper_e_storage_error: paper.map(|p| rel(p.estimate.e_storage, model_e1)),
         paper_e_loss_error: paper.map(|p| rel(p.estimate.e_loss, model_e2)),
         link_non_sinusoidal: analysis::non_sinusoidal_fraction(t, trace.column(rig::O_LINK_ANGLE), omega, start, len),
-        transient_s: analysis::transient_end(t, trace.column(rig::O_LINK_ANGLE), omega, start, len, 1e-3 * motor.amplitude),
+        transient_s: analysis::transient_end(
+            t,
+            trace.column(rig::O_LINK_ANGLE),
+            omega,
+            start,
+            len,
+            1e-3 * motor.amplitude,
+        ),
         motor_tracking_error_rad: tracking,
         trace,
         window: (start, len),
@@ -450,11 +472,8 @@ fn analyse(args: &SweepArgs, k: &Known, temp_c: f64, f: f64, motor: &MotorLoop, 
 
 /// Decay normalised to the first temperature's Decay at the same frequency.
 fn normalize_decay(conditions: &mut [Condition], reference_c: f64) {
-    let refs: Vec<(f64, f64)> = conditions
-        .iter()
-        .filter(|c| c.temperature_c == reference_c)
-        .map(|c| (c.frequency_hz, c.decay_rad))
-        .collect();
+    let refs: Vec<(f64, f64)> =
+        conditions.iter().filter(|c| c.temperature_c == reference_c).map(|c| (c.frequency_hz, c.decay_rad)).collect();
     for c in conditions.iter_mut() {
         c.decay_normalized = refs.iter().find(|(f, _)| *f == c.frequency_hz).map(|(_, d)| c.decay_rad / d);
     }

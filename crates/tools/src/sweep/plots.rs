@@ -99,16 +99,25 @@ fn trajectories(r: &SweepResult, f: f64, path: &Path) -> R {
 
         let d: Vec<f64> = l.iter().zip(&m).map(|(a, b)| a - b).collect();
         let (d0, d1) = range(d[c.window.0..].iter().cloned());
-        let (d0, d1) = (d0.min(range(d.iter().cloned()).0.max(3.0 * d0 - 2.0 * d1)), d1.max(range(d.iter().cloned()).1.min(3.0 * d1 - 2.0 * d0)));
+        let (d0, d1) = (
+            d0.min(range(d.iter().cloned()).0.max(3.0 * d0 - 2.0 * d1)),
+            d1.max(range(d.iter().cloned()).1.min(3.0 * d1 - 2.0 * d0)),
+        );
         let mut ch = ChartBuilder::on(&rows[2 * i + 1])
-            .caption(format!("link − motor, Decay {:+.2} mrad, phase {:.3}°", c.decay_rad * 1e3, c.phase_deg), ("sans-serif", 15))
+            .caption(
+                format!("link − motor, Decay {:+.2} mrad, phase {:.3}°", c.decay_rad * 1e3, c.phase_deg),
+                ("sans-serif", 15),
+            )
             .margin(6)
             .x_label_area_size(28)
             .y_label_area_size(56)
             .build_cartesian_2d(0.0..t_end, d0..d1)?;
         ch.configure_mesh().x_desc("time (s)").y_desc("θl − θm (°)").light_line_style(WHITE).draw()?;
         ch.draw_series(std::iter::once(Rectangle::new([(t_win, d0), (t_end, d1)], RGBColor(235, 235, 235).filled())))?;
-        ch.draw_series(LineSeries::new(thin(t, &d, 3000).filter(|p| p.1 >= d0 && p.1 <= d1), PALETTE[4].stroke_width(1)))?;
+        ch.draw_series(LineSeries::new(
+            thin(t, &d, 3000).filter(|p| p.1 >= d0 && p.1 <= d1),
+            PALETTE[4].stroke_width(1),
+        ))?;
     }
     root.present()?;
     Ok(())
@@ -129,11 +138,22 @@ fn decay(r: &SweepResult, path: &Path) -> R {
         .build_cartesian_2d(x0..x1, y0..y1)?;
     ch.configure_mesh().x_desc("housing temperature (°C)").y_desc("Decay / Decay(first)").draw()?;
     for (i, &f) in r.args.frequencies.iter().enumerate() {
-        let pts: Vec<(f64, f64)> =
-            r.conditions.iter().filter(|c| c.frequency_hz == f).filter_map(|c| Some((c.temperature_c, c.decay_normalized?))).collect();
+        let pts: Vec<(f64, f64)> = r
+            .conditions
+            .iter()
+            .filter(|c| c.frequency_hz == f)
+            .filter_map(|c| Some((c.temperature_c, c.decay_normalized?)))
+            .collect();
         let col = PALETTE[i % PALETTE.len()];
         ch.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))?
-            .label(format!("model, {f} Hz (Decay sign: {})", if r.conditions.iter().any(|c| c.frequency_hz == f && c.decay_rad < 0.0) { "negative, overshoot" } else { "positive" }))
+            .label(format!(
+                "model, {f} Hz (Decay sign: {})",
+                if r.conditions.iter().any(|c| c.frequency_hz == f && c.decay_rad < 0.0) {
+                    "negative, overshoot"
+                } else {
+                    "positive"
+                }
+            ))
             .legend(legend(col));
         ch.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))?;
     }
@@ -141,7 +161,11 @@ fn decay(r: &SweepResult, path: &Path) -> R {
     ch.draw_series(std::iter::once(TriangleMarker::new(paper_pt, 8, BLACK.filled())))?
         .label("paper, 0.5 Hz: “nearly five times” (positive Decay)")
         .legend(|(x, y)| TriangleMarker::new((x + 9, y), 6, BLACK.filled()));
-    ch.configure_series_labels().position(SeriesLabelPosition::UpperLeft).background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    ch.configure_series_labels()
+        .position(SeriesLabelPosition::UpperLeft)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
     root.present()?;
     Ok(())
 }
@@ -154,7 +178,9 @@ fn moduli(r: &SweepResult, path: &Path) -> R {
     for (k, name) in ["E' (storage)", "E'' (loss)"].iter().enumerate() {
         let used = |c: &super::Condition| if k == 0 { c.model_e_storage_kpa } else { c.model_e_loss_kpa };
         let closed = |c: &super::Condition| if k == 0 { c.e_storage_kpa } else { c.e_loss_kpa };
-        let paper = |c: &super::Condition| c.paper_method.map(|p| if k == 0 { p.estimate.e_storage } else { p.estimate.e_loss } / 1e3);
+        let paper = |c: &super::Condition| {
+            c.paper_method.map(|p| if k == 0 { p.estimate.e_storage } else { p.estimate.e_loss } / 1e3)
+        };
         let all: Vec<f64> = r
             .conditions
             .iter()
@@ -178,14 +204,27 @@ fn moduli(r: &SweepResult, path: &Path) -> R {
             ch.draw_series(LineSeries::new(cs.iter().map(|c| (c.temperature_c, used(c))), col.stroke_width(2)))?
                 .label(format!("used by the FMU, {f} Hz runs"))
                 .legend(legend(col));
-            ch.draw_series(cs.iter().filter(|c| closed(c) > 0.0).map(|c| Circle::new((c.temperature_c, closed(c)), 5, col.stroke_width(2))))?
-                .label(format!("closed form, {f} Hz"))
-                .legend(move |(x, y)| Circle::new((x + 9, y), 4, col.stroke_width(2)));
-            ch.draw_series(cs.iter().filter_map(|c| Some((c.temperature_c, paper(c)?))).filter(|p| p.1 > 0.0).map(|p| Cross::new(p, 6, col.stroke_width(2))))?
-                .label(format!("paper Eq. 15–16, {f} Hz"))
-                .legend(move |(x, y)| Cross::new((x + 9, y), 5, col.stroke_width(2)));
+            ch.draw_series(
+                cs.iter()
+                    .filter(|c| closed(c) > 0.0)
+                    .map(|c| Circle::new((c.temperature_c, closed(c)), 5, col.stroke_width(2))),
+            )?
+            .label(format!("closed form, {f} Hz"))
+            .legend(move |(x, y)| Circle::new((x + 9, y), 4, col.stroke_width(2)));
+            ch.draw_series(
+                cs.iter()
+                    .filter_map(|c| Some((c.temperature_c, paper(c)?)))
+                    .filter(|p| p.1 > 0.0)
+                    .map(|p| Cross::new(p, 6, col.stroke_width(2))),
+            )?
+            .label(format!("paper Eq. 15–16, {f} Hz"))
+            .legend(move |(x, y)| Cross::new((x + 9, y), 5, col.stroke_width(2)));
         }
-        ch.configure_series_labels().position(SeriesLabelPosition::LowerLeft).background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
     }
     root.present()?;
     Ok(())
@@ -201,7 +240,10 @@ fn warmup(r: &SweepResult, path: &Path) -> R {
     });
     let (y0, y1) = range(temps);
     let mut ch = ChartBuilder::on(&top)
-        .caption("Warm-up: housing (thick: the thermocouple) and PCL (thin: the model's estimate, no sensor)", ("sans-serif", 16))
+        .caption(
+            "Warm-up: housing (thick: the thermocouple) and PCL (thin: the model's estimate, no sensor)",
+            ("sans-serif", 16),
+        )
         .margin(10)
         .x_label_area_size(32)
         .y_label_area_size(50)
@@ -218,7 +260,11 @@ fn warmup(r: &SweepResult, path: &Path) -> R {
             .label(format!("target {} °C: PCL", w.target_c))
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col.stroke_width(1)));
     }
-    ch.configure_series_labels().position(SeriesLabelPosition::LowerRight).background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+    ch.configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()?;
     let (p0, p1) = range(r.warmups.iter().flat_map(|(_, t)| t.heater_power.clone()).chain([0.0]));
     let mut ch = ChartBuilder::on(&bottom)
         .caption("Heater power", ("sans-serif", 16))

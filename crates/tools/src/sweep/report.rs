@@ -96,7 +96,13 @@ pub fn comparison(r: &SweepResult) -> Vec<Claim> {
                 "Decay {} mrad at {} °C: {}, {}",
                 decays.join(" / "),
                 temps.iter().map(|t| t.to_string()).collect::<Vec<_>>().join("/"),
-                if positive { "positive" } else if row.iter().all(|c| c.decay_rad < 0.0) { "negative (the link overshoots)" } else { "mixed sign" },
+                if positive {
+                    "positive"
+                } else if row.iter().all(|c| c.decay_rad < 0.0) {
+                    "negative (the link overshoots)"
+                } else {
+                    "mixed sign"
+                },
                 if increasing { "increasing" } else { "not increasing" }
             ),
             agrees: verdict(positive && increasing),
@@ -166,7 +172,11 @@ pub fn comparison(r: &SweepResult) -> Vec<Claim> {
                 continue;
             }
             let get = |h: &super::rig::HeatingResult| {
-                if pick == 0 { (h.housing_reached_s, h.housing_reached_energy_j) } else { (h.pcl_reached_s, h.pcl_reached_energy_j) }
+                if pick == 0 {
+                    (h.housing_reached_s, h.housing_reached_energy_j)
+                } else {
+                    (h.pcl_reached_s, h.pcl_reached_energy_j)
+                }
             };
             let parts: Vec<String> = rows
                 .iter()
@@ -192,7 +202,12 @@ pub fn comparison(r: &SweepResult) -> Vec<Claim> {
                 claim: format!("heating {:.0} → {:.0} °C: {what}, {mode}", r.ambient_c, rows[0].target_c),
                 paper: format!(
                     "{}–{} s at {}–{} W, {}–{} J",
-                    PAPER_HEATING_TIME_S.0, PAPER_HEATING_TIME_S.1, PAPER_HEATING_POWER_W.0, PAPER_HEATING_POWER_W.1, PAPER_HEATING_ENERGY_J.0, PAPER_HEATING_ENERGY_J.1
+                    PAPER_HEATING_TIME_S.0,
+                    PAPER_HEATING_TIME_S.1,
+                    PAPER_HEATING_POWER_W.0,
+                    PAPER_HEATING_POWER_W.1,
+                    PAPER_HEATING_ENERGY_J.0,
+                    PAPER_HEATING_ENERGY_J.1
                 ),
                 model: format!(
                     "{}{}",
@@ -259,7 +274,17 @@ pub fn markdown(r: &SweepResult) -> String {
     let _ = writeln!(s, "| claim | paper | model (nominal, untuned) | agrees |\n|---|---|---|---|");
     for c in comparison(r) {
         let cell = |t: &str| t.replace('|', "\\|");
-        let _ = writeln!(s, "| {} | {} | {} | {} |", cell(&c.claim), cell(&c.paper), cell(&c.model), match c.agrees { "no" => "**no**", v => v });
+        let _ = writeln!(
+            s,
+            "| {} | {} | {} | {} |",
+            cell(&c.claim),
+            cell(&c.paper),
+            cell(&c.model),
+            match c.agrees {
+                "no" => "**no**",
+                v => v,
+            }
+        );
     }
     let _ = writeln!(s);
     let _ = writeln!(s, "{}\n", findings(r));
@@ -290,7 +315,10 @@ pub fn markdown(r: &SweepResult) -> String {
     );
 
     let _ = writeln!(s, "## Frequency-response check\n");
-    let _ = writeln!(s, "Measured H = Θ e^(−iφ)/θ0 against K*/(K* − J_l ω²) at the values the FMU reports (K* = K_eff + iωC_eff).\n");
+    let _ = writeln!(
+        s,
+        "Measured H = Θ e^(−iφ)/θ0 against K*/(K* − J_l ω²) at the values the FMU reports (K* = K_eff + iωC_eff).\n"
+    );
     let _ = writeln!(s, "| T °C | f Hz | \\|H\\| measured | \\|H\\| analytic | rel. diff | phase measured ° | phase analytic ° | diff ° |\n|---|---|---|---|---|---|---|---|");
     for c in &r.conditions {
         let h = super::analysis::Complex::new(c.h_re, c.h_im);
@@ -335,7 +363,15 @@ pub fn markdown(r: &SweepResult) -> String {
             c.paper_e_loss_error.map_or("–".into(), |e| format!("{:+.0} %", 100.0 * e)),
         );
     }
-    let _ = writeln!(s, "\nEq. 15–16 status per condition: {}.\n", r.conditions.iter().map(|c| format!("{} °C {} Hz: {}", c.temperature_c, c.frequency_hz, c.paper_method_status)).collect::<Vec<_>>().join("; "));
+    let _ = writeln!(
+        s,
+        "\nEq. 15–16 status per condition: {}.\n",
+        r.conditions
+            .iter()
+            .map(|c| format!("{} °C {} Hz: {}", c.temperature_c, c.frequency_hz, c.paper_method_status))
+            .collect::<Vec<_>>()
+            .join("; ")
+    );
 
     let _ = writeln!(s, "## Conditioning\n");
     let _ = writeln!(
@@ -401,8 +437,12 @@ pub fn markdown(r: &SweepResult) -> String {
         let _ = writeln!(s);
     }
     let _ = writeln!(s, "## Files\n");
-    let _ = writeln!(s, "- `summary.json`: one record per condition (`conditions`), warm-ups, settings, this comparison.");
-    let _ = writeln!(s, "- `run_<T>C_<f>Hz.csv`, `warmup_<T>C.csv`: trajectories, time first, one column per variable (SI units, K).");
+    let _ =
+        writeln!(s, "- `summary.json`: one record per condition (`conditions`), warm-ups, settings, this comparison.");
+    let _ = writeln!(
+        s,
+        "- `run_<T>C_<f>Hz.csv`, `warmup_<T>C.csv`: trajectories, time first, one column per variable (SI units, K)."
+    );
     let _ = writeln!(s, "- `fig6_trajectories_<f>Hz.svg` (motor vs link, as the paper's Fig. 6), `fig7_decay_normalized.svg`, `fig4_moduli.svg`, `warmup.svg`.");
     s
 }
@@ -410,7 +450,9 @@ pub fn markdown(r: &SweepResult) -> String {
 /// Plain statements of where the model and the paper part, with numbers.
 fn findings(r: &SweepResult) -> String {
     let mut s = String::new();
-    if let (Some(a), Some(b)) = (find(r, r.args.temperatures[0], 0.5), find(r, *r.args.temperatures.last().unwrap(), 0.5)) {
+    if let (Some(a), Some(b)) =
+        (find(r, r.args.temperatures[0], 0.5), find(r, *r.args.temperatures.last().unwrap(), 0.5))
+    {
         if a.decay_rad < 0.0 || b.decay_rad < 0.0 {
             let _ = write!(
                 s,
