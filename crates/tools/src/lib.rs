@@ -12,6 +12,7 @@ use std::path::{Path, PathBuf};
 pub mod arm;
 pub mod calibrate;
 pub mod output;
+pub mod report;
 pub mod sweep;
 
 /// Default location of the packaged FMU: `<workspace>/target/fmu/ThermoVIA.fmu`, where

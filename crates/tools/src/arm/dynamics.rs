@@ -56,7 +56,7 @@ impl Default for ArmConfig {
             elbow_mass: 0.86,
             payload_mass: 0.30,
             hub_inertia: 1e-3,
-            gravity: 9.80665,
+            gravity: crate::report::STANDARD_GRAVITY,
             motor_inertia: 0.005,
             motor_damping: 0.01,
             excitation_frequency: 0.5,

@@ -6,7 +6,7 @@ use thermovia_importer::cosim::{Exchange, Master, Port};
 use thermovia_importer::Fmu;
 
 pub const ROOM_K: f64 = 295.15;
-pub const ZERO_C: f64 = 273.15;
+pub use crate::report::ZERO_CELSIUS;
 
 /// Thermal set-up of one run: each joint's PCL (and housing) temperature, held steady by a heater
 /// power that balances the passive loss (0 W at room temperature).
@@ -37,7 +37,7 @@ pub struct JointProps {
 
 /// FMU parameters of joint `i` at PCL temperature `temp_c`.
 pub fn joint_parameters(cfg: &ArmConfig, i: usize, temp_c: f64, initial: Option<(V2, V2)>) -> Vec<(&'static str, f64)> {
-    let t = ZERO_C + temp_c;
+    let t = ZERO_CELSIUS + temp_c;
     let mut p = vec![
         ("link_inertia", cfg.coupling_inertia()[i]),
         ("motor_inertia", cfg.motor_inertia),
@@ -65,7 +65,7 @@ pub fn probe(fmu: &Fmu, cfg: &ArmConfig, scenario: &Scenario) -> Result<[JointPr
         out[i] = JointProps {
             stiffness: inst.get("effective_stiffness").map_err(e)?,
             damping: inst.get("effective_damping").map_err(e)?,
-            holding_power: g * (ZERO_C + scenario.pcl_temperature_c[i] - ROOM_K),
+            holding_power: g * (ZERO_CELSIUS + scenario.pcl_temperature_c[i] - ROOM_K),
             coupling_inertia: ji[i],
         };
     }
@@ -165,7 +165,7 @@ impl JointOutputs {
             motor_speed: y(3),
             tau: y(4),
             stiffness: y(5),
-            pcl_temperature_c: [pcl[0] - ZERO_C, pcl[1] - ZERO_C],
+            pcl_temperature_c: [pcl[0] - ZERO_CELSIUS, pcl[1] - ZERO_CELSIUS],
         }
     }
 }

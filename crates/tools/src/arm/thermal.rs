@@ -4,7 +4,7 @@
 
 use thermovia_importer::Fmu;
 
-use super::sim::{ROOM_K, ZERO_C};
+use super::sim::{ROOM_K, ZERO_CELSIUS};
 
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SwitchResult {
@@ -47,7 +47,7 @@ pub fn switching(
         p.initialize(
             0.0,
             None,
-            &[("initial_pcl_temperature", ZERO_C + c), ("initial_housing_temperature", ZERO_C + c)],
+            &[("initial_pcl_temperature", ZERO_CELSIUS + c), ("initial_housing_temperature", ZERO_CELSIUS + c)],
         )
         .map_err(e)?;
         p.get("effective_stiffness").map_err(e)
@@ -55,7 +55,7 @@ pub fn switching(
     let mut r = SwitchResult {
         heater_power_w: heater_power,
         hot_temperature_c: hot_c,
-        stiffness_cold: stiffness_at(ROOM_K - ZERO_C)?,
+        stiffness_cold: stiffness_at(ROOM_K - ZERO_CELSIUS)?,
         stiffness_hot: stiffness_at(hot_c)?,
         ..Default::default()
     };
@@ -79,18 +79,18 @@ pub fn switching(
         let (pcl, housing, kv) =
             (inst.get_handle(tp).map_err(e)?, inst.get_handle(th).map_err(e)?, inst.get_handle(k).map_err(e)?);
         if n.is_multiple_of(sample_every) {
-            r.samples.push([t, pcl - ZERO_C, housing - ZERO_C, kv]);
+            r.samples.push([t, pcl - ZERO_CELSIUS, housing - ZERO_CELSIUS, kv]);
         }
         match off_at {
             None => {
-                r.peak_housing_c = r.peak_housing_c.max(housing - ZERO_C);
+                r.peak_housing_c = r.peak_housing_c.max(housing - ZERO_CELSIUS);
                 if r.soften_50_s.is_none() && softened(kv, 0.5) {
                     r.soften_50_s = Some(t);
                 }
                 if r.soften_90_s.is_none() && softened(kv, 0.9) {
                     r.soften_90_s = Some(t);
                 }
-                if pcl - ZERO_C >= hot_c {
+                if pcl - ZERO_CELSIUS >= hot_c {
                     r.heat_time_s = Some(t);
                     off_at = Some(t);
                     inst.set_handle(hp, 0.0).map_err(e)?;

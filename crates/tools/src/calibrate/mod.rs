@@ -120,7 +120,7 @@ pub fn sim_input(r: &data::Run, smoothing_half_width: usize) -> sim::SimInput {
     sim::SimInput {
         time: r.time.clone(),
         motor: savitzky_golay(&r.motor, smoothing_half_width),
-        housing_k: r.temperature_c.iter().map(|t| t + 273.15).collect(),
+        housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
         frequency_hz: r.frequency_hz,
         link_inertia: r.link_inertia,
         link0: r.link[0],

@@ -63,7 +63,7 @@ pub fn summarise(sim: &Simulator, effects: EffectValues, temps: &[f64], freqs: &
             let w = 2.0 * std::f64::consts::PI * f;
             inputs.push(SimInput {
                 motor: time.iter().map(|t| AMPLITUDE * (w * t).sin()).collect(),
-                housing_k: vec![tc + 273.15; n],
+                housing_k: vec![tc + crate::report::ZERO_CELSIUS; n],
                 time,
                 frequency_hz: f,
                 link_inertia: None,
@@ -227,7 +227,7 @@ fn scan(sim: &Simulator, temps: &[f64], freqs: &[f64], target: f64) -> Result<Sc
 fn transmission_stiffness(sim: &Simulator, t_c: f64) -> Result<f64, String> {
     let e = |e: thermovia_importer::HarnessError| e.to_string();
     let mut inst = sim.fmu.instantiate(None).map_err(e)?;
-    let t_k = t_c + crate::sweep::rig::ZERO_CELSIUS;
+    let t_k = t_c + crate::report::ZERO_CELSIUS;
     inst.initialize(0.0, None, &[("initial_pcl_temperature", t_k), ("initial_housing_temperature", t_k)]).map_err(e)?;
     Ok(inst.get("spring_bank_stiffness").map_err(e)?
         + inst.get("storage_modulus").map_err(e)? * inst.get("modulus_to_torsion").map_err(e)?)

@@ -7,6 +7,7 @@ use super::data::Run;
 use super::diagnose::Signatures;
 use super::fit::{Effect, Fit, Problem};
 use super::search::Outcome;
+use crate::report::plot::{range, thin};
 
 /// Error metrics of a fit over every sample used.
 pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
@@ -240,21 +241,6 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     );
     s += "Plots: `plots/fit_*.svg` (measured vs model before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
     s
-}
-
-fn thin(t: &[f64], y: &[f64], max: usize) -> Vec<(f64, f64)> {
-    let step = (t.len() / max).max(1);
-    (0..t.len()).step_by(step).map(|k| (t[k], y[k])).collect()
-}
-
-fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (lo, hi) = v.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| (a.min(x), b.max(x)));
-    if !(lo < hi) {
-        (lo - 1e-6, lo + 1e-6)
-    } else {
-        let pad = 0.05 * (hi - lo);
-        (lo - pad, hi + pad)
-    }
 }
 
 fn line_plot(

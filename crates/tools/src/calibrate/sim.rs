@@ -8,7 +8,7 @@ use std::sync::Mutex;
 use thermovia_importer::{Fmu, Handle, HarnessError, Instance};
 
 /// g, m/s² (the FMU uses the same standard gravity).
-pub const STANDARD_GRAVITY: f64 = 9.80665;
+pub use crate::report::STANDARD_GRAVITY;
 
 /// What drives one simulated run.
 #[derive(Clone, Debug)]

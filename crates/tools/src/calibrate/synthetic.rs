@@ -194,7 +194,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
             let temp_c: Vec<f64> =
                 time.iter().map(|t| temp - args.heating_k * (-3.0 * t / args.duration).exp()).collect();
             let input = SimInput {
-                housing_k: temp_c.iter().map(|t| t + 273.15).collect(),
+                housing_k: temp_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
                 time: time.clone(),
                 motor: motor.clone(),
                 frequency_hz: f,

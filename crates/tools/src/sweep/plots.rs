@@ -8,40 +8,9 @@ use plotters::prelude::*;
 
 use super::rig::{self, ZERO_CELSIUS};
 use super::SweepResult;
+use crate::report::plot::{legend, range, thin, PALETTE};
 
 type R = Result<(), Box<dyn Error>>;
-
-const PALETTE: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(214, 39, 40),
-    RGBColor(44, 160, 44),
-    RGBColor(255, 127, 14),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
-
-/// Every `k`-th point so a line has at most ~`max` points (SVG size).
-fn thin<'a>(x: &'a [f64], y: &'a [f64], max: usize) -> impl Iterator<Item = (f64, f64)> + 'a {
-    let k = (x.len() / max).max(1);
-    x.iter().zip(y).step_by(k).map(|(a, b)| (*a, *b))
-}
-
-fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for v in vals.filter(|v| v.is_finite()) {
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    if !lo.is_finite() {
-        return (0.0, 1.0);
-    }
-    let pad = ((hi - lo) * 0.08).max(1e-9 * hi.abs().max(1.0));
-    (lo - pad, hi + pad)
-}
-
-fn legend(color: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
-    move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
-}
 
 pub fn write_all(r: &SweepResult, dir: &Path) -> Result<usize, Box<dyn Error>> {
     let mut n = 0;

@@ -5,7 +5,7 @@
 
 use thermovia_importer::{HarnessError, Instance};
 
-pub const ZERO_CELSIUS: f64 = 273.15;
+pub use crate::report::ZERO_CELSIUS;
 
 /// Motor position loop: τ = J_m θr'' + B_m θr' + kp (θr − θm) + kd (θr' − θm').
 ///

@@ -1,5 +1,7 @@
-//! Small SVG line charts (plotters) for the arm report.
+//! SVG plots for every tool's report (plotters): one palette, one way to thin long traces and to
+//! pad axis ranges, one legend style, and a general line/marker chart.
 
+use plotters::element::PathElement;
 use plotters::prelude::*;
 
 pub struct Series<'a> {
@@ -16,6 +18,35 @@ pub const GREY_: RGBColor = RGBColor(120, 120, 120);
 pub const GREEN_: RGBColor = RGBColor(44, 160, 44);
 pub const ORANGE_: RGBColor = RGBColor(255, 127, 14);
 pub const PURPLE_: RGBColor = RGBColor(148, 103, 189);
+pub const BROWN_: RGBColor = RGBColor(140, 86, 75);
+
+/// Series colours in order (matplotlib's tab10, so plots look alike across tools).
+pub const PALETTE: [RGBColor; 6] = [BLUE_, RED_, GREEN_, ORANGE_, PURPLE_, BROWN_];
+
+/// Every `k`-th point so a line has at most ~`max` points (keeps SVG files small).
+pub fn thin<'a>(x: &'a [f64], y: &'a [f64], max: usize) -> impl Iterator<Item = (f64, f64)> + 'a {
+    let k = (x.len() / max).max(1);
+    x.iter().zip(y).step_by(k).map(|(a, b)| (*a, *b))
+}
+
+/// The finite values' range padded by 8 % (never empty; (0, 1) when nothing is finite).
+pub fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in vals.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+    }
+    if !lo.is_finite() {
+        return (0.0, 1.0);
+    }
+    let pad = ((hi - lo) * 0.08).max(1e-9 * hi.abs().max(1.0));
+    (lo - pad, hi + pad)
+}
+
+/// A legend entry: a short line in the series' colour.
+pub fn legend(color: RGBColor) -> impl Fn((i32, i32)) -> PathElement<(i32, i32)> {
+    move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2))
+}
 
 fn bounds(series: &[Series]) -> ((f64, f64), (f64, f64)) {
     let mut x = (f64::INFINITY, f64::NEG_INFINITY);
