@@ -182,15 +182,16 @@ impl thermovia_tools::output::Progress for Bar {
 
 fn main() {
     let cli = parse_command_line();
-    let result = match &cli.command {
-        Command::Sweep(a) => thermovia_tools::sweep::run(
-            a,
-            &Bar::new(a.quiet, "{spinner} sweep [{bar:30}] {pos}/{len} {msg} ({elapsed})"),
-        ),
+    let result: Result<(), Box<dyn std::error::Error>> = match &cli.command {
+        Command::Sweep(a) => {
+            let bar = Bar::new(a.quiet, "{spinner} sweep [{bar:30}] {pos}/{len} {msg} ({elapsed})");
+            thermovia_tools::sweep::run(a, &bar).map_err(Into::into)
+        }
         Command::Calibrate(a) => thermovia_tools::calibrate::run(a),
         Command::Synth(a) => thermovia_tools::calibrate::synth(a),
         Command::Arm(a) => {
-            thermovia_tools::arm::run(a, &Bar::new(false, "{msg:32} [{bar:40}] {percent:>3}% {elapsed}"))
+            let bar = Bar::new(false, "{msg:32} [{bar:40}] {percent:>3}% {elapsed}");
+            thermovia_tools::arm::run(a, &bar).map_err(Into::into)
         }
         Command::Simulate(a) => simulate(a),
         Command::Info(a) => info(a),

@@ -20,8 +20,9 @@ fn at(path: &Path, what: &str) -> impl FnOnce(std::io::Error) -> std::io::Error 
     move |e| std::io::Error::new(e.kind(), format!("{context}: {e}"))
 }
 
-/// Creates the folder that will hold `out` (and its parents), naming the path on failure.
-fn make_parent(out: &Path) -> std::io::Result<()> {
+/// Creates the folder that will hold `out` (and its parents), naming the path on failure. Tools
+/// call it before long work, so a bad `--out` fails at once rather than after the simulation.
+pub fn make_parent(out: &Path) -> std::io::Result<()> {
     match out.parent().filter(|p| !p.as_os_str().is_empty()) {
         Some(parent) => std::fs::create_dir_all(parent).map_err(at(parent, "cannot create the output folder")),
         None => Ok(()),

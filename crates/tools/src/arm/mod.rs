@@ -97,15 +97,33 @@ fn probe_stability(fmu: &thermovia_importer::Fmu, cfg: &ArmConfig, scenario: &Sc
     }
 }
 
-pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(), Box<dyn std::error::Error>> {
+/// What can stop `thermovia arm`, each with what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum ArmError {
+    /// An option or the arm's configuration is out of range (naming it and the value).
+    #[error("{0}")]
+    Options(String),
+    /// The FMU could not be loaded or refused a call.
+    #[error(transparent)]
+    Fmu(#[from] thermovia_importer::HarnessError),
+    /// A co-simulation, the reference or the heating run failed (the message says where).
+    #[error("{0}")]
+    Simulation(String),
+    /// Writing the report failed (the message names the path).
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+}
+
+pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(), ArmError> {
     let cfg = args.config();
-    cfg.validate().map_err(|e| format!("arm configuration refused: {e}"))?;
+    cfg.validate().map_err(|e| ArmError::Options(format!("arm configuration refused: {e}")))?;
     if !(args.step.is_finite() && args.step > 0.0) {
-        return Err(format!("--step must be a positive number of seconds, got {}", args.step).into());
+        return Err(ArmError::Options(format!("--step {}: must be a positive number of seconds", args.step)));
     }
     if !(args.hot_c.is_finite() && args.hot_c > 22.0) {
-        return Err(format!("--hot-c must be above room temperature (22 °C), got {}", args.hot_c).into());
+        return Err(ArmError::Options(format!("--hot-c {}: must be above room temperature (22 °C)", args.hot_c)));
     }
+    crate::output::make_parent(&args.out)?;
     let fmu_path = args.fmu.clone().unwrap_or_else(crate::default_fmu_path);
     let fmu = thermovia_importer::Fmu::open(&fmu_path)?;
     let cold = Scenario::cold();
@@ -119,13 +137,13 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
 
     // 1. stability limit
     stage(0, "stability limit");
-    let props_cold = sim::probe(&fmu, &cfg, &cold)?;
-    let props_hot = sim::probe(&fmu, &cfg, &hot)?;
+    let props_cold = sim::probe(&fmu, &cfg, &cold).map_err(ArmError::Simulation)?;
+    let props_hot = sim::probe(&fmu, &cfg, &hot).map_err(ArmError::Simulation)?;
     let limit_cold = stability::limit(&cfg, &props_cold);
     let limit_hot = stability::limit(&cfg, &props_hot);
     let limit = limit_cold.unwrap_or(f64::INFINITY).min(limit_hot.unwrap_or(f64::INFINITY));
     if args.step >= limit {
-        return Err(format!(
+        return Err(ArmError::Options(format!(
             "--step {:.3} ms is at or above the coupling's stability limit {:.3} ms for this arm (cold joints: {}, hot joints: {}); \
              the explicit loops (sampled motor PD against the PCL's damping, wall contact, delayed inertia coupling) would diverge. \
              Use a smaller --step or a smaller --kd.",
@@ -133,8 +151,7 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
             limit * 1e3,
             limit_cold.map_or("none".into(), |v| format!("{:.3} ms", v * 1e3)),
             limit_hot.map_or("none".into(), |v| format!("{:.3} ms", v * 1e3)),
-        )
-        .into());
+        )));
     }
     let limiting = if limit_hot.unwrap_or(f64::INFINITY) <= limit_cold.unwrap_or(f64::INFINITY) { &hot } else { &cold };
     let check_below =
@@ -151,7 +168,8 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
         let t0 = std::time::Instant::now();
         let tr = sim::cosimulate(&fmu, &cfg, sc, args.step, Some(limit), |f| {
             progress.set_position(100 * (1 + k as u64) + (100.0 * f) as u64)
-        })?;
+        })
+        .map_err(ArmError::Simulation)?;
         wall_time += t0.elapsed().as_secs_f64();
         tasks.push(task_metrics(&cfg, sc, props, &tr));
         traces.push(tr);
@@ -164,22 +182,21 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
     let mut refs = Vec::new();
     let mut reference_steps = 0;
     for props in [&props_cold, &props_hot] {
-        let (r, n) = reference::simulate(&cfg, props, ref_dt, 1e-10)?;
+        let (r, n) = reference::simulate(&cfg, props, ref_dt, 1e-10).map_err(ArmError::Simulation)?;
         reference_steps += n;
         refs.push(r);
     }
     let mut accuracy = Vec::new();
     let steps: Vec<f64> = [5e-4, 1e-3, 2e-3, 5e-3].into_iter().filter(|h| *h < limit).collect();
     if steps.is_empty() {
-        return Err(format!(
+        return Err(ArmError::Options(format!(
             "the stability limit {:.3} ms is below the smallest compared step (0.5 ms): lower --kd or --kp",
             limit * 1e3
-        )
-        .into());
+        )));
     }
     for (i, h) in steps.iter().enumerate() {
         for (j, sc) in [&cold, &hot].into_iter().enumerate() {
-            let tr = sim::cosimulate(&fmu, &cfg, sc, *h, Some(limit), |_| {})?;
+            let tr = sim::cosimulate(&fmu, &cfg, sc, *h, Some(limit), |_| {}).map_err(ArmError::Simulation)?;
             accuracy.push(compare(&tr, &refs[j], *h, ref_dt, &sc.name));
         }
         progress.set_position(300 + (100 * (i + 1) / steps.len()) as u64);
@@ -194,7 +211,7 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
         one_percent_check.clear();
         for (j, sc) in [&cold, &hot].into_iter().enumerate() {
             if h1 < limit {
-                let tr = sim::cosimulate(&fmu, &cfg, sc, h1, Some(limit), |_| {})?;
+                let tr = sim::cosimulate(&fmu, &cfg, sc, h1, Some(limit), |_| {}).map_err(ArmError::Simulation)?;
                 one_percent_check.push(compare(&tr, &refs[j], h1, ref_dt, &sc.name));
             }
         }
@@ -208,7 +225,8 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
     stage(4, "heating and passive cooling");
     let switching = thermal::switching(&fmu, args.heater_power, args.hot_c, args.cooling_limit, 0.01, |f| {
         progress.set_position(400 + (300.0 * f.min(1.0)) as u64)
-    })?;
+    })
+    .map_err(ArmError::Simulation)?;
     progress.finish();
 
     let report = ArmReport {

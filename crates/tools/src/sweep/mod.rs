@@ -185,6 +185,25 @@ pub struct SweepResult {
     pub fmu_path: PathBuf,
 }
 
+/// What can stop a sweep, each with what to fix.
+#[derive(Debug, thiserror::Error)]
+pub enum SweepError {
+    /// An option out of range, naming the option and the value.
+    #[error("{0}")]
+    Options(String),
+    /// The FMU refused a call, or could not be loaded.
+    #[error(transparent)]
+    Fmu(#[from] HarnessError),
+    /// Writing the outputs failed (the message names the path).
+    #[error(transparent)]
+    Io(#[from] std::io::Error),
+    #[error("summary.json: {0}")]
+    Json(#[from] serde_json::Error),
+    /// A plot could not be drawn.
+    #[error("plot: {0}")]
+    Plot(String),
+}
+
 fn validate(a: &SweepArgs) -> Result<(), String> {
     if a.temperatures.is_empty() || a.frequencies.is_empty() {
         return Err("need at least one temperature and one frequency".into());
@@ -219,8 +238,8 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
 
 /// Runs every condition through the FMU. `progress` is called after each finished unit of work
 /// (one warm-up or one run) with a label.
-pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<SweepResult, Box<dyn std::error::Error>> {
-    validate(args)?;
+pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<SweepResult, SweepError> {
+    validate(args).map_err(SweepError::Options)?;
     let fmu_path = args.fmu.clone().unwrap_or_else(crate::default_fmu_path);
     let started = Instant::now();
     let fmu = Fmu::open(&fmu_path)?;
@@ -255,10 +274,9 @@ pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<Swee
             integral: 0.0,
         };
         if temp_c < ambient_c - args.reach_tolerance {
-            return Err(format!(
+            return Err(SweepError::Options(format!(
                 "{temp_c} °C is below the ambient {ambient_c:.2} °C: the device has heaters only (no cooling)"
-            )
-            .into());
+            )));
         }
         let heated = temp_c > ambient_c + args.reach_tolerance;
         let heater = if heated {
@@ -480,7 +498,9 @@ fn normalize_decay(conditions: &mut [Condition], reference_c: f64) {
 }
 
 /// `thermovia sweep`: simulate, then write the outputs atomically.
-pub fn run(args: &SweepArgs, progress: &dyn crate::output::Progress) -> Result<(), Box<dyn std::error::Error>> {
+pub fn run(args: &SweepArgs, progress: &dyn crate::output::Progress) -> Result<(), SweepError> {
+    validate(args).map_err(SweepError::Options)?;
+    crate::output::make_parent(&args.out)?;
     let total = args.temperatures.len() * (args.frequencies.len() + 1) + usize::from(!args.heating_powers.is_empty());
     progress.start(total as u64);
     let mut done = 0;

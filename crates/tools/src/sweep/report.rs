@@ -490,8 +490,8 @@ fn findings(r: &SweepResult) -> String {
 }
 
 /// Writes every output into `out` atomically; returns the number of files.
-pub fn write_all(r: &SweepResult, out: &Path) -> Result<usize, Box<dyn std::error::Error>> {
-    crate::output::replace_folder(out, |tmp| -> Result<usize, Box<dyn std::error::Error>> {
+pub fn write_all(r: &SweepResult, out: &Path) -> Result<usize, super::SweepError> {
+    crate::output::replace_folder(out, |tmp| -> Result<usize, super::SweepError> {
         let mut n = 0;
         std::fs::write(tmp.join("summary.json"), serde_json::to_string_pretty(&summary_json(r))?)?;
         std::fs::write(tmp.join("report.md"), markdown(r))?;
@@ -504,7 +504,7 @@ pub fn write_all(r: &SweepResult, out: &Path) -> Result<usize, Box<dyn std::erro
             write_csv(&tmp.join(format!("warmup_{}C.csv", w.target_c)), t)?;
             n += 1;
         }
-        n += super::plots::write_all(r, tmp)?;
+        n += super::plots::write_all(r, tmp).map_err(|e| super::SweepError::Plot(e.to_string()))?;
         Ok(n)
     })
 }
