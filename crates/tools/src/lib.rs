@@ -18,7 +18,9 @@ pub mod sweep;
 /// Default location of the packaged FMU: `<workspace>/target/fmu/ThermoVIA.fmu`, where
 /// `cargo run --release -p fmu-build` writes it.
 pub fn default_fmu_path() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../target/fmu/ThermoVIA.fmu")
+    let workspace =
+        Path::new(env!("CARGO_MANIFEST_DIR")).ancestors().nth(2).expect("crates/tools sits two levels down");
+    workspace.join("target").join("fmu").join("ThermoVIA.fmu")
 }
 
 /// Opens the packaged FMU at `path`, or at [`default_fmu_path`].
