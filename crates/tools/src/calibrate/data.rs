@@ -62,7 +62,7 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
             file: PathBuf::from("(command line)"),
             line: None,
             column: None,
-            message: "no run files given".into(),
+            message: "no run files given: name run files or folders of them (or use --paper)".into(),
         });
     }
     Ok(out)

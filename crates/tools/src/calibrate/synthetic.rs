@@ -173,9 +173,19 @@ pub fn run_file_name(t: f64, f: f64) -> String {
 /// Generates every run in memory: (file name, CSV text).
 pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box<dyn std::error::Error>> {
     let sim = Simulator::new(fmu, 1)?;
+    if !(args.duration > 0.0) || !args.duration.is_finite() {
+        return Err(format!("--duration {}: must be a finite number > 0 s", args.duration).into());
+    }
+    if !(args.rate > 0.0) || !args.rate.is_finite() {
+        return Err(format!("--rate {}: must be a finite number > 0 Hz", args.rate).into());
+    }
     let n = (args.duration * args.rate).round() as usize + 1;
-    if n < 3 || !(args.rate > 0.0) {
-        return Err("synth: duration × rate gives fewer than 3 samples".into());
+    if n < 3 {
+        return Err(format!(
+            "--duration {} s at --rate {} Hz gives {n} samples: need at least 3",
+            args.duration, args.rate
+        )
+        .into());
     }
     let model = RunModel {
         storage_scale: args.storage_scale,
