@@ -52,6 +52,19 @@ fn structure_indices_point_at_outputs_and_every_unit_is_defined() {
     let listed: Vec<usize> =
         section.split("index=\"").skip(1).map(|s| s[..s.find('"').unwrap()].parse().unwrap()).collect();
     assert_eq!(listed, outputs);
+    // FMI 2.0: InitialUnknowns are exactly the outputs and the calculated parameters
+    let initial: Vec<usize> = md
+        .variables
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| v.causality == "output" || v.causality == "calculatedParameter")
+        .map(|(i, _)| i + 1)
+        .collect();
+    assert!(initial.len() > outputs.len(), "the FMU declares calculated parameters");
+    let section = &xml[xml.find("<InitialUnknowns>").unwrap()..xml.find("</InitialUnknowns>").unwrap()];
+    let listed: Vec<usize> =
+        section.split("index=\"").skip(1).map(|s| s[..s.find('"').unwrap()].parse().unwrap()).collect();
+    assert_eq!(listed, initial);
     for v in &md.variables {
         if let Some(u) = &v.unit {
             assert!(xml.contains(&format!("<Unit name=\"{u}\">")), "unit {u} of {} is not defined", v.name);

@@ -181,11 +181,17 @@ fn render(guid: &str) -> String {
     put(Event::End(BytesEnd::new("ModelVariables")));
 
     put(Event::Start(BytesStart::new("ModelStructure")));
-    let outputs: Vec<usize> =
-        VARIABLES.iter().enumerate().filter(|(_, v)| v.causality == Causality::Output).map(|(i, _)| i + 1).collect();
-    for (section, with_dependencies) in [("Outputs", true), ("InitialUnknowns", false)] {
+    let indices = |keep: &dyn Fn(Causality) -> bool| -> Vec<usize> {
+        VARIABLES.iter().enumerate().filter(|(_, v)| keep(v.causality)).map(|(i, _)| i + 1).collect()
+    };
+    let outputs = indices(&|c| c == Causality::Output);
+    // FMI 2.0: the initial unknowns are the outputs and the calculated parameters.
+    let initial_unknowns = indices(&|c| matches!(c, Causality::Output | Causality::CalculatedParameter));
+    for (section, unknowns, with_dependencies) in
+        [("Outputs", &outputs, true), ("InitialUnknowns", &initial_unknowns, false)]
+    {
         put(Event::Start(BytesStart::new(section)));
-        for i in &outputs {
+        for i in unknowns {
             let mut u = BytesStart::new("Unknown");
             u.push_attribute(("index", i.to_string().as_str()));
             if with_dependencies {
