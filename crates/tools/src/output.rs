@@ -67,7 +67,7 @@ pub fn replace_folder<T, E: From<std::io::Error>>(
 
 /// Progress of long work. The command line shows it as a bar; tests and other callers pass
 /// [`Silent`]. Keeps progress bars out of the library.
-pub trait Progress {
+pub trait Progress: Sync {
     /// The work has `total` units.
     fn start(&self, _total: u64) {}
     /// Names what is running now.

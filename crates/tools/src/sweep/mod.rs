@@ -236,79 +236,117 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
     Ok(())
 }
 
+/// What one temperature gives: its conditions (one per frequency), its warm-up if heated, and what
+/// the estimator needs to know of the FMU.
+struct TemperatureBlock {
+    conditions: Vec<Condition>,
+    warmup: Option<(WarmupResult, Trace)>,
+    known: Known,
+    ambient_c: f64,
+}
+
+/// Warm-up to `temp_c` (when above ambient) and one harmonic run per frequency, on one instance.
+fn temperature_block(
+    args: &SweepArgs,
+    fmu: &Fmu,
+    temp_c: f64,
+    progress: &(dyn Fn(&str) + Sync),
+) -> Result<TemperatureBlock, SweepError> {
+    let mut inst = fmu.instantiate(None)?;
+    inst.initialize(
+        0.0,
+        None,
+        &[("excitation_frequency", args.frequencies[0]), ("max_internal_step", args.warmup_step.max(args.step))],
+    )?;
+    let vrs = Vrs::resolve(&inst)?;
+    let (jm, bm) = (inst.get("motor_inertia")?, inst.get("motor_damping")?);
+    let k = Known {
+        link_inertia: inst.get("link_inertia")?,
+        // the FMU's own calculated parameters: the tools do not re-derive its formulas
+        spring_stiffness: inst.get("spring_bank_stiffness")?,
+        modulus_to_torsion: inst.get("modulus_to_torsion")?,
+    };
+    let ambient_c = inst.get("ambient_temperature")? - ZERO_CELSIUS;
+    let heater = HeaterLoop {
+        target_k: temp_c + ZERO_CELSIUS,
+        kp: args.heater_kp,
+        ki: args.heater_ki,
+        p_max: args.heater_max_w,
+        integral: 0.0,
+    };
+    if temp_c < ambient_c - args.reach_tolerance {
+        return Err(SweepError::Options(format!(
+            "{temp_c} °C is below the ambient {ambient_c:.2} °C: the device has heaters only (no cooling)"
+        )));
+    }
+    let mut warmup = None;
+    let heater = if temp_c > ambient_c + args.reach_tolerance {
+        let (heater, w, trace) =
+            warm_up_until(&mut inst, &vrs, heater, args.warmup_step, args.soak, args.reach_tolerance)?;
+        warmup = Some((w, trace));
+        progress(&format!("warm-up to {temp_c} °C"));
+        Some(heater)
+    } else {
+        progress(&format!("{temp_c} °C: room temperature, no heating"));
+        None
+    };
+    let saved = inst.save_state()?;
+    let mut conditions = Vec::new();
+    for &f in &args.frequencies {
+        inst.restore_state(&saved)?;
+        inst.set("excitation_frequency", f)?;
+        let omega = 2.0 * std::f64::consts::PI * f;
+        let motor = MotorLoop {
+            amplitude: args.amplitude_deg.to_radians(),
+            omega,
+            kp: args.motor_kp,
+            kd: args.motor_kd,
+            motor_inertia: jm,
+            motor_damping: bm,
+        };
+        let n = analysis::samples_per_period(f, args.step).expect("validated");
+        let steps = n * (args.settle_cycles + args.cycles);
+        let trace = rig::harmonic_run(&mut inst, &vrs, &motor, heater, args.step, steps)?;
+        conditions.push(analyse(args, &k, temp_c, f, &motor, trace, n));
+        progress(&format!("{temp_c} °C, {f} Hz"));
+    }
+    Ok(TemperatureBlock { conditions, warmup, known: k, ambient_c })
+}
+
 /// Runs every condition through the FMU. `progress` is called after each finished unit of work
 /// (one warm-up or one run) with a label.
-pub fn simulate(args: &SweepArgs, mut progress: impl FnMut(&str)) -> Result<SweepResult, SweepError> {
+pub fn simulate(args: &SweepArgs, progress: impl FnMut(&str) + Send) -> Result<SweepResult, SweepError> {
     validate(args).map_err(SweepError::Options)?;
     let fmu_path = args.fmu.clone().unwrap_or_else(crate::default_fmu_path);
     let started = Instant::now();
     let fmu = Fmu::open(&fmu_path)?;
-    let mut conditions = Vec::new();
-    let mut warmups = Vec::new();
-    let mut known = None;
-    let mut ambient_c = 22.0;
-    let mut link_inertia = 0.0;
-    for &temp_c in &args.temperatures {
-        let mut inst = fmu.instantiate(None)?;
-        inst.initialize(
-            0.0,
-            None,
-            &[("excitation_frequency", args.frequencies[0]), ("max_internal_step", args.warmup_step.max(args.step))],
-        )?;
-        let vrs = Vrs::resolve(&inst)?;
-        let (jm, bm) = (inst.get("motor_inertia")?, inst.get("motor_damping")?);
-        link_inertia = inst.get("link_inertia")?;
-        let k = Known {
-            link_inertia,
-            // the FMU's own calculated parameters: the tools do not re-derive its formulas
-            spring_stiffness: inst.get("spring_bank_stiffness")?,
-            modulus_to_torsion: inst.get("modulus_to_torsion")?,
-        };
-        known = Some(k);
-        ambient_c = inst.get("ambient_temperature")? - ZERO_CELSIUS;
-        let heater = HeaterLoop {
-            target_k: temp_c + ZERO_CELSIUS,
-            kp: args.heater_kp,
-            ki: args.heater_ki,
-            p_max: args.heater_max_w,
-            integral: 0.0,
-        };
-        if temp_c < ambient_c - args.reach_tolerance {
-            return Err(SweepError::Options(format!(
-                "{temp_c} °C is below the ambient {ambient_c:.2} °C: the device has heaters only (no cooling)"
-            )));
+    let progress = std::sync::Mutex::new(progress);
+    let report = |label: &str| (progress.lock().unwrap_or_else(|p| p.into_inner()))(label);
+    // Temperatures are independent (each its own instance, warm-up and runs): one worker per core,
+    // results kept in the order of --temperatures, so the output does not depend on the cores.
+    let workers = std::thread::available_parallelism().map_or(1, |n| n.get()).min(args.temperatures.len());
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let slots: Vec<std::sync::Mutex<Option<Result<TemperatureBlock, SweepError>>>> =
+        args.temperatures.iter().map(|_| std::sync::Mutex::new(None)).collect();
+    std::thread::scope(|scope| {
+        for _ in 0..workers {
+            scope.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(&temp_c) = args.temperatures.get(i) else { break };
+                let block = temperature_block(args, &fmu, temp_c, &report);
+                *slots[i].lock().unwrap_or_else(|p| p.into_inner()) = Some(block);
+            });
         }
-        let heated = temp_c > ambient_c + args.reach_tolerance;
-        let heater = if heated {
-            let (heater, w, trace) =
-                warm_up_until(&mut inst, &vrs, heater, args.warmup_step, args.soak, args.reach_tolerance)?;
-            warmups.push((w, trace));
-            progress(&format!("warm-up to {temp_c} °C"));
-            Some(heater)
-        } else {
-            progress(&format!("{temp_c} °C: room temperature, no heating"));
-            None
-        };
-        let saved = inst.save_state()?;
-        for &f in &args.frequencies {
-            inst.restore_state(&saved)?;
-            inst.set("excitation_frequency", f)?;
-            let omega = 2.0 * std::f64::consts::PI * f;
-            let motor = MotorLoop {
-                amplitude: args.amplitude_deg.to_radians(),
-                omega,
-                kp: args.motor_kp,
-                kd: args.motor_kd,
-                motor_inertia: jm,
-                motor_damping: bm,
-            };
-            let n = analysis::samples_per_period(f, args.step).expect("validated");
-            let steps = n * (args.settle_cycles + args.cycles);
-            let trace = rig::harmonic_run(&mut inst, &vrs, &motor, heater, args.step, steps)?;
-            conditions.push(analyse(args, &k, temp_c, f, &motor, trace, n));
-            progress(&format!("{temp_c} °C, {f} Hz"));
-        }
+    });
+    let (mut conditions, mut warmups) = (Vec::new(), Vec::new());
+    let (mut known, mut ambient_c, mut link_inertia) = (None, 22.0, 0.0);
+    for slot in slots {
+        let block = slot.into_inner().unwrap_or_else(|p| p.into_inner()).expect("every temperature ran")?;
+        conditions.extend(block.conditions);
+        warmups.extend(block.warmup);
+        (known, ambient_c, link_inertia) = (Some(block.known), block.ambient_c, block.known.link_inertia);
     }
+    let progress = |label: &str| report(label);
     let simulate_seconds = started.elapsed().as_secs_f64();
     let started = Instant::now();
     // Heating study from room temperature to the highest target (cheap: coarse step, motor at rest).
