@@ -29,8 +29,8 @@ pub struct CalibrateArgs {
     /// Packaged FMU to use (default target/fmu/ThermoVIA.fmu).
     #[cfg_attr(feature = "cli", arg(long))]
     pub fmu: Option<std::path::PathBuf>,
-    /// FMU instances simulating in parallel.
-    #[cfg_attr(feature = "cli", arg(long, default_value_t = 2))]
+    /// FMU instances simulating in parallel [default: one per core].
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
     /// Half-width (samples) of the zero-phase Savitzky–Golay smoothing of the measured motor
     /// angle before it drives the model; 0 uses the raw samples.
