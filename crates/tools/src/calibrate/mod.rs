@@ -29,7 +29,7 @@ pub struct CalibrateArgs {
     /// Packaged FMU to use (default target/fmu/ThermoVIA.fmu).
     #[cfg_attr(feature = "cli", arg(long))]
     pub fmu: Option<std::path::PathBuf>,
-    /// FMU instances simulating in parallel [default: one per core].
+    /// FMU instances simulating in parallel (the default is this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
     /// Half-width (samples) of the zero-phase Savitzky–Golay smoothing of the measured motor
