@@ -752,8 +752,26 @@ pub struct DriveCandidate {
     pub evidence: String,
 }
 
-/// One refit tried: (effect, BIC before, after, held-out relerr before, after, kept).
-pub type Attempt = (DriveEffect, f64, f64, Option<f64>, Option<f64>, bool);
+/// One refit tried: (effect, BIC before, after, held-out relerr before, after, kept, Wald χ²).
+pub type Attempt = (DriveEffect, f64, f64, Option<f64>, Option<f64>, bool, f64);
+
+/// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
+pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
+    let idx: Vec<usize> = effect.params().iter().filter_map(|q| fit.spec.iter().position(|x| x == q)).collect();
+    let k = idx.len();
+    let theta = DVector::from_iterator(k, idx.iter().map(|&i| fit.p[i]));
+    let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(idx[a], idx[b])]);
+    (theta.transpose() * spd_inverse(&cov) * &theta)[(0, 0)]
+}
+
+/// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
+pub fn wald_limit(dof: usize) -> f64 {
+    if dof <= 1 {
+        10.83
+    } else {
+        13.82
+    }
+}
 
 pub struct DriveOutcome {
     pub baseline: DriveFit,
@@ -1024,8 +1042,11 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
                 (Some(a), Some(b)) => b < (1.0 - HELD_OUT_GAIN) * a,
                 _ => true,
             };
-            let keep = bic_ok && held_ok;
-            attempts.push((c.effect, current.bic(), refit.bic(), current_held, h, keep));
+            // BIC over every sample overrates small effects on a correlated residual: the effect's
+            // parameters must also stand out of their block-sandwich errors
+            let w = wald(&refit, c.effect);
+            let keep = bic_ok && held_ok && w > wald_limit(c.effect.params().len());
+            attempts.push((c.effect, current.bic(), refit.bic(), current_held, h, keep, w));
             if keep && best.as_ref().is_none_or(|b| refit.bic() < b.0.bic()) {
                 best = Some((refit, h));
             }
@@ -1173,11 +1194,16 @@ pub fn report_json(
             json!({"effect": e.name(), "parameters": p, "std_errors": se})
         })
         .collect();
-    let mut added = added;
-    if let Some((v, s)) = o.final_fit.value(Param::ConstantLoad) {
-        added.push(json!({"effect": "constant_load", "parameters": {"torque_nm": v}, "std_errors": {"torque_nm": s},
-                          "note": "part of the baseline (a constant force or torque on the link, or a measurement offset)"}));
-    }
+    // the baseline's own effect (interfaces.md: constant_load), in the final model's value
+    let baseline_effects: Vec<Value> = o
+        .final_fit
+        .value(Param::ConstantLoad)
+        .map(|(v, s)| {
+            json!({"effect": "constant_load", "parameters": {"torque_nm": v}, "std_errors": {"torque_nm": s},
+                   "note": "part of the baseline: a constant torque or force on the link (or a measurement offset); a published offset on the motor side is its negative"})
+        })
+        .into_iter()
+        .collect();
     let params = |f: &DriveFit| -> Value {
         parameter_table(prob, f, axis)
             .into_iter()
@@ -1203,7 +1229,7 @@ pub fn report_json(
             json!({
                 "candidates": c.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "start": c.start})).collect::<Vec<_>>(),
                 "attempts": a.iter().map(|a| json!({"effect": a.0.name(), "bic_before": a.1, "bic_after": a.2,
-                    "held_out_relerr_before": a.3, "held_out_relerr_after": a.4, "kept": a.5})).collect::<Vec<_>>(),
+                    "held_out_relerr_before": a.3, "held_out_relerr_after": a.4, "kept": a.5, "wald_chi2": a.6})).collect::<Vec<_>>(),
             })
         })
         .collect();
@@ -1213,6 +1239,7 @@ pub fn report_json(
         "baseline": metrics_json(&bm, axis, Some(o.baseline.bic()), Some(o.baseline.p.len())),
         "diagnosis": diagnosis,
         "added_effects": added,
+        "baseline_effects": baseline_effects,
         "final": metrics_json(&fm, axis, Some(o.final_fit.bic()), Some(o.final_fit.p.len())),
         "unexplained": o.unexplained,
         "identified": identified,
@@ -1223,7 +1250,7 @@ pub fn report_json(
         "method": {
             "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
             "fit": "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)",
-            "selection": format!("an effect is kept when BIC falls by more than {BIC_MARGIN} and, with a held-out set, the held-out position error falls by at least {} %", 100.0 * HELD_OUT_GAIN),
+            "selection": format!("an effect is kept when BIC falls by more than {BIC_MARGIN}, its parameters pass a Wald test with the block-sandwich covariance (χ² above the p = 0.001 quantile) and, with a held-out set, the held-out position error falls by at least {} %", 100.0 * HELD_OUT_GAIN),
         },
         "seconds": seconds,
         "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
@@ -1394,10 +1421,11 @@ pub fn report_markdown(j: &Value) -> String {
         s += &format!("Round {}:\n", i + 1);
         for a in r["attempts"].as_array().into_iter().flatten() {
             s += &format!(
-                "- {}: BIC {} → {}, held-out relerr {} → {} %, {}\n",
+                "- {}: BIC {} → {}, Wald χ² {}, held-out relerr {} → {} %, {}\n",
                 a["effect"].as_str().unwrap_or(""),
                 f(&a["bic_before"]),
                 f(&a["bic_after"]),
+                f(&a["wald_chi2"]),
                 f(&a["held_out_relerr_before"]),
                 f(&a["held_out_relerr_after"]),
                 if a["kept"].as_bool() == Some(true) { "kept" } else { "not kept" }
