@@ -587,13 +587,26 @@ pub struct Metrics {
     pub relerr_percent: f64,
     /// 100‖τ − τ̂‖/‖τ‖ of the applied torque (force) against the measured one, when measured.
     pub torque_relerr_percent: Option<f64>,
+    /// 100‖q̇ − q̂̇‖/‖q̇‖ of the motor speed, both by the drive's own estimate (reference drives)
+    /// applied to the measured and to the simulated positions.
+    pub velocity_relerr_percent: Option<f64>,
     pub samples: usize,
 }
 
 pub fn metrics(inputs: &[DriveInput], sims: &[Simulated]) -> Metrics {
     let (mut y, mut e) = (Vec::new(), Vec::new());
     let (mut tn, mut te, mut has_t) = (0.0, 0.0, false);
+    let (mut vn, mut ve) = (0.0, 0.0);
     for (inp, s) in inputs.iter().zip(sims) {
+        if let Some(c) = &inp.controller {
+            let mut em = VelocityEstimator::new(inp.motor[0], inp.speed0, c.period);
+            let mut es = VelocityEstimator::new(s.motor[0], inp.speed0, c.period);
+            for (a, b) in inp.motor.iter().zip(&s.motor) {
+                let (va, vb) = (em.update(*a), es.update(*b));
+                vn += va * va;
+                ve += (va - vb) * (va - vb);
+            }
+        }
         let m = inp.measured();
         e.extend(m.iter().zip(s.stacked(inp)).map(|(a, b)| a - b));
         y.extend(m);
@@ -627,6 +640,7 @@ pub fn metrics(inputs: &[DriveInput], sims: &[Simulated]) -> Metrics {
         relerr_percent: 100.0 * err / norm,
         torque_relerr_percent: (has_t && inputs.iter().all(|i| i.drive == DriveKind::Reference))
             .then(|| 100.0 * (te / tn).sqrt()),
+        velocity_relerr_percent: (vn > 0.0).then(|| 100.0 * (ve / vn).sqrt()),
         samples: y.len(),
     }
 }
@@ -914,6 +928,9 @@ pub struct LoadColumnDiagnosis {
     /// agrees with it within `LOAD_GAIN_AGREEMENT`, else 1 (as recorded).
     pub applied_gain: f64,
     pub as_recorded: Option<(Metrics, Metrics)>,
+    /// Independent of any model: the logged drive force minus the controller law on the measured
+    /// positions, regressed on the load column (reference drives that log their force).
+    pub force_log_gain: Option<f64>,
 }
 
 /// Relative agreement between the fitted load gain and the declared drive gain for the column to
@@ -967,6 +984,21 @@ pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadC
         }
     }
     let declared = held.inputs.iter().find_map(|i| i.declared_drive_gain);
+    let force_log_gain = {
+        let (mut num, mut den) = (0.0, 0.0);
+        for inp in held.inputs.iter().filter(|i| i.drive == DriveKind::Reference && i.torque.is_some()) {
+            let (Some(c), Some(r), Some(t), Some(l)) = (&inp.controller, &inp.reference, &inp.torque, &inp.load) else {
+                continue;
+            };
+            let mut est = VelocityEstimator::new(inp.motor[0], inp.speed0, c.period);
+            for k in 0..inp.time.len() {
+                let law = c.law(r[k], inp.motor[k], est.update(inp.motor[k]));
+                num += (t[k] - law) * l[k];
+                den += l[k] * l[k];
+            }
+        }
+        (den > 0.0).then(|| num / den)
+    };
     let applied = match declared {
         Some(g) if ((k / g) - 1.0).abs() <= LOAD_GAIN_AGREEMENT => g,
         _ => 1.0,
@@ -977,6 +1009,7 @@ pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadC
         declared_drive_gain: declared,
         applied_gain: applied,
         as_recorded: None,
+        force_log_gain,
     })
 }
 
@@ -1104,6 +1137,9 @@ fn metrics_json(m: &Metrics, axis: Axis, bic: Option<f64>, parameters: Option<us
     o.insert("relerr_percent".into(), json!(m.relerr_percent));
     if let Some(t) = m.torque_relerr_percent {
         o.insert("torque_relerr_percent".into(), json!(t));
+    }
+    if let Some(v) = m.velocity_relerr_percent {
+        o.insert("velocity_relerr_percent".into(), json!(v));
     }
     if let Some(b) = bic {
         o.insert("bic".into(), json!(b));
@@ -1276,8 +1312,10 @@ pub fn report_json(
                     "relerr_percent_at_fitted_gain_baseline": d.relerr_at_fitted_gain,
                     "declared_drive_gain": d.declared_drive_gain,
                     "applied_gain": d.applied_gain,
+                    "force_log_gain": d.force_log_gain,
                     "note": if d.applied_gain != 1.0 {
-                        format!("the held-out positions are best explained with the load column × {:.3}, within {} % of the drive gain the file declares ({:.3} N/V): the column reads as the pulse command in controller volts, so the held-out set above uses it × the declared drive gain (no parameter is fitted on the held-out set); the figures with the column as recorded are under as_recorded", d.fitted_gain, 100.0 * LOAD_GAIN_AGREEMENT, d.declared_drive_gain.unwrap_or(f64::NAN))
+                        format!("the held-out positions are best explained with the load column × {:.3}, within {} % of the drive gain the file declares ({:.3} N/V){}: the column reads as the pulse command in controller volts, so the held-out set above uses it × the declared drive gain (no parameter is fitted on the held-out set); the figures with the column as recorded are under as_recorded", d.fitted_gain, 100.0 * LOAD_GAIN_AGREEMENT, d.declared_drive_gain.unwrap_or(f64::NAN),
+                            d.force_log_gain.map_or(String::new(), |g| format!(", and the logged drive force exceeds the controller law on the measured positions by {g:.3} × the column")))
                     } else {
                         format!("the load column is used as recorded (best-fitting gain {:.3}; declared drive gain {:?})", d.fitted_gain, d.declared_drive_gain)
                     },
@@ -1342,7 +1380,7 @@ fn comparison(o: &DriveOutcome, p: &Value) -> Value {
 
 /// report.md for drive runs.
 pub fn report_markdown(j: &Value) -> String {
-    let f = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.4}"));
+    let f = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.5}"));
     let g = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.4e}"));
     let pu = j["units"]["position"].as_str().unwrap_or("");
     let mut s = String::from("# Calibration of drive runs\n\n");
@@ -1352,21 +1390,23 @@ pub fn report_markdown(j: &Value) -> String {
         j["units"]["torque"].as_str().unwrap_or(""),
         j["units"]["inertia"].as_str().unwrap_or("")
     );
-    s += "## Errors\n\n| model | set | position relerr % | RMSE | fit % | torque relerr % |\n|---|---|---|---|---|---|\n";
+    s += "## Errors\n\n| model | set | position relerr % | RMSE | fit % | velocity relerr % | torque relerr % |\n|---|---|---|---|---|---|---|\n";
     for (name, key) in [("baseline", "baseline"), ("final", "final")] {
         s += &format!(
-            "| {name} | estimation | {} | {} | {} | {} |\n",
+            "| {name} | estimation | {} | {} | {} | {} | {} |\n",
             f(&j[key]["relerr_percent"]),
             g(&j[key]["rmse"]),
             f(&j[key]["fit_percent"]),
+            f(&j[key]["velocity_relerr_percent"]),
             f(&j[key]["torque_relerr_percent"])
         );
         if j.get("validation").is_some() {
             s += &format!(
-                "| {name} | validation | {} | {} | {} | {} |\n",
+                "| {name} | validation | {} | {} | {} | {} | {} |\n",
                 f(&j["validation"][key]["relerr_percent"]),
                 g(&j["validation"][key]["rmse"]),
                 f(&j["validation"][key]["fit_percent"]),
+                f(&j["validation"][key]["velocity_relerr_percent"]),
                 f(&j["validation"][key]["torque_relerr_percent"])
             );
         }
