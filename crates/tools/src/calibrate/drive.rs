@@ -795,6 +795,8 @@ pub struct DriveOutcome {
     /// The model after each accepted round (baseline first).
     pub path: Vec<DriveFit>,
     pub validation: Option<(Vec<DriveInput>, Metrics, Metrics)>,
+    /// Held-out simulations of the baseline and the final model.
+    pub validation_sims: Option<(Vec<Simulated>, Vec<Simulated>)>,
     pub load_column: Option<LoadColumnDiagnosis>,
     pub unexplained: bool,
     pub residual_corr_sign: f64,
@@ -1102,9 +1104,11 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
             break;
         }
     }
+    let mut validation_sims = None;
     let validation = held.and_then(|h| {
-        let (_, b) = predict(prob, h, &baseline)?;
-        let (_, f) = predict(prob, h, &current)?;
+        let (sb, b) = predict(prob, h, &baseline)?;
+        let (sf, f) = predict(prob, h, &current)?;
+        validation_sims = Some((sb, sf));
         Some((h.inputs.clone(), b, f))
     });
     if let (Some(d), Some(h)) = (load_column.as_mut(), held) {
@@ -1120,6 +1124,7 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
         rounds,
         path,
         validation,
+        validation_sims,
         load_column,
         // the friction library is exhausted when a sign-of-speed pattern remains in the residual
         unexplained: final_corr.abs() > 0.3,
@@ -1477,4 +1482,40 @@ pub fn report_markdown(j: &Value) -> String {
     }
     s += &format!("\nUnexplained structure left: {}.\n", j["unexplained"]);
     s
+}
+
+/// plots/residual_<run>.svg: the position error of the baseline and the final model over time,
+/// estimation and held-out runs (every 10th sample).
+pub fn plots(
+    prob: &DriveProblem,
+    o: &DriveOutcome,
+    axis: Axis,
+) -> Result<crate::output::Files, Box<dyn std::error::Error>> {
+    use plotters::style::RGBColor;
+    let (orange, blue) = (RGBColor(255, 127, 14), RGBColor(31, 119, 180));
+    let mut files = Vec::new();
+    let mut one =
+        |inp: &DriveInput, b: &Simulated, f: &Simulated, set: &str| -> Result<(), Box<dyn std::error::Error>> {
+            let every = |v: &[f64]| v.iter().step_by(10).copied().collect::<Vec<f64>>();
+            let t = every(&inp.time);
+            let e0: Vec<f64> = inp.motor.iter().zip(&b.motor).map(|(a, c)| a - c).collect();
+            let e1: Vec<f64> = inp.motor.iter().zip(&f.motor).map(|(a, c)| a - c).collect();
+            let svg = super::report::line_plot(
+                &format!("{} ({set}): position error before and after", inp.name),
+                &format!("measured − model ({})", axis.units().0),
+                &t,
+                &[("baseline", &every(&e0), orange), ("final", &every(&e1), blue)],
+            )?;
+            files.push((format!("plots/residual_{}.svg", inp.name.trim_end_matches(".csv")), svg.into_bytes()));
+            Ok(())
+        };
+    for (i, inp) in prob.inputs.iter().enumerate() {
+        one(inp, &o.baseline.sims[i], &o.final_fit.sims[i], "estimation")?;
+    }
+    if let (Some((inputs, _, _)), Some((sb, sf))) = (&o.validation, &o.validation_sims) {
+        for (i, inp) in inputs.iter().enumerate() {
+            one(inp, &sb[i], &sf[i], "held out")?;
+        }
+    }
+    Ok(files)
 }

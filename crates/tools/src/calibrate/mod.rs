@@ -41,10 +41,10 @@ File format, metadata and report keys: docs/interfaces.md (\"Measured data\", \"
 pub struct CalibrateArgs {
     /// Run files (CSV, docs: interfaces.md) or folders of them.
     pub inputs: Vec<std::path::PathBuf>,
-    /// Held-out runs (files or folders): simulated with the parameters fitted on INPUTS and
+    /// Held-out runs (a file or folder; repeat the option for more): simulated with the parameters fitted on INPUTS and
     /// reported under "validation"; an effect is kept only if it lowers their position error
     /// (drive runs: `# drive=motor_torque` or `reference`).
-    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE_OR_DIR", num_args = 1..))]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE_OR_DIR"))]
     pub validate: Vec<std::path::PathBuf>,
     /// A published reference to compare with (JSON: {"parameters": {"inertia": …, "viscous_friction": …,
     /// "coulomb_friction": …, "offset": …}, "position_relerr_percent": {"estimation": …, "validation": …}});
@@ -263,10 +263,13 @@ fn calibrate_drive(
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;
     let seconds = t0.elapsed().as_secs_f64();
     let report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
-    let files = vec![
+    let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
         ("report.md".to_string(), drive::report_markdown(&report).into_bytes()),
     ];
+    if !args.no_plots {
+        files.extend(drive::plots(&prob, &outcome, runs[0].axis)?);
+    }
     Ok(Calibration { runs, temperatures, outcome: None, drive: Some(outcome), report, files })
 }
 

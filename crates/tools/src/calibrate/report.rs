@@ -257,7 +257,7 @@ fn range(v: impl Iterator<Item = f64>) -> (f64, f64) {
     }
 }
 
-fn line_plot(
+pub(crate) fn line_plot(
     title: &str,
     ylabel: &str,
     t: &[f64],
