@@ -37,6 +37,9 @@ pub enum Param {
     Coulomb,
     AsymCoulomb,
     AsymViscous,
+    /// Static friction above Coulomb, fading with speed (`stribeck_friction`), and ln of its speed scale.
+    Stribeck,
+    LnStribeckVelocity,
 }
 
 /// Effects the drive loop can add.
@@ -45,20 +48,25 @@ pub enum DriveEffect {
     CoulombFriction,
     /// Different Coulomb and viscous levels in each direction (needs Coulomb friction in).
     AsymmetricFriction,
+    /// Stribeck excess over Coulomb friction at low speed (needs Coulomb friction in).
+    StribeckFriction,
 }
 
 impl DriveEffect {
-    pub const ALL: [DriveEffect; 2] = [DriveEffect::CoulombFriction, DriveEffect::AsymmetricFriction];
+    pub const ALL: [DriveEffect; 3] =
+        [DriveEffect::CoulombFriction, DriveEffect::AsymmetricFriction, DriveEffect::StribeckFriction];
     pub fn name(self) -> &'static str {
         match self {
             DriveEffect::CoulombFriction => "coulomb_friction",
             DriveEffect::AsymmetricFriction => "asymmetric_friction",
+            DriveEffect::StribeckFriction => "stribeck_friction",
         }
     }
     pub fn params(self) -> &'static [Param] {
         match self {
             DriveEffect::CoulombFriction => &[Param::Coulomb],
             DriveEffect::AsymmetricFriction => &[Param::AsymCoulomb, Param::AsymViscous],
+            DriveEffect::StribeckFriction => &[Param::Stribeck, Param::LnStribeckVelocity],
         }
     }
 }
@@ -74,6 +82,8 @@ pub struct DriveModel {
     pub coulomb: f64,
     pub asym_coulomb: f64,
     pub asym_viscous: f64,
+    pub stribeck: f64,
+    pub stribeck_velocity: f64,
 }
 
 /// What drives one simulated run.
@@ -243,6 +253,8 @@ pub fn simulate(inst: &mut Instance, inp: &DriveInput, m: &DriveModel) -> Result
         ("coulomb_friction", m.coulomb.max(0.0)),
         ("coulomb_friction_asymmetry", m.asym_coulomb),
         ("viscous_friction_asymmetry", m.asym_viscous),
+        ("stribeck_friction", m.stribeck.max(0.0)),
+        ("stribeck_velocity", m.stribeck_velocity),
         ("solver_tolerance", DRIVE_SOLVER_TOLERANCE),
     ];
     if inp.rigid {
@@ -358,7 +370,8 @@ impl<'a> DriveProblem<'a> {
 
     pub fn typical(&self, p: Param) -> f64 {
         match p {
-            Param::LnInertia | Param::LnStorage(_) | Param::LnLoss(_) => 1.0,
+            Param::LnInertia | Param::LnStorage(_) | Param::LnLoss(_) | Param::LnStribeckVelocity => 1.0,
+            Param::Stribeck => self.force_scale,
             Param::Viscous | Param::AsymViscous => self.force_scale / self.speed_scale,
             Param::ConstantLoad | Param::Coulomb | Param::AsymCoulomb => self.force_scale,
         }
@@ -375,6 +388,8 @@ impl<'a> DriveProblem<'a> {
             coulomb: 0.0,
             asym_coulomb: 0.0,
             asym_viscous: 0.0,
+            stribeck: 0.0,
+            stribeck_velocity: 0.05,
         };
         for (&q, &v) in spec.iter().zip(p) {
             match q {
@@ -391,6 +406,8 @@ impl<'a> DriveProblem<'a> {
                 Param::Coulomb => m.coulomb = v,
                 Param::AsymCoulomb => m.asym_coulomb = v,
                 Param::AsymViscous => m.asym_viscous = v,
+                Param::Stribeck => m.stribeck = v,
+                Param::LnStribeckVelocity => m.stribeck_velocity = v.exp(),
             }
         }
         m
@@ -471,7 +488,7 @@ impl<'a> DriveProblem<'a> {
         p0: Vec<f64>,
         max_iter: usize,
     ) -> Result<DriveFit, String> {
-        let lower = |q: Param| matches!(q, Param::Viscous | Param::Coulomb);
+        let lower = |q: Param| matches!(q, Param::Viscous | Param::Coulomb | Param::Stribeck);
         let clamp = |p: &mut [f64]| {
             for (x, &q) in p.iter_mut().zip(&spec) {
                 if lower(q) {
@@ -829,17 +846,25 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
         if fit.effects.contains(&effect) {
             continue;
         }
-        if effect == DriveEffect::AsymmetricFriction && !fit.effects.contains(&DriveEffect::CoulombFriction) {
+        if effect != DriveEffect::CoulombFriction && !fit.effects.contains(&DriveEffect::CoulombFriction) {
             continue;
         }
         let base = fit.p.len();
         let mut spec = fit.spec.clone();
         spec.extend_from_slice(effect.params());
+        // the effect "off" (level 0) with its shape parameters at a start: the Stribeck speed at a
+        // tenth of the data's RMS speed; the levels are probed by secants
+        let init: Vec<f64> = effect
+            .params()
+            .iter()
+            .map(|q| if *q == Param::LnStribeckVelocity { (0.1 * prob.speed_scale).ln() } else { 0.0 })
+            .collect();
+        let probed: Vec<usize> = (0..init.len()).filter(|&i| effect.params()[i] != Param::LnStribeckVelocity).collect();
         let mut cols = Vec::new();
-        for (i, &q) in effect.params().iter().enumerate() {
-            let h = 0.05 * prob.typical(q);
+        for &i in &probed {
+            let h = 0.05 * prob.typical(effect.params()[i]);
             let mut x = fit.p.clone();
-            x.extend(std::iter::repeat_n(0.0, effect.params().len()));
+            x.extend_from_slice(&init);
             x[base + i] = h;
             let jobs: Vec<_> = (0..prob.inputs.len()).map(|run| (run, x.clone())).collect();
             let res: Option<Vec<Simulated>> =
@@ -855,7 +880,7 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
                 .collect();
             cols.push(col);
         }
-        if cols.len() != effect.params().len() {
+        if cols.len() != probed.len() {
             continue;
         }
         let m = DMatrix::from_fn(fit.n(), base + cols.len(), |i, j| {
@@ -866,7 +891,10 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
             }
         });
         let (sse_aug, beta) = project(&m);
-        let start: Vec<f64> = (0..cols.len()).map(|i| beta[base + i]).collect();
+        let mut start = init.clone();
+        for (c, &i) in probed.iter().enumerate() {
+            start[i] += beta[base + c];
+        }
         let score = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
         let evidence = match (effect, inverse) {
             (DriveEffect::CoulombFriction, Some(iv)) => format!(
@@ -896,6 +924,17 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
                 iv.as_ref().and_then(|iv| iv.asymmetric).map_or(String::new(), |(cp, cn, vp, vn)| format!(
                     "; inverse model by direction: Coulomb {cp:.3} forward / {cn:.3} back, viscous {vp:.3} / {vn:.3}"
                 ))
+            ),
+            (DriveEffect::StribeckFriction, _) => format!(
+                "explains {:.1} % of the remaining position residual; linearised excess {:.4} over Coulomb at a speed scale of {:.3e}{}",
+                100.0 * score,
+                start[0],
+                start[1].exp(),
+                if start[0] < 0.0 {
+                    " (negative: the data want less friction at low speed than the Coulomb level, the opposite of a Stribeck excess)"
+                } else {
+                    ""
+                }
             ),
         };
         out.push(DriveCandidate { effect, score, start, evidence });
@@ -1161,6 +1200,10 @@ pub fn effect_parameters(fit: &DriveFit, effect: DriveEffect) -> Vec<(&'static s
     let v = |q: Param| fit.value(q).unwrap_or((0.0, 0.0));
     match effect {
         DriveEffect::CoulombFriction => vec![("torque_nm", v(Param::Coulomb).0, v(Param::Coulomb).1)],
+        DriveEffect::StribeckFriction => {
+            let (l, sv) = (v(Param::Stribeck), v(Param::LnStribeckVelocity));
+            vec![("torque_nm", l.0, l.1), ("velocity", sv.0.exp(), sv.0.exp() * sv.1)]
+        }
         DriveEffect::AsymmetricFriction => {
             let (c, b) = (v(Param::Coulomb), v(Param::Viscous));
             let (ac, av) = (v(Param::AsymCoulomb), v(Param::AsymViscous));
@@ -1190,6 +1233,8 @@ pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(
             Param::Coulomb => ("coulomb_friction".into(), x, s, tu.into()),
             Param::AsymCoulomb => ("coulomb_asymmetry".into(), x, s, tu.into()),
             Param::AsymViscous => ("viscous_asymmetry".into(), x, s, vu.into()),
+            Param::Stribeck => ("stribeck_friction".into(), x, s, tu.into()),
+            Param::LnStribeckVelocity => ("stribeck_velocity".into(), x.exp(), x.exp() * s, axis.units().1.into()),
         };
         out.push(row);
     }
