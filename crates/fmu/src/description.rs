@@ -183,9 +183,16 @@ fn render(guid: &str) -> String {
     put(Event::Start(BytesStart::new("ModelStructure")));
     let outputs: Vec<usize> =
         VARIABLES.iter().enumerate().filter(|(_, v)| v.causality == Causality::Output).map(|(i, _)| i + 1).collect();
-    for (section, with_dependencies) in [("Outputs", true), ("InitialUnknowns", false)] {
+    // FMI 2.0 §2.2.8: InitialUnknowns holds the outputs and the calculated parameters, by index
+    let initial: Vec<usize> = VARIABLES
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| matches!(v.causality, Causality::Output | Causality::CalculatedParameter))
+        .map(|(i, _)| i + 1)
+        .collect();
+    for (section, with_dependencies, listed) in [("Outputs", true, &outputs), ("InitialUnknowns", false, &initial)] {
         put(Event::Start(BytesStart::new(section)));
-        for i in &outputs {
+        for i in listed {
             let mut u = BytesStart::new("Unknown");
             u.push_attribute(("index", i.to_string().as_str()));
             if with_dependencies {
