@@ -26,12 +26,12 @@ fn main() {
         let t = std::time::Instant::now();
         let c = calibrate(&args).unwrap();
         let s = t.elapsed().as_secs_f64();
-        let added: Vec<_> = c.outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect();
+        let added: Vec<_> = c.outcome.as_ref().unwrap().final_fit.spec.effects.iter().map(|e| e.name()).collect();
         println!(
             "rep {rep}: {s:.2} s, {} samples, baseline RMSE {:.3e}, final {:.3e}, added {added:?}",
-            c.outcome.baseline.n,
-            c.outcome.baseline.rmse(),
-            c.outcome.final_fit.rmse()
+            c.outcome.as_ref().unwrap().baseline.n,
+            c.outcome.as_ref().unwrap().baseline.rmse(),
+            c.outcome.as_ref().unwrap().final_fit.rmse()
         );
         times.push(s);
     }

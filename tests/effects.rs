@@ -180,3 +180,80 @@ fn maxwell_branch_matches_the_complex_stiffness() {
     assert!(close(without, amp(0.0), 1e-3), "{without} vs {}", amp(0.0));
     assert!((amp(km) - amp(0.0)).abs() > 1e-2 * amp(0.0), "the branch must matter at this setting");
 }
+
+/// Rigid transmission (`transmission` = 1): one body of inertia J_m + J_l and damping B_m + B_l
+/// under motor torque τ and load L from rest: v(t) = (τ + L)/B (1 − e^{−Bt/J}),
+/// x(t) = (τ + L)/B (t − J/B (1 − e^{−Bt/J})); motor and link angles equal; initial speed honoured.
+#[test]
+fn rigid_transmission_is_one_body() {
+    let f = common::fmu();
+    let (jm, jl, bm, bl, tau, load) = (0.3, 0.7, 0.5, 1.5, 2.0, -0.5);
+    let mut i = f.instantiate(None).unwrap();
+    let p = [
+        ("transmission", 1.0),
+        ("motor_inertia", jm),
+        ("link_inertia", jl),
+        ("motor_damping", bm),
+        ("link_damping", bl),
+        ("initial_link_angle", 5.0), // ignored: the link is the motor
+    ];
+    i.initialize(0.0, None, &p).unwrap();
+    i.set("motor_torque", tau).unwrap();
+    i.set("load_torque", load).unwrap();
+    for _ in 0..2000 {
+        i.step(H).unwrap();
+    }
+    let (j, b, u, t) = (jm + jl, bm + bl, tau + load, 2.0);
+    let x = u / b * (t - j / b * (1.0 - (-b * t / j).exp()));
+    let v = u / b * (1.0 - (-b * t / j).exp());
+    let (xm, xl) = (i.get("motor_angle").unwrap(), i.get("link_angle").unwrap());
+    assert!(close(xm, x, 1e-9), "motor {xm} vs {x}");
+    assert_eq!(xm, xl);
+    assert!(close(i.get("link_speed").unwrap(), v, 1e-9));
+    // the motor side passes on τ − B_m v − J_m a
+    let a = u / j * (-b * t / j).exp();
+    let tt = i.get("transmitted_torque").unwrap();
+    assert!(close(tt, tau - bm * v - jm * a, 1e-6), "transmitted {tt}");
+
+    // initial speed: coasting against damping only, x = v0 J/B (1 − e^{−Bt/J})
+    let mut i = f.instantiate(None).unwrap();
+    i.initialize(
+        0.0,
+        None,
+        &[("transmission", 1.0), ("motor_damping", 0.0), ("link_damping", 0.2), ("initial_motor_speed", 1.5)],
+    )
+    .unwrap();
+    for _ in 0..1000 {
+        i.step(H).unwrap();
+    }
+    let j: f64 = 0.005 + 0.018;
+    let x = 1.5 * j / 0.2 * (1.0 - (-0.2 * 1.0 / j).exp());
+    assert!(close(i.get("link_angle").unwrap(), x, 1e-9));
+}
+
+/// Asymmetric friction: a rigid body pushed by a constant torque reaches v = (τ − F±)/B±, with
+/// F± = F_c ± a_c and B± = B_l ± a_v in each direction (adaptive solver, smoothed sign).
+#[test]
+fn asymmetric_friction_has_a_level_for_each_direction() {
+    let f = common::fmu();
+    let (fc, ac, bl, av) = (0.3, 0.1, 0.5, -0.2);
+    for (tau, level, damping) in [(1.0, fc + ac, bl + av), (-1.0, fc - ac, bl - av)] {
+        let mut i = f.instantiate(None).unwrap();
+        let p = [
+            ("transmission", 1.0),
+            ("motor_damping", 0.0),
+            ("link_damping", bl),
+            ("coulomb_friction", fc),
+            ("coulomb_friction_asymmetry", ac),
+            ("viscous_friction_asymmetry", av),
+        ];
+        i.initialize(0.0, None, &p).unwrap();
+        i.set("motor_torque", tau).unwrap();
+        for _ in 0..3000 {
+            i.step(H).unwrap();
+        }
+        let v = i.get("motor_speed").unwrap();
+        let expect = tau.signum() * (tau.abs() - level) / damping;
+        assert!(close(v, expect, 1e-6), "τ {tau}: v {v}, expected {expect}");
+    }
+}

@@ -3,7 +3,7 @@
 //! so they cannot disagree. Start values are read from `Model::default()` through each row's getter.
 
 use thermovia_model::material::MaterialTable;
-use thermovia_model::{Model, MotorDrive, ThermalDrive};
+use thermovia_model::{Model, MotorDrive, ThermalDrive, Transmission};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Causality {
@@ -233,6 +233,14 @@ pub static MOTOR_DRIVE: Enumeration = Enumeration {
     ],
 };
 
+pub static TRANSMISSION: Enumeration = Enumeration {
+    name: "Transmission",
+    items: &[
+        (0, "compliant", "springs and PCL between motor and link (the device)"),
+        (1, "rigid", "motor and link are one body (a drive without a link encoder)"),
+    ],
+};
+
 pub static THERMAL_DRIVE: Enumeration = Enumeration {
     name: "ThermalDrive",
     items: &[
@@ -291,6 +299,8 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(227, gravity_link_mass, Fixed, "kg", Ge(0.0), None, "Mass on a link in a vertical plane (effect gravity)", "EFFECT: off (the device carries 0.91 kg, PAPER)"),
     real_param!(228, gravity_com_distance, Fixed, "m", Ge(0.0), None, "Distance of that mass's centre from the axis", "PAPER: link length 140 mm"),
     real_param!(229, gravity_offset, Fixed, "rad", NONE, None, "Link angle of the hanging rest position", "EFFECT: 0"),
+    real_param!(231, coulomb_friction_asymmetry, Fixed, "N.m", NONE, None, "Half the difference of the Coulomb levels: F+ = coulomb_friction + this, F- = coulomb_friction - this (effect asymmetric_friction)", "EFFECT: off"),
+    real_param!(232, viscous_friction_asymmetry, Fixed, "N.m.s/rad", NONE, None, "Half the difference of the viscous coefficients: B+ = link_damping + this, B- = link_damping - this (effect asymmetric_friction)", "EFFECT: off"),
     real_param!(230, thermal_lag_time_constant, Fixed, "s", Ge(0.0), None, "Lag of the PCL behind the prescribed housing temperature (thermal_drive = 1; effect thermal_lag)", "EFFECT: off"),
     // ---- thermal parameters
     real_param!(240, pcl_mass, Fixed, "kg", Gt(0.0), None, "PCL mass, all cavities", "PAPER Table 1: 1.10 g × 3 cavities"),
@@ -305,6 +315,8 @@ pub static VARIABLES: &[Variable] = &[
     // ---- initial state
     real_param!(260, initial_motor_angle, Fixed, "rad", NONE, None, "θm at initialisation", "0"),
     real_param!(261, initial_link_angle, Fixed, "rad", NONE, None, "θl at initialisation", "0"),
+    real_param!(264, initial_motor_speed, Fixed, "rad/s", NONE, None, "θm' at initialisation (rigid: the body's speed)", "0"),
+    real_param!(265, initial_link_speed, Fixed, "rad/s", NONE, None, "θl' at initialisation (compliant transmission)", "0"),
     real_param!(262, initial_housing_temperature, Fixed, "K", Gt(0.0), None, "Housing temperature at initialisation", "PAPER: room 22 °C"),
     real_param!(263, initial_pcl_temperature, Fixed, "K", Gt(0.0), None, "PCL temperature at initialisation", "PAPER: room 22 °C"),
     // ---- numerics
@@ -346,6 +358,24 @@ pub static VARIABLES: &[Variable] = &[
             }),
         },
         enumeration: Some(&MOTOR_DRIVE),
+    },
+    Variable {
+        name: "transmission",
+        value_reference: 303,
+        causality: Causality::Parameter,
+        variability: Variability::Fixed,
+        unit: "",
+        lower: Ge(0.0),
+        upper: Some(1.0),
+        description: "0: springs and PCL couple motor and link; 1: rigid, motor and link one body of inertia motor_inertia + link_inertia, damping motor_damping + link_damping",
+        source: "MODE",
+        access: Access::Integer {
+            get: |m| m.params().transmission as i32,
+            set: Some(|m, v| {
+                m.params_mut().transmission = if v == 0 { Transmission::Compliant } else { Transmission::Rigid }
+            }),
+        },
+        enumeration: Some(&TRANSMISSION),
     },
     Variable {
         name: "thermal_drive",

@@ -9,7 +9,7 @@ pub mod params;
 pub mod thermal;
 
 use mechanics::{Coefficients, Drive, Propagator, State};
-pub use params::{MotorDrive, Params, ThermalDrive};
+pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -130,7 +130,17 @@ impl Model {
     /// Sets every state from the `initial_*` parameters (start of a run).
     pub fn initialize(&mut self) {
         let p = &self.params;
-        self.mechanics = State::from([p.initial_motor_angle, 0.0, p.initial_link_angle, 0.0, 0.0]);
+        self.mechanics = if p.transmission == Transmission::Rigid {
+            State::from([
+                p.initial_motor_angle,
+                p.initial_motor_speed,
+                p.initial_motor_angle,
+                p.initial_motor_speed,
+                0.0,
+            ])
+        } else {
+            State::from([p.initial_motor_angle, p.initial_motor_speed, p.initial_link_angle, p.initial_link_speed, 0.0])
+        };
         self.thermal = ThermalState::initial(p);
         self.adaptive_step = 0.0;
     }
@@ -161,6 +171,10 @@ impl Model {
         if self.params.motor_drive == MotorDrive::PrescribedAngle {
             self.mechanics[mechanics::MOTOR_ANGLE] = self.inputs.motor_angle_command;
             self.mechanics[mechanics::MOTOR_SPEED] = self.inputs.motor_speed_command;
+            if self.params.transmission == Transmission::Rigid {
+                self.mechanics[mechanics::LINK_ANGLE] = self.inputs.motor_angle_command;
+                self.mechanics[mechanics::LINK_SPEED] = self.inputs.motor_speed_command;
+            }
         }
         let drive = Drive::new(self.inputs.motor_torque, self.inputs.load_torque);
         let thermal_inputs = ThermalInputs {
@@ -220,6 +234,19 @@ impl Model {
         self.mechanics[mechanics::LINK_SPEED]
     }
     pub fn transmitted_torque(&mut self) -> f64 {
+        if self.params.transmission == Transmission::Rigid {
+            // the force the motor side passes on: τ_m − B_m θ' − J_m θ'' (0 when the angle is prescribed)
+            if self.params.motor_drive == MotorDrive::PrescribedAngle {
+                return 0.0;
+            }
+            let c = self.coefficients();
+            let u = Drive::new(self.inputs.motor_torque, self.inputs.load_torque);
+            let a = mechanics::derivative(&self.params, &c, &self.mechanics, &u)[mechanics::MOTOR_SPEED];
+            let p = &self.params;
+            return self.inputs.motor_torque
+                - p.motor_damping * self.mechanics[mechanics::MOTOR_SPEED]
+                - p.motor_inertia * a;
+        }
         let c = self.coefficients();
         mechanics::transmission(&self.params, &c, &self.mechanics).0
     }

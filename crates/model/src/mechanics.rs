@@ -12,7 +12,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
-use super::params::{MotorDrive, Params};
+use super::params::{MotorDrive, Params, Transmission};
 
 pub const N_STATE: usize = 5;
 pub type State = SVector<f64, N_STATE>;
@@ -70,12 +70,12 @@ const N_AUG: usize = N_STATE + 2;
 /// e^{Ah} and Γ = ∫₀ʰ e^{As} ds B for one step length and coefficient set.
 #[derive(Clone, Debug)]
 pub struct Propagator {
-    key: [f64; 10],
+    key: [f64; 11],
     phi: SMatrix<f64, N_STATE, N_STATE>,
     gamma: SMatrix<f64, N_STATE, 2>,
 }
 
-fn propagator_key(p: &Params, c: &Coefficients, h: f64) -> [f64; 10] {
+fn propagator_key(p: &Params, c: &Coefficients, h: f64) -> [f64; 11] {
     [
         h,
         c.stiffness,
@@ -87,6 +87,7 @@ fn propagator_key(p: &Params, c: &Coefficients, h: f64) -> [f64; 10] {
         p.link_inertia,
         p.link_damping,
         p.motor_drive as i32 as f64,
+        p.transmission as i32 as f64,
     ]
 }
 
@@ -95,6 +96,21 @@ pub fn linear_system(p: &Params, c: &Coefficients) -> (SMatrix<f64, N_STATE, N_S
     let (k, d, km, lam) = (c.stiffness, c.damping, p.maxwell_stiffness, p.maxwell_relaxation_time);
     let mut a = SMatrix::<f64, N_STATE, N_STATE>::zeros();
     let mut b = SMatrix::<f64, N_STATE, 2>::zeros();
+    if p.transmission == Transmission::Rigid {
+        // one body: both angle rows integrate the same speed, both speed rows the same law
+        let (j, damping) = (p.motor_inertia + p.link_inertia, p.motor_damping + p.link_damping);
+        let driven = p.motor_drive == MotorDrive::Torque;
+        for (angle, speed) in [(MOTOR_ANGLE, MOTOR_SPEED), (LINK_ANGLE, LINK_SPEED)] {
+            a[(angle, MOTOR_SPEED)] = 1.0;
+            if driven {
+                a[(speed, MOTOR_SPEED)] = -damping / j;
+                b[(speed, 0)] = 1.0 / j;
+                b[(speed, 1)] = 1.0 / j;
+            }
+        }
+        a[(MAXWELL_DEFLECTION, MAXWELL_DEFLECTION)] = -1.0 / p.maxwell_relaxation_time;
+        return (a, b);
+    }
     // τ_t = (k + km) θm + d ωm − (k + km) θl − d ωl − km q
     let tau_row = [k + km, d, -(k + km), -d, -km];
     a[(MOTOR_ANGLE, MOTOR_SPEED)] = 1.0;
@@ -167,13 +183,20 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
 
 /// Link friction: Coulomb plus a Stribeck excess that fades above `stribeck_velocity`, with sign
 /// smoothed by tanh over `friction_smoothing_velocity` (keeps the ODE Lipschitz).
+/// Asymmetric friction (`coulomb_friction_asymmetry` a_c, `viscous_friction_asymmetry` a_v) adds
+/// −a_c s² − a_v s v with s the smoothed sign: levels F_c ± a_c and B_l ± a_v for θl' ≷ 0.
 pub fn link_friction(p: &Params, link_speed: f64) -> f64 {
-    if p.coulomb_friction == 0.0 && p.stribeck_friction == 0.0 {
+    if p.coulomb_friction == 0.0
+        && p.stribeck_friction == 0.0
+        && p.coulomb_friction_asymmetry == 0.0
+        && p.viscous_friction_asymmetry == 0.0
+    {
         return 0.0;
     }
     let s = link_speed / p.stribeck_velocity;
     let level = p.coulomb_friction + p.stribeck_friction * (-s * s).exp();
-    -level * (link_speed / p.friction_smoothing_velocity).tanh()
+    let sign = (link_speed / p.friction_smoothing_velocity).tanh();
+    -level * sign - p.coulomb_friction_asymmetry * sign * sign - p.viscous_friction_asymmetry * sign * link_speed
 }
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
@@ -186,6 +209,19 @@ pub fn link_gravity(p: &Params, link_angle: f64) -> f64 {
 
 /// Right-hand side of the full (possibly nonlinear) mechanics.
 pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
+    if p.transmission == Transmission::Rigid {
+        let v = x[MOTOR_SPEED];
+        let accel = match p.motor_drive {
+            MotorDrive::Torque => {
+                let torque = u[0] + u[1] - (p.motor_damping + p.link_damping) * v
+                    + link_friction(p, v)
+                    + link_gravity(p, x[MOTOR_ANGLE]);
+                torque / (p.motor_inertia + p.link_inertia)
+            }
+            MotorDrive::PrescribedAngle => 0.0,
+        };
+        return State::from([v, accel, v, accel, -x[MAXWELL_DEFLECTION] / p.maxwell_relaxation_time]);
+    }
     let (tau, q_rate) = transmission(p, c, x);
     let motor_accel = match p.motor_drive {
         MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,

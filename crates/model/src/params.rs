@@ -13,6 +13,18 @@ pub enum MotorDrive {
     PrescribedAngle = 1,
 }
 
+/// What couples motor and link.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Transmission {
+    /// Springs ∥ Kelvin–Voigt PCL (∥ Maxwell branch, with backlash): the device as built.
+    Compliant = 0,
+    /// Motor and link are one body: inertia J_m + J_l, viscous B_m + B_l, every torque (motor, load,
+    /// friction, gravity) on that body; the link angle equals the motor angle. For drives without
+    /// a link encoder (a ball-screw axis), so a calibration need not fake rigidity with a huge
+    /// stiffness (a stiff ODE under the adaptive solver).
+    Rigid = 1,
+}
+
 /// How the thermal side is driven.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ThermalDrive {
@@ -44,6 +56,10 @@ pub struct Params {
     pub maxwell_stiffness: f64,
     pub maxwell_relaxation_time: f64,
     pub coulomb_friction: f64,
+    /// Half the difference of the Coulomb levels: F+ = F_c + this, F− = F_c − this.
+    pub coulomb_friction_asymmetry: f64,
+    /// Half the difference of the viscous coefficients: B+ = B_l + this, B− = B_l − this.
+    pub viscous_friction_asymmetry: f64,
     pub stribeck_friction: f64,
     pub stribeck_velocity: f64,
     pub friction_smoothing_velocity: f64,
@@ -65,10 +81,13 @@ pub struct Params {
     // initial state
     pub initial_motor_angle: f64,
     pub initial_link_angle: f64,
+    pub initial_motor_speed: f64,
+    pub initial_link_speed: f64,
     pub initial_housing_temperature: f64,
     pub initial_pcl_temperature: f64,
     // modes and numerics
     pub motor_drive: MotorDrive,
+    pub transmission: Transmission,
     pub thermal_drive: ThermalDrive,
     pub max_internal_step: f64,
     pub solver_tolerance: f64,
@@ -96,6 +115,8 @@ impl Default for Params {
             maxwell_stiffness: 0.0,
             maxwell_relaxation_time: 0.1,
             coulomb_friction: 0.0,
+            coulomb_friction_asymmetry: 0.0,
+            viscous_friction_asymmetry: 0.0,
             stribeck_friction: 0.0,
             stribeck_velocity: 0.05,
             friction_smoothing_velocity: 1e-3,
@@ -115,9 +136,12 @@ impl Default for Params {
             housing_ambient_conductance: 0.02,
             initial_motor_angle: 0.0,
             initial_link_angle: 0.0,
+            initial_motor_speed: 0.0,
+            initial_link_speed: 0.0,
             initial_housing_temperature: ZERO_CELSIUS + 22.0,
             initial_pcl_temperature: ZERO_CELSIUS + 22.0,
             motor_drive: MotorDrive::Torque,
+            transmission: Transmission::Compliant,
             thermal_drive: ThermalDrive::Heater,
             max_internal_step: 1e-3,
             solver_tolerance: 1e-10,
@@ -144,6 +168,8 @@ impl Params {
     /// True when every enabled effect is linear, so the exact exponential step applies.
     pub fn mechanics_is_linear(&self) -> bool {
         self.coulomb_friction == 0.0
+            && self.coulomb_friction_asymmetry == 0.0
+            && self.viscous_friction_asymmetry == 0.0
             && self.stribeck_friction == 0.0
             && self.backlash_width == 0.0
             && self.gravity_link_mass == 0.0

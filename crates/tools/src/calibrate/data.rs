@@ -5,6 +5,60 @@
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+/// How a run was driven (`# drive=`, docs/interfaces.md "Runs from other rigs and drives").
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DriveKind {
+    /// The measured motor angle drives the model; the link angle is predicted.
+    MotorAngle,
+    /// The measured motor torque (force) drives the model; motor and link positions are predicted.
+    MotorTorque,
+    /// The reference is replayed through the rig's controller; the positions are predicted.
+    Reference,
+}
+
+impl DriveKind {
+    pub fn name(self) -> &'static str {
+        match self {
+            DriveKind::MotorAngle => "motor_angle",
+            DriveKind::MotorTorque => "motor_torque",
+            DriveKind::Reference => "reference",
+        }
+    }
+}
+
+/// `# axis=`: rotary (rad, N·m, kg·m²) or linear (m, N, kg).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Axis {
+    Rotary,
+    Linear,
+}
+
+impl Axis {
+    /// (position, speed, torque, inertia, viscous) units as the reports print them.
+    pub fn units(self) -> (&'static str, &'static str, &'static str, &'static str, &'static str) {
+        match self {
+            Axis::Rotary => ("rad", "rad/s", "N.m", "kg.m2", "N.m.s/rad"),
+            Axis::Linear => ("m", "m/s", "N", "kg", "N.s/m"),
+        }
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Axis::Rotary => "rotary",
+            Axis::Linear => "linear",
+        }
+    }
+}
+
+/// The rig's position controller (`drive=reference`), in the file's units:
+/// τ = sat(kp (r − q) − kd q̇), applied every `period` s and held in between.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Controller {
+    pub kp: f64,
+    pub kd: f64,
+    pub saturation: f64,
+    pub period: f64,
+}
+
 /// One measured run, as read.
 #[derive(Clone, Debug)]
 pub struct Run {
@@ -19,6 +73,18 @@ pub struct Run {
     pub frequency_hz: f64,
     pub frequency_declared: bool,
     pub link_inertia: Option<f64>,
+    pub drive: DriveKind,
+    pub axis: Axis,
+    /// `# transmission=rigid`: motor and link one body; `link` then repeats `motor`.
+    pub rigid: bool,
+    /// False when the file has no link column (rigid drives).
+    pub link_measured: bool,
+    pub reference: Option<Vec<f64>>,
+    /// Measured motor torque (force on a linear axis), when the file has it.
+    pub motor_torque: Option<Vec<f64>>,
+    /// External torque (force) on the link, when the file has it.
+    pub load: Option<Vec<f64>>,
+    pub controller: Option<Controller>,
 }
 
 impl Run {
@@ -77,53 +143,206 @@ pub fn read_run(path: &Path) -> Result<Run, DataError> {
     parse_run(path, &text)
 }
 
+/// Line (1-based) of the `# key=` metadata line, for errors.
+fn meta_line(text: &str, key: &str) -> Option<usize> {
+    for (i, l) in text.lines().enumerate() {
+        let t = l.trim_start();
+        if !t.starts_with('#') {
+            if t.is_empty() {
+                continue;
+            }
+            return None;
+        }
+        if let Some((k, _)) = t.trim_start_matches('#').trim().split_once('=') {
+            if k.trim() == key {
+                return Some(i + 1);
+            }
+        }
+    }
+    None
+}
+
+fn meta_error(path: &Path, text: &str, key: &str, message: String) -> DataError {
+    match meta_line(text, key) {
+        Some(l) => DataError::line(path, l, message),
+        None => file_error(path, message),
+    }
+}
+
 /// Parses one run from its text (`path` only names it in errors).
 pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
-    const COLUMNS: [(&str, bool); 4] =
-        [("time_s", true), ("motor_angle_rad", true), ("link_angle_rad", true), ("temperature_c", false)];
-    let table = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&COLUMNS))?;
+    // the metadata decides which columns the file must have: read it first
+    let head = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&[]))
+        .map(|t| t.meta)
+        .unwrap_or_default();
+    let word = |key: &str, allowed: &[&str], default: &str| -> Result<String, DataError> {
+        match head.get(key) {
+            None => Ok(default.to_string()),
+            Some(v) if allowed.contains(&v.as_str()) => Ok(v.clone()),
+            Some(v) => {
+                Err(meta_error(path, text, key, format!("metadata {key}={v:?} is not one of {}", allowed.join(", "))))
+            }
+        }
+    };
+    let drive = match word("drive", &["motor_angle", "motor_torque", "reference"], "motor_angle")?.as_str() {
+        "motor_torque" => DriveKind::MotorTorque,
+        "reference" => DriveKind::Reference,
+        _ => DriveKind::MotorAngle,
+    };
+    let axis = if word("axis", &["rotary", "linear"], "rotary")? == "linear" { Axis::Linear } else { Axis::Rotary };
+    let rigid = word("transmission", &["compliant", "rigid"], "compliant")? == "rigid";
+    if rigid && drive == DriveKind::MotorAngle {
+        return Err(meta_error(
+            path,
+            text,
+            "transmission",
+            "transmission=rigid with drive=motor_angle leaves nothing to predict (the measured motor angle is the \
+             whole motion); declare `# drive=motor_torque` or `# drive=reference`"
+                .into(),
+        ));
+    }
+    let (pos, torque_col, link_col, ref_col, load_col) = match axis {
+        Axis::Rotary => {
+            ("motor_angle_rad", "motor_torque_nm", "link_angle_rad", "reference_angle_rad", "load_torque_nm")
+        }
+        Axis::Linear => {
+            ("motor_position_m", "motor_force_n", "link_position_m", "reference_position_m", "load_force_n")
+        }
+    };
+    let columns: [(&str, bool); 7] = [
+        ("time_s", true),
+        (pos, true),
+        (link_col, !rigid),
+        ("temperature_c", false),
+        (ref_col, drive == DriveKind::Reference),
+        (torque_col, drive == DriveKind::MotorTorque),
+        (load_col, false),
+    ];
+    let table = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&columns))
+        .map_err(|mut e| {
+            if e.message.starts_with("missing required column") {
+                e.message += &format!(
+                    " (axis={}, drive={}, transmission={})",
+                    axis.name(),
+                    drive.name(),
+                    if rigid { "rigid" } else { "compliant" }
+                );
+            }
+            e
+        })?;
     let (meta, last_line) = (table.meta, table.last_line);
     let has_temperature_column = table.columns[3].is_some();
-    let mut cols: Vec<Vec<f64>> = table.columns.into_iter().map(Option::unwrap_or_default).collect();
-    let n = cols[0].len();
+    let link_measured = table.columns[2].is_some();
+    let mut cols: Vec<Option<Vec<f64>>> = table.columns;
+    let n = cols[0].as_ref().map_or(0, Vec::len);
     if n < 3 {
         return Err(DataError::line(path, last_line, format!("only {n} data rows; a run needs at least 3")));
     }
     let temperature_c = if has_temperature_column {
-        std::mem::take(&mut cols[3])
+        cols[3].take().unwrap_or_default()
     } else if let Some(v) = meta.get("temperature_c") {
-        let t: f64 = v
-            .parse()
-            .ok()
-            .filter(|t: &f64| t.is_finite())
-            .ok_or_else(|| file_error(path, format!("metadata temperature_c={v:?} is not a number")))?;
+        let t: f64 = v.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {
+            meta_error(path, text, "temperature_c", format!("metadata temperature_c={v:?} is not a number"))
+        })?;
         vec![t; n]
+    } else if rigid {
+        // a rigid drive has no PCL: the temperature only labels the run
+        vec![22.0; n]
     } else {
         return Err(file_error(
             path,
             "the run has no temperature: neither a temperature_c column nor `# temperature_c=` metadata".into(),
         ));
     };
+    let time = cols[0].take().unwrap_or_default();
+    let motor = cols[1].take().unwrap_or_default();
+    let link = cols[2].take().unwrap_or_else(|| motor.clone());
     let mut run = Run {
         file: path.to_path_buf(),
-        time: std::mem::take(&mut cols[0]),
-        motor: std::mem::take(&mut cols[1]),
-        link: std::mem::take(&mut cols[2]),
+        time,
+        motor,
+        link,
         temperature_c,
         frequency_hz: 0.0,
         frequency_declared: false,
         link_inertia: None,
+        drive,
+        axis,
+        rigid,
+        link_measured,
+        reference: cols[4].take(),
+        motor_torque: cols[5].take(),
+        load: cols[6].take(),
+        controller: None,
         meta,
     };
-    for key in ["frequency_hz", "link_inertia_kgm2", "link_mass_kg", "link_length_m", "motor_amplitude_rad"] {
+    let inertia_key = match axis {
+        Axis::Rotary => "link_inertia_kgm2",
+        Axis::Linear => "inertia_kg",
+    };
+    for key in ["frequency_hz", inertia_key, "link_mass_kg", "link_length_m", "motor_amplitude_rad"] {
         if let Some(v) = run.meta.get(key) {
             match v.parse::<f64>() {
                 Ok(x) if x.is_finite() && x > 0.0 => {}
-                _ => return Err(file_error(path, format!("metadata {key}={v:?} is not a positive number"))),
+                _ => return Err(meta_error(path, text, key, format!("metadata {key}={v:?} is not a positive number"))),
             }
         }
     }
-    run.link_inertia = run.meta_f64("link_inertia_kgm2");
+    if axis == Axis::Linear && run.meta.contains_key("link_inertia_kgm2") {
+        return Err(meta_error(
+            path,
+            text,
+            "link_inertia_kgm2",
+            "link_inertia_kgm2 on a linear axis: declare the moving mass as `# inertia_kg=`".into(),
+        ));
+    }
+    run.link_inertia = run.meta_f64(inertia_key);
+    if drive == DriveKind::Reference {
+        let get = |key: &str, what: &str| -> Result<f64, DataError> {
+            match run.meta.get(key) {
+                None => Err(file_error(
+                    path,
+                    format!("drive=reference needs the controller: missing `# {key}=` ({what}, in the file's units)"),
+                )),
+                Some(v) => v.parse::<f64>().ok().filter(|x| x.is_finite() && *x > 0.0).ok_or_else(|| {
+                    meta_error(path, text, key, format!("metadata {key}={v:?} is not a positive number ({what})"))
+                }),
+            }
+        };
+        let controller = Controller {
+            kp: get("controller_kp", "torque or force per position error")?,
+            kd: get("controller_kd", "torque or force per velocity")?,
+            saturation: get("controller_saturation", "largest torque or force")?,
+            period: get("controller_period_s", "controller period, s")?,
+        };
+        // the controller acts once per sample: the log must be at its period
+        let span = run.time[n - 1] - run.time[0];
+        let mean_dt = span / (n - 1) as f64;
+        if (mean_dt - controller.period).abs() > 1e-3 * controller.period {
+            return Err(meta_error(
+                path,
+                text,
+                "controller_period_s",
+                format!(
+                    "controller_period_s={} but the samples are {mean_dt:.6} s apart on average: drive=reference \
+                     replays one controller update per sample",
+                    controller.period
+                ),
+            ));
+        }
+        run.controller = Some(controller);
+    }
+    if run.rigid || drive != DriveKind::MotorAngle {
+        // no harmonic excitation to measure; the PCL's hysteretic damping reads it (compliant only)
+        run.frequency_hz = run.meta_f64("frequency_hz").unwrap_or(0.5);
+        run.frequency_declared = run.meta.contains_key("frequency_hz");
+        if !run.rigid && !run.frequency_declared {
+            if let Some(f) = dominant_frequency(&run.time, &run.motor) {
+                run.frequency_hz = f;
+            }
+        }
+        return Ok(run);
+    }
     match run.meta_f64("frequency_hz") {
         Some(f) => {
             run.frequency_hz = f;

@@ -8,6 +8,7 @@
 
 pub mod data;
 pub mod diagnose;
+pub mod drive;
 pub mod fit;
 pub mod paper;
 pub mod report;
@@ -20,9 +21,36 @@ pub use synthetic::SynthArgs;
 /// `thermovia calibrate` options.
 #[derive(Debug, Clone)]
 #[cfg_attr(feature = "cli", derive(clap::Args))]
+#[cfg_attr(
+    feature = "cli",
+    command(after_long_help = "Examples:
+  # runs of the device (the measured motor angle drives the model; the link angle is predicted)
+  thermovia synth --out out/synth --coulomb-friction 0.03
+  thermovia calibrate out/synth --out out/calibrate
+
+  # a real drive log, closed loop: the reference is replayed through the rig's controller
+  # (declared in the file: # drive=reference, # controller_kp=..., # axis=linear, # transmission=rigid)
+  thermovia calibrate data/emps/emps_estimation.csv --validate data/emps/emps_validation.csv \\
+      --published data/emps/published.json --out out/emps
+
+  # a log driven by its measured torque (# drive=motor_torque): motor and link angles are predicted
+  thermovia calibrate runs/torque_driven.csv --out out/torque
+
+File format, metadata and report keys: docs/interfaces.md (\"Measured data\", \"Runs from other rigs and drives\").")
+)]
 pub struct CalibrateArgs {
     /// Run files (CSV, docs: interfaces.md) or folders of them.
     pub inputs: Vec<std::path::PathBuf>,
+    /// Held-out runs (a file or folder; repeat the option for more): simulated with the parameters fitted on INPUTS and
+    /// reported under "validation"; an effect is kept only if it lowers their position error
+    /// (drive runs: `# drive=motor_torque` or `reference`).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE_OR_DIR"))]
+    pub validate: Vec<std::path::PathBuf>,
+    /// A published reference to compare with (JSON: {"parameters": {"inertia": …, "viscous_friction": …,
+    /// "coulomb_friction": …, "offset": …}, "position_relerr_percent": {"estimation": …, "validation": …}});
+    /// it is only reported, never used by the fit.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "FILE"))]
+    pub published: Option<std::path::PathBuf>,
     /// Folder for report.json, the Markdown report and plots (written atomically).
     #[cfg_attr(feature = "cli", arg(long, default_value = "out/calibrate"))]
     pub out: std::path::PathBuf,
@@ -132,7 +160,10 @@ pub fn sim_input(r: &data::Run, smoothing_half_width: usize) -> sim::SimInput {
 pub struct Calibration {
     pub runs: Vec<data::Run>,
     pub temperatures: Vec<f64>,
-    pub outcome: search::Outcome,
+    /// The device loop (runs driven by the measured motor angle).
+    pub outcome: Option<search::Outcome>,
+    /// The drive loop (`drive=motor_torque` or `reference`, rigid or linear axes).
+    pub drive: Option<drive::DriveOutcome>,
     pub report: serde_json::Value,
     pub files: Vec<(String, Vec<u8>)>,
 }
@@ -141,6 +172,23 @@ pub struct Calibration {
 pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error::Error>> {
     let t0 = std::time::Instant::now();
     let runs = data::read_inputs(&args.inputs)?;
+    let is_drive = |r: &data::Run| r.drive != data::DriveKind::MotorAngle || r.rigid;
+    if runs.iter().any(is_drive) {
+        return calibrate_drive(args, runs, t0);
+    }
+    if let Some(r) = runs.iter().find(|r| r.axis == data::Axis::Linear) {
+        return Err(format!(
+            "{}: axis=linear with drive=motor_angle is not supported (the device loop fits PCL moduli of a \
+             rotary joint); declare `# drive=motor_torque` or `# drive=reference`",
+            r.file.display()
+        )
+        .into());
+    }
+    if !args.validate.is_empty() {
+        return Err("--validate is supported for drive runs (`# drive=motor_torque` or `reference`); runs driven by \
+                    the measured motor angle report no held-out set yet"
+            .into());
+    }
     let fmu = crate::open_fmu(args.fmu.as_deref())?;
     let sim = sim::Simulator::new(fmu, args.threads)?;
     let (group, temperatures) = group_runs(&runs);
@@ -162,7 +210,67 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     if !args.no_plots {
         files.extend(report::plots(&runs, &prob, &outcome)?);
     }
-    Ok(Calibration { runs, temperatures, outcome, report, files })
+    Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
+}
+
+/// The drive loop (drive.rs) on runs driven by torque or by a reference, rigid or linear.
+fn calibrate_drive(
+    args: &CalibrateArgs,
+    runs: Vec<data::Run>,
+    t0: std::time::Instant,
+) -> Result<Calibration, Box<dyn std::error::Error>> {
+    let held = if args.validate.is_empty() { Vec::new() } else { data::read_inputs(&args.validate)? };
+    let all: Vec<&data::Run> = runs.iter().chain(&held).collect();
+    let first = all[0];
+    for r in &all {
+        if r.axis != first.axis {
+            return Err(format!(
+                "{}: axis={} but {} is axis={}: one calibration speaks one set of units",
+                r.file.display(),
+                r.axis.name(),
+                first.file.display(),
+                first.axis.name()
+            )
+            .into());
+        }
+        if r.drive == data::DriveKind::MotorAngle {
+            return Err(format!(
+                "{}: drive=motor_angle cannot be calibrated together with torque- or reference-driven runs",
+                r.file.display()
+            )
+            .into());
+        }
+    }
+    let published = match &args.published {
+        Some(p) => {
+            let text = std::fs::read_to_string(p).map_err(|e| format!("{}: {e}", p.display()))?;
+            Some(serde_json::from_str::<serde_json::Value>(&text).map_err(|e| format!("{}: {e}", p.display()))?)
+        }
+        None => None,
+    };
+    let fmu = crate::open_fmu(args.fmu.as_deref())?;
+    let sim = sim::Simulator::new(fmu, args.threads)?;
+    let (group, temperatures) = group_runs(&runs);
+    let mut prob = drive::DriveProblem::new(&sim, &runs, group, temperatures.len());
+    let mut held_prob = if held.is_empty() {
+        None
+    } else {
+        let (hg, _) = group_runs(&held);
+        // held-out runs at a temperature not fitted use the first group's moduli
+        let hg = hg.into_iter().map(|g| g.min(temperatures.len() - 1)).collect();
+        Some(drive::DriveProblem::new(&sim, &held, hg, temperatures.len()))
+    };
+    let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
+    let mut files = vec![
+        ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
+        ("report.md".to_string(), drive::report_markdown(&report).into_bytes()),
+    ];
+    if !args.no_plots {
+        files.extend(drive::plots(&prob, &outcome, runs[0].axis)?);
+    }
+    Ok(Calibration { runs, temperatures, outcome: None, drive: Some(outcome), report, files })
 }
 
 pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
@@ -187,15 +295,39 @@ pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     let c = calibrate(args)?;
     synthetic::write_atomically(&args.out, &c.files)?;
+    if let Some(d) = &c.drive {
+        let j = &c.report;
+        let unit = j["units"]["position"].as_str().unwrap_or("");
+        let m = |a: &serde_json::Value| a["relerr_percent"].as_f64().unwrap_or(f64::NAN);
+        let added: Vec<&str> = d.final_fit.effects.iter().map(|e| e.name()).collect();
+        let mut line = format!(
+            "{} runs: position relerr baseline {:.4} %, final {:.4} % (RMSE {:.3e} → {:.3e} {unit})",
+            c.runs.len(),
+            m(&j["baseline"]),
+            m(&j["final"]),
+            j["baseline"]["rmse"].as_f64().unwrap_or(f64::NAN),
+            j["final"]["rmse"].as_f64().unwrap_or(f64::NAN)
+        );
+        if j.get("validation").is_some() {
+            line += &format!(
+                "; validation {:.4} % → {:.4} %",
+                m(&j["validation"]["baseline"]),
+                m(&j["validation"]["final"])
+            );
+        }
+        println!("{line}; added [{}]; report in {}", added.join(", "), args.out.display());
+        return Ok(());
+    }
+    let outcome = c.outcome.as_ref().expect("device loop");
     let m = |k: &str| c.report[k]["rmse_rad"].as_f64().unwrap_or(f64::NAN);
-    let added: Vec<&str> = c.outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect();
+    let added: Vec<&str> = outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect();
     println!(
         "{} runs: baseline RMSE {:.3e} rad, final {:.3e} rad, added [{}], unexplained {}; report in {}",
         c.runs.len(),
         m("baseline"),
         m("final"),
         added.join(", "),
-        c.outcome.unexplained,
+        outcome.unexplained,
         args.out.display()
     );
     Ok(())

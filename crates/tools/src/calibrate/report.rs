@@ -243,7 +243,7 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     s
 }
 
-fn line_plot(
+pub(crate) fn line_plot(
     title: &str,
     ylabel: &str,
     t: &[f64],

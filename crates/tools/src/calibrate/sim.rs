@@ -160,6 +160,31 @@ impl Simulator {
         self.instances.len()
     }
 
+    /// Runs `f` on every job with an instance of the pool, in parallel; results in job order.
+    pub fn map<T: Sync, R: Send>(&self, jobs: &[T], f: impl Fn(&mut Instance, &T) -> R + Sync) -> Vec<R> {
+        let next = AtomicUsize::new(0);
+        let results: Vec<Mutex<Option<R>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
+        let workers = self.instances.len().min(jobs.len()).max(1);
+        std::thread::scope(|s| {
+            for w in 0..workers {
+                let (next, results, inst, f) = (&next, &results, &self.instances[w], &f);
+                s.spawn(move || {
+                    let mut inst = inst.lock().unwrap_or_else(|p| p.into_inner());
+                    loop {
+                        let j = next.fetch_add(1, Ordering::Relaxed);
+                        if j >= jobs.len() {
+                            break;
+                        }
+                        let r = f(&mut inst, &jobs[j]);
+                        *results[j].lock().unwrap_or_else(|p| p.into_inner()) = Some(r);
+                    }
+                });
+            }
+        });
+        self.simulations.fetch_add(jobs.len(), Ordering::Relaxed);
+        results.into_iter().map(|m| m.into_inner().unwrap_or_else(|p| p.into_inner()).expect("every job ran")).collect()
+    }
+
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
     /// absurd trial parameter) is returned as an error for that job only.
     pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<JobResult> {

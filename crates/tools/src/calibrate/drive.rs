@@ -1,0 +1,1566 @@
+//! Real drive logs (docs/interfaces.md, "Runs from other rigs and drives"): runs driven by the
+//! measured motor torque (`drive=motor_torque`) or by a reference replayed through the rig's
+//! controller (`drive=reference`), on rotary or linear axes, with a compliant or a rigid
+//! transmission. Every run is simulated by the packaged FMU (`motor_drive` 0, `transmission`
+//! 0 or 1); the master applies the measured torque, or the controller's output every controller
+//! period, held over the period (as a digital drive does).
+//!
+//! A linear axis runs through the same FMU with its numbers unchanged: metres where the FMU says
+//! rad, newtons for N·m, kg for kg·m² (the equations of a body on an axis are the same); the
+//! reports carry the file's units.
+//!
+//! The loop: a baseline (inertia, viscous friction, a constant load; the PCL moduli too on a
+//! compliant transmission) fitted by output error, Levenberg–Marquardt through the FMU; the
+//! residual diagnosed (inverse-model regression of the measured force on the motion, and a score
+//! test of each friction effect through the FMU); the best effect refitted and kept when BIC falls
+//! by more than 10 and, with a held-out set, the held-out position error falls too.
+
+use nalgebra::{DMatrix, DVector};
+use serde_json::{json, Map, Value};
+use thermovia_importer::{HarnessError, Instance};
+
+use super::data::{Axis, DriveKind, Run};
+use super::sim::Simulator;
+
+/// Fitted quantities.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Param {
+    /// ln of the moving inertia: the whole body on a rigid drive, the link on a compliant one.
+    LnInertia,
+    /// Viscous friction to ground (`link_damping`; on a rigid drive the body's, motor_damping = 0).
+    Viscous,
+    /// Constant torque (force) on the link: a load or a measurement offset (`constant_load`).
+    ConstantLoad,
+    /// ln of the PCL modulus factors of a temperature group (compliant only).
+    LnStorage(usize),
+    LnLoss(usize),
+    Coulomb,
+    AsymCoulomb,
+    AsymViscous,
+    /// Static friction above Coulomb, fading with speed (`stribeck_friction`), and ln of its speed scale.
+    Stribeck,
+    LnStribeckVelocity,
+}
+
+/// Effects the drive loop can add.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DriveEffect {
+    CoulombFriction,
+    /// Different Coulomb and viscous levels in each direction (needs Coulomb friction in).
+    AsymmetricFriction,
+    /// Stribeck excess over Coulomb friction at low speed (needs Coulomb friction in).
+    StribeckFriction,
+}
+
+impl DriveEffect {
+    pub const ALL: [DriveEffect; 3] =
+        [DriveEffect::CoulombFriction, DriveEffect::AsymmetricFriction, DriveEffect::StribeckFriction];
+    pub fn name(self) -> &'static str {
+        match self {
+            DriveEffect::CoulombFriction => "coulomb_friction",
+            DriveEffect::AsymmetricFriction => "asymmetric_friction",
+            DriveEffect::StribeckFriction => "stribeck_friction",
+        }
+    }
+    pub fn params(self) -> &'static [Param] {
+        match self {
+            DriveEffect::CoulombFriction => &[Param::Coulomb],
+            DriveEffect::AsymmetricFriction => &[Param::AsymCoulomb, Param::AsymViscous],
+            DriveEffect::StribeckFriction => &[Param::Stribeck, Param::LnStribeckVelocity],
+        }
+    }
+}
+
+/// Physical values of one simulation, in the file's units.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct DriveModel {
+    pub inertia: f64,
+    pub viscous: f64,
+    pub constant_load: f64,
+    pub storage_scale: f64,
+    pub loss_scale: f64,
+    pub coulomb: f64,
+    pub asym_coulomb: f64,
+    pub asym_viscous: f64,
+    pub stribeck: f64,
+    pub stribeck_velocity: f64,
+}
+
+/// What drives one simulated run.
+#[derive(Clone, Debug)]
+pub struct DriveInput {
+    pub name: String,
+    pub time: Vec<f64>,
+    pub drive: DriveKind,
+    pub rigid: bool,
+    pub motor: Vec<f64>,
+    /// Measured link position (None on a rigid drive).
+    pub link: Option<Vec<f64>>,
+    pub reference: Option<Vec<f64>>,
+    pub controller: Option<super::data::Controller>,
+    /// Measured motor torque (force).
+    pub torque: Option<Vec<f64>>,
+    pub load: Option<Vec<f64>>,
+    pub housing_k: Vec<f64>,
+    pub frequency_hz: f64,
+    pub inertia_declared: Option<f64>,
+    /// Initial speed estimated from the first samples (quadratic fit over 10 ms).
+    pub speed0: f64,
+    pub link_speed0: f64,
+    /// Multiplies the load column (1: as recorded; see `LoadColumnDiagnosis`).
+    pub load_gain: f64,
+    /// `# drive_gain_n_per_v=` when the file declares it (torque per controller volt).
+    pub declared_drive_gain: Option<f64>,
+}
+
+/// Speed at the first sample: slope at t0 of a least-squares quadratic over the first samples.
+fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
+    let m = t.len().min(11);
+    if m < 3 {
+        return 0.0;
+    }
+    let a = DMatrix::from_fn(m, 3, |i, j| (t[i] - t[0]).powi(j as i32));
+    let y = DVector::from_iterator(m, x[..m].iter().copied());
+    let ata = a.transpose() * &a;
+    match ata.try_inverse() {
+        Some(inv) => (inv * (a.transpose() * y))[1],
+        None => 0.0,
+    }
+}
+
+impl DriveInput {
+    pub fn from_run(r: &Run) -> DriveInput {
+        DriveInput {
+            name: r.name(),
+            time: r.time.clone(),
+            drive: r.drive,
+            rigid: r.rigid,
+            motor: r.motor.clone(),
+            link: if r.link_measured && !r.rigid { Some(r.link.clone()) } else { None },
+            reference: r.reference.clone(),
+            controller: r.controller,
+            torque: r.motor_torque.clone(),
+            load: r.load.clone(),
+            housing_k: r.temperature_c.iter().map(|t| t + 273.15).collect(),
+            frequency_hz: r.frequency_hz,
+            inertia_declared: r.link_inertia,
+            speed0: initial_speed(&r.time, &r.motor),
+            link_speed0: initial_speed(&r.time, &r.link),
+            load_gain: 1.0,
+            declared_drive_gain: r.meta_f64("drive_gain_n_per_v").filter(|g| g.is_finite() && *g > 0.0),
+        }
+    }
+
+    /// Measured positions the model predicts, stacked: motor, then link when measured.
+    pub fn measured(&self) -> Vec<f64> {
+        let mut y = self.motor.clone();
+        if let Some(l) = &self.link {
+            y.extend_from_slice(l);
+        }
+        y
+    }
+
+    /// The controller's output computed from the *measured* positions (what the drive applied,
+    /// up to the drive's own rounding): the torque record when the file has none.
+    pub fn applied_torque(&self) -> Vec<f64> {
+        if let Some(t) = &self.torque {
+            return t.clone();
+        }
+        let (Some(c), Some(r)) = (&self.controller, &self.reference) else { return vec![0.0; self.time.len()] };
+        let mut est = VelocityEstimator::new(self.motor[0], self.speed0, c.period);
+        self.motor.iter().zip(r).map(|(&q, &rk)| c.law(rk, q, est.update(q))).collect()
+    }
+}
+
+impl super::data::Controller {
+    /// τ = sat(kp (r − q) − kd q̇).
+    pub fn law(&self, reference: f64, q: f64, speed: f64) -> f64 {
+        (self.kp * (reference - q) - self.kd * speed).clamp(-self.saturation, self.saturation)
+    }
+}
+
+/// The drive's velocity estimate (EMPS, its Eq. 6–7): qf(k) = ½ q(k) + ½ q(k−1),
+/// q̇(k) = (qf(k) − qf(k−1)) / T. Before the first sample the history is extrapolated with the
+/// initial speed.
+pub struct VelocityEstimator {
+    q_prev: f64,
+    qf_prev: f64,
+    period: f64,
+}
+
+impl VelocityEstimator {
+    pub fn new(q0: f64, v0: f64, period: f64) -> Self {
+        let (q1, q2) = (q0 - v0 * period, q0 - 2.0 * v0 * period);
+        VelocityEstimator { q_prev: q1, qf_prev: 0.5 * (q1 + q2), period }
+    }
+    pub fn update(&mut self, q: f64) -> f64 {
+        let qf = 0.5 * (q + self.q_prev);
+        let v = (qf - self.qf_prev) / self.period;
+        self.q_prev = q;
+        self.qf_prev = qf;
+        v
+    }
+}
+
+/// One simulated run: positions at every sample and the torque (force) the master applied.
+#[derive(Clone, Debug)]
+pub struct Simulated {
+    pub motor: Vec<f64>,
+    pub link: Vec<f64>,
+    pub torque: Vec<f64>,
+}
+
+impl Simulated {
+    pub fn stacked(&self, inp: &DriveInput) -> Vec<f64> {
+        let mut y = self.motor.clone();
+        if inp.link.is_some() {
+            y.extend_from_slice(&self.link);
+        }
+        y
+    }
+}
+
+/// Solver tolerance for the drive runs: the closed loop turns a friction change of a newton into
+/// a micrometre (1/kp), so the solver's own noise must stay well below what a difference step moves.
+pub const DRIVE_SOLVER_TOLERANCE: f64 = 1e-10;
+
+/// Samples closer than this relative amount to the nominal step use the nominal step.
+const STEP_SNAP: f64 = 1e-6;
+
+/// One run through one instance.
+pub fn simulate(inst: &mut Instance, inp: &DriveInput, m: &DriveModel) -> Result<Simulated, HarnessError> {
+    let vr = |n: &str| inst.handle(n).map(|h| h.value_reference);
+    let (vr_torque, vr_load, vr_housing) =
+        (vr("motor_torque")?, vr("load_torque")?, vr("housing_temperature_command")?);
+    let (vr_motor, vr_link) = (vr("motor_angle")?, vr("link_angle")?);
+    inst.reset()?;
+    let n = inp.time.len();
+    let link0 = inp.link.as_ref().map_or(inp.motor[0], |l| l[0]);
+    let mut params: Vec<(&str, f64)> = vec![
+        ("motor_drive", 0.0),
+        ("thermal_drive", 1.0),
+        ("transmission", if inp.rigid { 1.0 } else { 0.0 }),
+        ("initial_motor_angle", inp.motor[0]),
+        ("initial_link_angle", link0),
+        ("initial_motor_speed", inp.speed0),
+        ("initial_link_speed", if inp.link.is_some() { inp.link_speed0 } else { inp.speed0 }),
+        ("initial_housing_temperature", inp.housing_k[0]),
+        ("initial_pcl_temperature", inp.housing_k[0]),
+        ("excitation_frequency", inp.frequency_hz),
+        ("storage_modulus_scale", m.storage_scale),
+        ("loss_modulus_scale", m.loss_scale),
+        ("link_damping", m.viscous.max(0.0)),
+        ("coulomb_friction", m.coulomb.max(0.0)),
+        ("coulomb_friction_asymmetry", m.asym_coulomb),
+        ("viscous_friction_asymmetry", m.asym_viscous),
+        ("stribeck_friction", m.stribeck.max(0.0)),
+        ("stribeck_velocity", m.stribeck_velocity),
+        ("solver_tolerance", DRIVE_SOLVER_TOLERANCE),
+    ];
+    if inp.rigid {
+        // the body's inertia split over the two halves (the FMU adds them); its viscous friction
+        // is link_damping alone
+        params.extend([("motor_inertia", 0.5 * m.inertia), ("link_inertia", 0.5 * m.inertia), ("motor_damping", 0.0)]);
+    } else {
+        params.push(("link_inertia", m.inertia));
+    }
+    inst.initialize(inp.time[0], None, &params)?;
+    let nominal = (inp.time[n - 1] - inp.time[0]) / (n - 1) as f64;
+    let mut out =
+        Simulated { motor: Vec::with_capacity(n), link: Vec::with_capacity(n), torque: Vec::with_capacity(n) };
+    let mut q = inp.motor[0];
+    let mut l = link0;
+    let mut est = inp.controller.map(|c| VelocityEstimator::new(q, inp.speed0, c.period));
+    let mut y = [0.0; 2];
+    for k in 0..n {
+        out.motor.push(q);
+        out.link.push(l);
+        let tau = match (inp.drive, &inp.controller, &inp.reference, est.as_mut()) {
+            (DriveKind::Reference, Some(c), Some(r), Some(e)) => c.law(r[k], q, e.update(q)),
+            _ => inp.torque.as_ref().map_or(0.0, |t| t[k]),
+        };
+        out.torque.push(tau);
+        if k + 1 == n {
+            break;
+        }
+        let dt = match &inp.controller {
+            Some(c) if inp.drive == DriveKind::Reference => c.period,
+            _ => {
+                let dt = inp.time[k + 1] - inp.time[k];
+                if (dt - nominal).abs() <= STEP_SNAP * nominal {
+                    nominal
+                } else {
+                    dt
+                }
+            }
+        };
+        let load = inp.load.as_ref().map_or(0.0, |v| v[k] * inp.load_gain) + m.constant_load;
+        let housing = 0.5 * (inp.housing_k[k] + inp.housing_k[k + 1]);
+        inst.set_reals(&[vr_torque, vr_load, vr_housing], &[tau, load, housing])?;
+        inst.step(dt)?;
+        inst.get_reals(&[vr_motor, vr_link], &mut y)?;
+        (q, l) = (y[0], y[1]);
+    }
+    Ok(out)
+}
+
+/// The data as the drive fit sees it.
+pub struct DriveProblem<'a> {
+    pub sim: &'a Simulator,
+    pub inputs: Vec<DriveInput>,
+    pub group: Vec<usize>,
+    pub n_groups: usize,
+    /// Typical force and speed of the data (difference steps, scaling).
+    pub force_scale: f64,
+    pub speed_scale: f64,
+    /// Start of the inertia when undeclared.
+    pub inertia_start: f64,
+}
+
+/// A fitted model.
+#[derive(Clone, Debug)]
+pub struct DriveFit {
+    pub spec: Vec<Param>,
+    pub effects: Vec<DriveEffect>,
+    pub p: Vec<f64>,
+    pub sims: Vec<Simulated>,
+    pub residual: Vec<f64>,
+    pub sse: f64,
+    pub jacobian: DMatrix<f64>,
+    /// Block-sandwich covariance (holds up under correlated residuals).
+    pub covariance: DMatrix<f64>,
+    pub iterations: usize,
+}
+
+impl DriveFit {
+    pub fn n(&self) -> usize {
+        self.residual.len()
+    }
+    pub fn bic(&self) -> f64 {
+        let n = self.n() as f64;
+        n * (self.sse / n).ln() + self.p.len() as f64 * n.ln()
+    }
+    pub fn value(&self, param: Param) -> Option<(f64, f64)> {
+        let i = self.spec.iter().position(|&q| q == param)?;
+        Some((self.p[i], self.covariance[(i, i)].max(0.0).sqrt()))
+    }
+}
+
+/// Contiguous blocks per set for the sandwich covariance: residual correlation inside a block is
+/// kept whole, blocks are taken as independent.
+pub const COVARIANCE_BLOCKS: usize = 20;
+
+impl<'a> DriveProblem<'a> {
+    pub fn new(sim: &'a Simulator, runs: &[Run], group: Vec<usize>, n_groups: usize) -> Self {
+        let inputs: Vec<DriveInput> = runs.iter().map(DriveInput::from_run).collect();
+        let (mut fs, mut vs, mut nf) = (0.0, 0.0, 0usize);
+        for inp in &inputs {
+            let tau = inp.applied_torque();
+            fs += tau.iter().map(|t| t * t).sum::<f64>();
+            for k in 1..inp.time.len() {
+                let v = (inp.motor[k] - inp.motor[k - 1]) / (inp.time[k] - inp.time[k - 1]);
+                vs += v * v;
+            }
+            nf += tau.len();
+        }
+        let force_scale = (fs / nf.max(1) as f64).sqrt().max(1e-12);
+        let speed_scale = (vs / nf.max(1) as f64).sqrt().max(1e-12);
+        DriveProblem { sim, inputs, group, n_groups, force_scale, speed_scale, inertia_start: 1.0 }
+    }
+
+    pub fn typical(&self, p: Param) -> f64 {
+        match p {
+            Param::LnInertia | Param::LnStorage(_) | Param::LnLoss(_) | Param::LnStribeckVelocity => 1.0,
+            Param::Stribeck => self.force_scale,
+            Param::Viscous | Param::AsymViscous => self.force_scale / self.speed_scale,
+            Param::ConstantLoad | Param::Coulomb | Param::AsymCoulomb => self.force_scale,
+        }
+    }
+
+    pub fn model(&self, spec: &[Param], p: &[f64], run: usize) -> DriveModel {
+        let g = self.group[run];
+        let mut m = DriveModel {
+            inertia: self.inputs[run].inertia_declared.unwrap_or(self.inertia_start),
+            viscous: 0.0,
+            constant_load: 0.0,
+            storage_scale: 1.0,
+            loss_scale: 1.0,
+            coulomb: 0.0,
+            asym_coulomb: 0.0,
+            asym_viscous: 0.0,
+            stribeck: 0.0,
+            stribeck_velocity: 0.05,
+        };
+        for (&q, &v) in spec.iter().zip(p) {
+            match q {
+                Param::LnInertia => {
+                    if self.inputs[run].inertia_declared.is_none() {
+                        m.inertia = v.exp()
+                    }
+                }
+                Param::Viscous => m.viscous = v,
+                Param::ConstantLoad => m.constant_load = v,
+                Param::LnStorage(h) if h == g => m.storage_scale = v.exp(),
+                Param::LnLoss(h) if h == g => m.loss_scale = v.exp(),
+                Param::LnStorage(_) | Param::LnLoss(_) => {}
+                Param::Coulomb => m.coulomb = v,
+                Param::AsymCoulomb => m.asym_coulomb = v,
+                Param::AsymViscous => m.asym_viscous = v,
+                Param::Stribeck => m.stribeck = v,
+                Param::LnStribeckVelocity => m.stribeck_velocity = v.exp(),
+            }
+        }
+        m
+    }
+
+    fn depends(&self, q: Param, run: usize) -> bool {
+        match q {
+            Param::LnStorage(g) | Param::LnLoss(g) => self.group[run] == g && !self.inputs[run].rigid,
+            Param::LnInertia => self.inputs[run].inertia_declared.is_none(),
+            _ => true,
+        }
+    }
+
+    /// Simulates (run, parameter vector) jobs in parallel.
+    pub fn simulate_jobs(&self, spec: &[Param], jobs: &[(usize, Vec<f64>)]) -> Vec<Result<Simulated, String>> {
+        let models: Vec<(usize, DriveModel)> = jobs.iter().map(|(r, p)| (*r, self.model(spec, p, *r))).collect();
+        self.sim.map(&models, |inst, (r, m)| simulate(inst, &self.inputs[*r], m).map_err(|e| e.to_string()))
+    }
+
+    pub fn simulate_all(&self, spec: &[Param], p: &[f64]) -> Option<Vec<Simulated>> {
+        let jobs: Vec<_> = (0..self.inputs.len()).map(|r| (r, p.to_vec())).collect();
+        self.simulate_jobs(spec, &jobs).into_iter().collect::<Result<Vec<_>, _>>().ok()
+    }
+
+    pub fn residual(&self, sims: &[Simulated]) -> Vec<f64> {
+        self.inputs
+            .iter()
+            .zip(sims)
+            .flat_map(|(inp, s)| inp.measured().into_iter().zip(s.stacked(inp)).map(|(a, b)| a - b).collect::<Vec<_>>())
+            .collect()
+    }
+
+    fn lengths(&self) -> Vec<usize> {
+        self.inputs.iter().map(|i| i.measured().len()).collect()
+    }
+
+    /// Forward-difference Jacobian of the stacked positions.
+    pub fn jacobian(&self, spec: &[Param], p: &[f64], base: &[Simulated]) -> Option<DMatrix<f64>> {
+        let mut jobs = Vec::new();
+        let mut meta = Vec::new();
+        for r in 0..self.inputs.len() {
+            for (j, &q) in spec.iter().enumerate() {
+                if !self.depends(q, r) {
+                    continue;
+                }
+                let h = 1e-3 * self.typical(q).max(p[j].abs());
+                let mut x = p.to_vec();
+                x[j] += h;
+                jobs.push((r, x));
+                meta.push((r, j, h));
+            }
+        }
+        let res = self.simulate_jobs(spec, &jobs);
+        let lengths = self.lengths();
+        let offsets: Vec<usize> = lengths
+            .iter()
+            .scan(0, |s, &l| {
+                let o = *s;
+                *s += l;
+                Some(o)
+            })
+            .collect();
+        let mut jac = DMatrix::zeros(lengths.iter().sum(), p.len());
+        for ((r, j, h), out) in meta.into_iter().zip(res) {
+            let out = out.ok()?.stacked(&self.inputs[r]);
+            for (k, (a, b)) in out.iter().zip(base[r].stacked(&self.inputs[r])).enumerate() {
+                jac[(offsets[r] + k, j)] = (a - b) / h;
+            }
+        }
+        Some(jac)
+    }
+
+    /// Levenberg–Marquardt from `p0`, then the block-sandwich covariance.
+    pub fn fit(
+        &self,
+        spec: Vec<Param>,
+        effects: Vec<DriveEffect>,
+        p0: Vec<f64>,
+        max_iter: usize,
+    ) -> Result<DriveFit, String> {
+        let lower = |q: Param| matches!(q, Param::Viscous | Param::Coulomb | Param::Stribeck);
+        let clamp = |p: &mut [f64]| {
+            for (x, &q) in p.iter_mut().zip(&spec) {
+                if lower(q) {
+                    *x = x.max(0.0);
+                }
+            }
+        };
+        let mut p = p0;
+        clamp(&mut p);
+        let mut sims = self.simulate_all(&spec, &p).ok_or("the FMU could not simulate the starting model")?;
+        let mut r = self.residual(&sims);
+        let mut cost: f64 = r.iter().map(|x| x * x).sum();
+        let mut mu = 1e-3;
+        let mut jac = DMatrix::zeros(0, 0);
+        let mut iterations = 0;
+        for it in 0..max_iter {
+            iterations = it + 1;
+            jac = self.jacobian(&spec, &p, &sims).ok_or("the FMU could not simulate a difference step")?;
+            let a = jac.transpose() * &jac;
+            let g = jac.transpose() * DVector::from_column_slice(&r);
+            let mut improved = false;
+            let mut converged = false;
+            for _ in 0..8 {
+                let delta = lm_solve(&a, &g, mu);
+                let mut q: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
+                clamp(&mut q);
+                let small = q
+                    .iter()
+                    .zip(&p)
+                    .zip(&spec)
+                    .all(|((a, b), s)| (a - b).abs() <= 1e-7 * self.typical(*s).max(b.abs()));
+                if let Some(out) = self.simulate_all(&spec, &q) {
+                    let rq = self.residual(&out);
+                    let cq: f64 = rq.iter().map(|x| x * x).sum();
+                    if cq < cost {
+                        converged = small || (cost - cq) / cost < 1e-8;
+                        (p, sims, r, cost) = (q, out, rq, cq);
+                        mu = (mu / 3.0).max(1e-9);
+                        improved = true;
+                        break;
+                    }
+                }
+                if small {
+                    converged = true;
+                    break;
+                }
+                mu *= 5.0;
+            }
+            if !improved || converged {
+                break;
+            }
+        }
+        let covariance = self.sandwich(&jac, &r);
+        Ok(DriveFit { spec, effects, p, sims, residual: r, sse: cost, jacobian: jac, covariance, iterations })
+    }
+
+    /// (JᵀJ)⁻¹ (Σ_b s_b s_bᵀ) (JᵀJ)⁻¹ with s_b = Σ_{t∈b} J_tᵀ e_t over contiguous blocks of each
+    /// run's record: standard errors that allow residuals correlated within a block (the closed
+    /// loop's residual is correlated over hundreds of samples), scaled by B/(B − p).
+    pub fn sandwich(&self, jac: &DMatrix<f64>, r: &[f64]) -> DMatrix<f64> {
+        let np = jac.ncols();
+        let a = jac.transpose() * jac;
+        let ainv = spd_inverse(&a);
+        let mut meat = DMatrix::<f64>::zeros(np, np);
+        let mut offset = 0;
+        let mut blocks = 0usize;
+        for len in self.lengths() {
+            let b = COVARIANCE_BLOCKS.min(len);
+            for i in 0..b {
+                let (lo, hi) = (offset + i * len / b, offset + (i + 1) * len / b);
+                let mut s = DVector::<f64>::zeros(np);
+                for t in lo..hi {
+                    for j in 0..np {
+                        s[j] += jac[(t, j)] * r[t];
+                    }
+                }
+                meat += &s * s.transpose();
+                blocks += 1;
+            }
+            offset += len;
+        }
+        let scale = blocks as f64 / (blocks.saturating_sub(np).max(1)) as f64;
+        &ainv * meat * &ainv * scale
+    }
+}
+
+/// Pseudo-inverse of a symmetric positive semi-definite matrix with diagonal scaling.
+fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
+    super::fit::spd_inverse(a)
+}
+
+fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
+    let n = a.nrows();
+    let d: Vec<f64> = (0..n).map(|i| a[(i, i)].max(1e-300).sqrt()).collect();
+    let mut s = DMatrix::from_fn(n, n, |i, j| a[(i, j)] / (d[i] * d[j]));
+    for i in 0..n {
+        s[(i, i)] += mu;
+    }
+    let rhs = DVector::from_iterator(n, (0..n).map(|i| g[i] / d[i]));
+    let x = match s.clone().cholesky() {
+        Some(c) => c.solve(&rhs),
+        None => s.svd(true, true).solve(&rhs, 1e-12).unwrap_or_else(|_| DVector::zeros(n)),
+    };
+    DVector::from_iterator(n, (0..n).map(|i| x[i] / d[i]))
+}
+
+/// Error metrics of simulated runs against their measurements, positions stacked.
+#[derive(Clone, Debug, Default)]
+pub struct Metrics {
+    pub rmse: f64,
+    pub nrmse: f64,
+    pub fit_percent: f64,
+    pub relerr_percent: f64,
+    /// 100‖τ − τ̂‖/‖τ‖ of the applied torque (force) against the measured one, when measured.
+    pub torque_relerr_percent: Option<f64>,
+    /// 100‖q̇ − q̂̇‖/‖q̇‖ of the motor speed, both by the drive's own estimate (reference drives)
+    /// applied to the measured and to the simulated positions.
+    pub velocity_relerr_percent: Option<f64>,
+    pub samples: usize,
+}
+
+pub fn metrics(inputs: &[DriveInput], sims: &[Simulated]) -> Metrics {
+    let (mut y, mut e) = (Vec::new(), Vec::new());
+    let (mut tn, mut te, mut has_t) = (0.0, 0.0, false);
+    let (mut vn, mut ve) = (0.0, 0.0);
+    for (inp, s) in inputs.iter().zip(sims) {
+        if let Some(c) = &inp.controller {
+            let mut em = VelocityEstimator::new(inp.motor[0], inp.speed0, c.period);
+            let mut es = VelocityEstimator::new(s.motor[0], inp.speed0, c.period);
+            for (a, b) in inp.motor.iter().zip(&s.motor) {
+                let (va, vb) = (em.update(*a), es.update(*b));
+                vn += va * va;
+                ve += (va - vb) * (va - vb);
+            }
+        }
+        let m = inp.measured();
+        e.extend(m.iter().zip(s.stacked(inp)).map(|(a, b)| a - b));
+        y.extend(m);
+        if let Some(t) = &inp.torque {
+            has_t = true;
+            // a load column read as drive volts (gain ≠ 1) enters through the drive, so the drive's
+            // force record carries it on top of the controller's output
+            let through_drive = |k: usize| {
+                if inp.load_gain != 1.0 {
+                    inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain)
+                } else {
+                    0.0
+                }
+            };
+            for (k, (a, b)) in t.iter().zip(&s.torque).enumerate() {
+                tn += a * a;
+                te += (a - b - through_drive(k)).powi(2);
+            }
+        }
+    }
+    let n = y.len() as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let spread = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+    let norm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let err = e.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let rmse = err / n.sqrt();
+    Metrics {
+        rmse,
+        nrmse: rmse / (spread / n.sqrt()),
+        fit_percent: 100.0 * (1.0 - err / spread),
+        relerr_percent: 100.0 * err / norm,
+        torque_relerr_percent: (has_t && inputs.iter().all(|i| i.drive == DriveKind::Reference))
+            .then(|| 100.0 * (te / tn).sqrt()),
+        velocity_relerr_percent: (vn > 0.0).then(|| 100.0 * (ve / vn).sqrt()),
+        samples: y.len(),
+    }
+}
+
+/// Central differences of a Savitzky–Golay-smoothed position: (speed, acceleration).
+fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let s = super::savitzky_golay(x, 10);
+    let n = s.len();
+    let mut v = vec![0.0; n];
+    let mut a = vec![0.0; n];
+    for k in 1..n - 1 {
+        let (h1, h2) = (t[k] - t[k - 1], t[k + 1] - t[k]);
+        v[k] = (s[k + 1] - s[k - 1]) / (h1 + h2);
+        a[k] = 2.0 * ((s[k + 1] - s[k]) / h2 - (s[k] - s[k - 1]) / h1) / (h1 + h2);
+    }
+    (v, a)
+}
+
+/// Inverse-model least squares on the measured motion (the IDIM-LS of drive identification):
+/// τ + load = M q̈ + Fv q̇ − L [+ Fc sign q̇], rigid drives. Returns (M, Fv, L, Fc, residual
+/// correlation with sign q̇ without Fc, mean residual for q̇ > 0 and q̇ < 0 without Fc).
+pub struct InverseModel {
+    pub inertia: f64,
+    pub viscous: f64,
+    pub constant_load: f64,
+    pub coulomb: f64,
+    pub corr_sign: f64,
+    pub mean_positive: f64,
+    pub mean_negative: f64,
+    pub with_coulomb_viscous: f64,
+    pub with_coulomb_inertia: f64,
+    pub with_coulomb_load: f64,
+    /// Direction-wise levels from the inverse model: (Fc+, Fc−, Fv+, Fv−).
+    pub asymmetric: Option<(f64, f64, f64, f64)>,
+}
+
+pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
+    let (mut rows, mut rhs, mut signs) = (Vec::new(), Vec::new(), Vec::new());
+    for inp in inputs {
+        let tau = inp.applied_torque();
+        let (v, a) = derivatives(&inp.time, &inp.motor);
+        for k in 20..inp.time.len().saturating_sub(20) {
+            rows.push([a[k], v[k], -1.0, v[k].signum()]);
+            rhs.push(tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain));
+            signs.push(v[k]);
+        }
+    }
+    if rows.len() < 10 {
+        return None;
+    }
+    let solve = |cols: usize| -> Option<(Vec<f64>, Vec<f64>)> {
+        let x = DMatrix::from_fn(rows.len(), cols, |i, j| rows[i][j]);
+        let y = DVector::from_column_slice(&rhs);
+        let beta = (x.transpose() * &x).try_inverse()? * (x.transpose() * &y);
+        let res = (&y - &x * &beta).iter().copied().collect();
+        Some((beta.iter().copied().collect(), res))
+    };
+    let (b3, res3) = solve(3)?;
+    let (b4, _) = solve(4)?;
+    // direction-wise: τ + load = M q̈ + Fv± q̇ + Fc± sign q̇ − L, with L fixed at the Coulomb model's
+    // (a constant load and the mean of Fc+ − Fc− are not separable from motion that splits evenly)
+    let asymmetric = {
+        let x = DMatrix::from_fn(rows.len(), 5, |i, j| {
+            let v = rows[i][1];
+            let (pos, neg) = (if v > 0.0 { 1.0 } else { 0.0 }, if v < 0.0 { 1.0 } else { 0.0 });
+            match j {
+                0 => rows[i][0],
+                1 => v * pos,
+                2 => v * neg,
+                3 => pos,
+                _ => -neg,
+            }
+        });
+        let y = DVector::from_iterator(rhs.len(), rhs.iter().map(|r| r + b4[2]));
+        (x.transpose() * &x).try_inverse().map(|inv| {
+            let b = inv * (x.transpose() * y);
+            (b[3], b[4], b[1], b[2])
+        })
+    };
+    let sgn: Vec<f64> = signs.iter().map(|v| v.signum()).collect();
+    let mean_where = |f: &dyn Fn(f64) -> bool| {
+        let (s, n) =
+            res3.iter().zip(&signs).filter(|(_, v)| f(**v)).fold((0.0, 0usize), |(s, n), (r, _)| (s + r, n + 1));
+        s / n.max(1) as f64
+    };
+    Some(InverseModel {
+        inertia: b3[0],
+        viscous: b3[1],
+        constant_load: b3[2],
+        coulomb: b4[3],
+        corr_sign: corr(&res3, &sgn),
+        mean_positive: mean_where(&|v| v > 0.0),
+        mean_negative: mean_where(&|v| v < 0.0),
+        with_coulomb_inertia: b4[0],
+        with_coulomb_viscous: b4[1],
+        with_coulomb_load: b4[2],
+        asymmetric,
+    })
+}
+
+fn corr(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len() as f64;
+    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
+    for (x, y) in a.iter().zip(b) {
+        sab += (x - ma) * (y - mb);
+        saa += (x - ma).powi(2);
+        sbb += (y - mb).powi(2);
+    }
+    if saa <= 0.0 || sbb <= 0.0 {
+        0.0
+    } else {
+        sab / (saa * sbb).sqrt()
+    }
+}
+
+/// One candidate's score test.
+#[derive(Clone, Debug)]
+pub struct DriveCandidate {
+    pub effect: DriveEffect,
+    pub score: f64,
+    pub start: Vec<f64>,
+    pub evidence: String,
+}
+
+/// One refit tried: (effect, BIC before, after, held-out relerr before, after, kept, Wald χ²).
+pub type Attempt = (DriveEffect, f64, f64, Option<f64>, Option<f64>, bool, f64);
+
+/// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
+pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
+    let idx: Vec<usize> = effect.params().iter().filter_map(|q| fit.spec.iter().position(|x| x == q)).collect();
+    let k = idx.len();
+    let theta = DVector::from_iterator(k, idx.iter().map(|&i| fit.p[i]));
+    let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(idx[a], idx[b])]);
+    (theta.transpose() * spd_inverse(&cov) * &theta)[(0, 0)]
+}
+
+/// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
+pub fn wald_limit(dof: usize) -> f64 {
+    if dof <= 1 {
+        10.83
+    } else {
+        13.82
+    }
+}
+
+pub struct DriveOutcome {
+    pub baseline: DriveFit,
+    pub final_fit: DriveFit,
+    pub inverse: Option<InverseModel>,
+    pub rounds: Vec<(Vec<DriveCandidate>, Vec<Attempt>)>,
+    /// The model after each accepted round (baseline first).
+    pub path: Vec<DriveFit>,
+    pub validation: Option<(Vec<DriveInput>, Metrics, Metrics)>,
+    /// Held-out simulations of the baseline and the final model.
+    pub validation_sims: Option<(Vec<Simulated>, Vec<Simulated>)>,
+    pub load_column: Option<LoadColumnDiagnosis>,
+    pub unexplained: bool,
+    pub residual_corr_sign: f64,
+    pub final_corr_sign: f64,
+}
+
+/// corr(e, sign q̇) of a fit's position residual (q̇ of the measured motor position).
+fn residual_corr_sign(prob: &DriveProblem, fit: &DriveFit) -> f64 {
+    let mut s = Vec::new();
+    for inp in &prob.inputs {
+        let (v, _) = derivatives(&inp.time, &inp.motor);
+        s.extend(v.iter().map(|x| x.signum()));
+        if inp.link.is_some() {
+            s.extend(v.iter().map(|x| x.signum()));
+        }
+    }
+    corr(&fit.residual, &s)
+}
+
+fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> Vec<DriveCandidate> {
+    let r = DVector::from_column_slice(&fit.residual);
+    let project = |m: &DMatrix<f64>| -> (f64, DVector<f64>) {
+        let a = m.transpose() * m;
+        let beta = spd_inverse(&a) * (m.transpose() * &r);
+        ((&r - m * &beta).norm_squared(), beta)
+    };
+    let (sse_now, _) = project(&fit.jacobian);
+    let mut out = Vec::new();
+    for effect in DriveEffect::ALL {
+        if fit.effects.contains(&effect) {
+            continue;
+        }
+        if effect != DriveEffect::CoulombFriction && !fit.effects.contains(&DriveEffect::CoulombFriction) {
+            continue;
+        }
+        let base = fit.p.len();
+        let mut spec = fit.spec.clone();
+        spec.extend_from_slice(effect.params());
+        // the effect "off" (level 0) with its shape parameters at a start: the Stribeck speed at a
+        // tenth of the data's RMS speed; the levels are probed by secants
+        let init: Vec<f64> = effect
+            .params()
+            .iter()
+            .map(|q| if *q == Param::LnStribeckVelocity { (0.1 * prob.speed_scale).ln() } else { 0.0 })
+            .collect();
+        let probed: Vec<usize> = (0..init.len()).filter(|&i| effect.params()[i] != Param::LnStribeckVelocity).collect();
+        let mut cols = Vec::new();
+        for &i in &probed {
+            let h = 0.05 * prob.typical(effect.params()[i]);
+            let mut x = fit.p.clone();
+            x.extend_from_slice(&init);
+            x[base + i] = h;
+            let jobs: Vec<_> = (0..prob.inputs.len()).map(|run| (run, x.clone())).collect();
+            let res: Option<Vec<Simulated>> =
+                prob.simulate_jobs(&spec, &jobs).into_iter().collect::<Result<_, _>>().ok();
+            let Some(res) = res else { continue };
+            let col: Vec<f64> = res
+                .iter()
+                .zip(&fit.sims)
+                .zip(&prob.inputs)
+                .flat_map(|((a, b), inp)| {
+                    a.stacked(inp).into_iter().zip(b.stacked(inp)).map(|(x, y)| (x - y) / h).collect::<Vec<_>>()
+                })
+                .collect();
+            cols.push(col);
+        }
+        if cols.len() != probed.len() {
+            continue;
+        }
+        let m = DMatrix::from_fn(fit.n(), base + cols.len(), |i, j| {
+            if j < base {
+                fit.jacobian[(i, j)]
+            } else {
+                cols[j - base][i]
+            }
+        });
+        let (sse_aug, beta) = project(&m);
+        let mut start = init.clone();
+        for (c, &i) in probed.iter().enumerate() {
+            start[i] += beta[base + c];
+        }
+        let score = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
+        let evidence = match (effect, inverse) {
+            (DriveEffect::CoulombFriction, Some(iv)) => format!(
+                "explains {:.1} % of the position residual (FMU sensitivity projected on it; linearised level {:.4}); \
+                 position residual vs sign of speed: corr {:+.2}; inverse model on the measured motion: the force \
+                 left after inertia, viscous friction and a constant load correlates with sign(speed) at {:+.2}, \
+                 mean {:+.3} moving forward and {:+.3} moving back (a Coulomb level of about {:.3})",
+                100.0 * score,
+                start[0],
+                residual_corr_sign(prob, fit),
+                iv.corr_sign,
+                iv.mean_positive,
+                iv.mean_negative,
+                iv.coulomb
+            ),
+            (DriveEffect::CoulombFriction, None) => format!(
+                "explains {:.1} % of the position residual; corr(e, sign speed) {:+.2}; linearised level {:.4}",
+                100.0 * score,
+                residual_corr_sign(prob, fit),
+                start[0]
+            ),
+            (DriveEffect::AsymmetricFriction, iv) => format!(
+                "explains {:.1} % of the remaining position residual; linearised half-differences: Coulomb {:+.4}, viscous {:+.4}{}",
+                100.0 * score,
+                start[0],
+                start[1],
+                iv.as_ref().and_then(|iv| iv.asymmetric).map_or(String::new(), |(cp, cn, vp, vn)| format!(
+                    "; inverse model by direction: Coulomb {cp:.3} forward / {cn:.3} back, viscous {vp:.3} / {vn:.3}"
+                ))
+            ),
+            (DriveEffect::StribeckFriction, _) => format!(
+                "explains {:.1} % of the remaining position residual; linearised excess {:.4} over Coulomb at a speed scale of {:.3e}{}",
+                100.0 * score,
+                start[0],
+                start[1].exp(),
+                if start[0] < 0.0 {
+                    " (negative: the data want less friction at low speed than the Coulomb level, the opposite of a Stribeck excess)"
+                } else {
+                    ""
+                }
+            ),
+        };
+        out.push(DriveCandidate { effect, score, start, evidence });
+    }
+    out.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(std::cmp::Ordering::Equal));
+    out
+}
+
+/// An effect is kept when BIC falls by more than this (Kass & Raftery: very strong) ...
+pub const BIC_MARGIN: f64 = 10.0;
+/// ... and, with a held-out set, the held-out position error falls by at least this fraction.
+pub const HELD_OUT_GAIN: f64 = 0.01;
+pub const MAX_ITERATIONS: usize = 30;
+
+/// Simulates held-out runs with a fit's parameters.
+pub fn predict(prob: &DriveProblem, held: &DriveProblem, fit: &DriveFit) -> Option<(Vec<Simulated>, Metrics)> {
+    let _ = prob;
+    let sims = held.simulate_all(&fit.spec, &fit.p)?;
+    let m = metrics(&held.inputs, &sims);
+    Some((sims, m))
+}
+
+/// What the held-out load column says about its own scale: the gain k that best explains the
+/// held-out positions when the column is multiplied by it (a diagnostic fitted on the held-out
+/// set, never used as a parameter), against the drive gain the file declares.
+#[derive(Clone, Debug)]
+pub struct LoadColumnDiagnosis {
+    pub fitted_gain: f64,
+    pub relerr_at_fitted_gain: f64,
+    pub declared_drive_gain: Option<f64>,
+    /// The gain applied to the held-out load column: the declared drive gain when the fitted one
+    /// agrees with it within `LOAD_GAIN_AGREEMENT`, else 1 (as recorded).
+    pub applied_gain: f64,
+    pub as_recorded: Option<(Metrics, Metrics)>,
+    /// Independent of any model: the logged drive force minus the controller law on the measured
+    /// positions, regressed on the load column (reference drives that log their force).
+    pub force_log_gain: Option<f64>,
+}
+
+/// Relative agreement between the fitted load gain and the declared drive gain for the column to
+/// be read as controller volts.
+pub const LOAD_GAIN_AGREEMENT: f64 = 0.1;
+
+impl DriveProblem<'_> {
+    /// The same runs with the load column multiplied by `gain`.
+    pub fn with_load_gain(&self, gain: f64) -> DriveProblem<'_> {
+        let mut inputs = self.inputs.clone();
+        inputs.iter_mut().for_each(|i| i.load_gain = gain);
+        DriveProblem { sim: self.sim, inputs, group: self.group.clone(), n_groups: self.n_groups, ..*self }
+    }
+}
+
+/// Gauss–Newton on the load column's gain over the held-out runs, with `fit`'s parameters.
+pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadColumnDiagnosis> {
+    if !held.inputs.iter().any(|i| i.load.as_ref().is_some_and(|l| l.iter().any(|&x| x != 0.0))) {
+        return None;
+    }
+    let eval = |k: f64| -> Option<(Vec<f64>, f64)> {
+        let h = held.with_load_gain(k);
+        let sims = h.simulate_all(&fit.spec, &fit.p)?;
+        let m = metrics(&h.inputs, &sims);
+        Some((h.residual(&sims), m.relerr_percent))
+    };
+    let mut k = 1.0;
+    let (mut r, mut rel) = eval(k)?;
+    for _ in 0..6 {
+        let dk = 1e-2 * k.abs().max(1.0);
+        let (r2, _) = eval(k + dk)?;
+        // residual = y − ŷ; column = ∂ŷ/∂k = −∂r/∂k
+        let (mut num, mut den) = (0.0, 0.0);
+        for (a, b) in r.iter().zip(&r2) {
+            let col = -(b - a) / dk;
+            num += col * a;
+            den += col * col;
+        }
+        if den <= 0.0 {
+            break;
+        }
+        let step = num / den;
+        let (rn, reln) = eval(k + step)?;
+        let better = reln < rel;
+        if better {
+            k += step;
+            (r, rel) = (rn, reln);
+        }
+        if !better || step.abs() < 1e-4 * k.abs().max(1.0) {
+            break;
+        }
+    }
+    let declared = held.inputs.iter().find_map(|i| i.declared_drive_gain);
+    let force_log_gain = {
+        let (mut num, mut den) = (0.0, 0.0);
+        for inp in held.inputs.iter().filter(|i| i.drive == DriveKind::Reference && i.torque.is_some()) {
+            let (Some(c), Some(r), Some(t), Some(l)) = (&inp.controller, &inp.reference, &inp.torque, &inp.load) else {
+                continue;
+            };
+            let mut est = VelocityEstimator::new(inp.motor[0], inp.speed0, c.period);
+            for k in 0..inp.time.len() {
+                let law = c.law(r[k], inp.motor[k], est.update(inp.motor[k]));
+                num += (t[k] - law) * l[k];
+                den += l[k] * l[k];
+            }
+        }
+        (den > 0.0).then(|| num / den)
+    };
+    let applied = match declared {
+        Some(g) if ((k / g) - 1.0).abs() <= LOAD_GAIN_AGREEMENT => g,
+        _ => 1.0,
+    };
+    Some(LoadColumnDiagnosis {
+        fitted_gain: k,
+        relerr_at_fitted_gain: rel,
+        declared_drive_gain: declared,
+        applied_gain: applied,
+        as_recorded: None,
+        force_log_gain,
+    })
+}
+
+pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Result<DriveOutcome, String> {
+    let inverse = if prob.inputs.iter().all(|i| i.rigid) { inverse_model(&prob.inputs) } else { None };
+    // start: the inverse model's inertia on a rigid drive, else the FMU's default link inertia
+    prob.inertia_start = match &inverse {
+        Some(iv) if iv.inertia > 0.0 => iv.inertia,
+        _ => 0.018,
+    };
+    let mut spec = vec![];
+    let mut p0 = vec![];
+    if prob.inputs.iter().any(|i| i.inertia_declared.is_none()) {
+        spec.push(Param::LnInertia);
+        p0.push(prob.inertia_start.ln());
+    }
+    spec.push(Param::Viscous);
+    p0.push(inverse.as_ref().map_or(0.0, |iv| iv.viscous.max(0.0)));
+    spec.push(Param::ConstantLoad);
+    p0.push(inverse.as_ref().map_or(0.0, |iv| iv.constant_load));
+    for g in 0..prob.n_groups {
+        if (0..prob.inputs.len()).any(|r| prob.group[r] == g && !prob.inputs[r].rigid) {
+            spec.extend([Param::LnStorage(g), Param::LnLoss(g)]);
+            p0.extend([0.0, 0.0]);
+        }
+    }
+    let baseline = prob.fit(spec, vec![], p0, MAX_ITERATIONS)?;
+    // the held-out load column is checked before it is used as evidence
+    let mut load_column = None;
+    let held = held.map(|h| {
+        h.inertia_start = prob.inertia_start;
+        if let Some(d) = diagnose_load_column(h, &baseline) {
+            h.inputs.iter_mut().for_each(|i| i.load_gain = d.applied_gain);
+            load_column = Some(d);
+        }
+        &*h
+    });
+    let held_err = |f: &DriveFit| held.and_then(|h| predict(prob, h, f)).map(|(_, m)| m.relerr_percent);
+    let mut current = baseline.clone();
+    let mut current_held = held_err(&current);
+    let mut rounds = Vec::new();
+    let mut path = vec![baseline.clone()];
+    loop {
+        let candidates = rank(prob, &current, &inverse);
+        let mut attempts = Vec::new();
+        let mut best: Option<(DriveFit, Option<f64>)> = None;
+        for c in &candidates {
+            let mut spec = current.spec.clone();
+            spec.extend_from_slice(c.effect.params());
+            let mut p = current.p.clone();
+            // a friction level starts from the inverse model when it has one, else the score test
+            let start: Vec<f64> = match (c.effect, &inverse) {
+                (DriveEffect::CoulombFriction, Some(iv)) if iv.coulomb > 0.0 => vec![iv.coulomb],
+                _ => c.start.clone(),
+            };
+            p.extend(start);
+            let mut effects = current.effects.clone();
+            effects.push(c.effect);
+            let Ok(refit) = prob.fit(spec, effects, p, MAX_ITERATIONS) else { continue };
+            let h = held_err(&refit);
+            let bic_ok = refit.bic() < current.bic() - BIC_MARGIN;
+            let held_ok = match (current_held, h) {
+                (Some(a), Some(b)) => b < (1.0 - HELD_OUT_GAIN) * a,
+                _ => true,
+            };
+            // BIC over every sample overrates small effects on a correlated residual: the effect's
+            // parameters must also stand out of their block-sandwich errors
+            let w = wald(&refit, c.effect);
+            let keep = bic_ok && held_ok && w > wald_limit(c.effect.params().len());
+            attempts.push((c.effect, current.bic(), refit.bic(), current_held, h, keep, w));
+            if keep && best.as_ref().is_none_or(|b| refit.bic() < b.0.bic()) {
+                best = Some((refit, h));
+            }
+        }
+        if let Some((f, _)) = &best {
+            for a in attempts.iter_mut() {
+                a.5 = a.5 && f.effects.last() == Some(&a.0);
+            }
+        }
+        rounds.push((candidates, attempts));
+        match best {
+            Some((f, h)) => {
+                path.push(f.clone());
+                current = f;
+                current_held = h;
+            }
+            None => break,
+        }
+        if current.effects.len() == DriveEffect::ALL.len() {
+            break;
+        }
+    }
+    let mut validation_sims = None;
+    let validation = held.and_then(|h| {
+        let (sb, b) = predict(prob, h, &baseline)?;
+        let (sf, f) = predict(prob, h, &current)?;
+        validation_sims = Some((sb, sf));
+        Some((h.inputs.clone(), b, f))
+    });
+    if let (Some(d), Some(h)) = (load_column.as_mut(), held) {
+        let raw = h.with_load_gain(1.0);
+        d.as_recorded = predict(prob, &raw, &baseline).zip(predict(prob, &raw, &current)).map(|(b, f)| (b.1, f.1));
+    }
+    let residual_corr = residual_corr_sign(prob, &baseline);
+    let final_corr = residual_corr_sign(prob, &current);
+    Ok(DriveOutcome {
+        baseline,
+        final_fit: current,
+        inverse,
+        rounds,
+        path,
+        validation,
+        validation_sims,
+        load_column,
+        // the friction library is exhausted when a sign-of-speed pattern remains in the residual
+        unexplained: final_corr.abs() > 0.3,
+        residual_corr_sign: residual_corr,
+        final_corr_sign: final_corr,
+    })
+}
+
+fn metrics_json(m: &Metrics, axis: Axis, bic: Option<f64>, parameters: Option<usize>) -> Value {
+    let mut o = Map::new();
+    o.insert("rmse".into(), json!(m.rmse));
+    o.insert(format!("rmse_{}", axis.units().0), json!(m.rmse));
+    o.insert("nrmse".into(), json!(m.nrmse));
+    o.insert("fit_percent".into(), json!(m.fit_percent));
+    o.insert("relerr_percent".into(), json!(m.relerr_percent));
+    if let Some(t) = m.torque_relerr_percent {
+        o.insert("torque_relerr_percent".into(), json!(t));
+    }
+    if let Some(v) = m.velocity_relerr_percent {
+        o.insert("velocity_relerr_percent".into(), json!(v));
+    }
+    if let Some(b) = bic {
+        o.insert("bic".into(), json!(b));
+    }
+    if let Some(p) = parameters {
+        o.insert("parameters".into(), json!(p));
+    }
+    o.insert("samples".into(), json!(m.samples));
+    Value::Object(o)
+}
+
+/// Parameters of an effect in the file's units, with standard errors.
+pub fn effect_parameters(fit: &DriveFit, effect: DriveEffect) -> Vec<(&'static str, f64, f64)> {
+    let v = |q: Param| fit.value(q).unwrap_or((0.0, 0.0));
+    match effect {
+        DriveEffect::CoulombFriction => vec![("torque_nm", v(Param::Coulomb).0, v(Param::Coulomb).1)],
+        DriveEffect::StribeckFriction => {
+            let (l, sv) = (v(Param::Stribeck), v(Param::LnStribeckVelocity));
+            vec![("torque_nm", l.0, l.1), ("velocity", sv.0.exp(), sv.0.exp() * sv.1)]
+        }
+        DriveEffect::AsymmetricFriction => {
+            let (c, b) = (v(Param::Coulomb), v(Param::Viscous));
+            let (ac, av) = (v(Param::AsymCoulomb), v(Param::AsymViscous));
+            let se = |a: f64, b: f64| a.hypot(b);
+            vec![
+                ("coulomb_positive", c.0 + ac.0, se(c.1, ac.1)),
+                ("coulomb_negative", c.0 - ac.0, se(c.1, ac.1)),
+                ("viscous_positive", b.0 + av.0, se(b.1, av.1)),
+                ("viscous_negative", b.0 - av.0, se(b.1, av.1)),
+            ]
+        }
+    }
+}
+
+/// (name, value, standard error, unit) of every fitted parameter in the file's units.
+pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(String, f64, f64, String)> {
+    let (_, _, tu, iu, vu) = axis.units();
+    let mut out = Vec::new();
+    for (i, &q) in fit.spec.iter().enumerate() {
+        let (x, s) = (fit.p[i], fit.covariance[(i, i)].max(0.0).sqrt());
+        let row = match q {
+            Param::LnInertia => ("inertia".to_string(), x.exp(), x.exp() * s, iu.to_string()),
+            Param::Viscous => ("viscous_friction".into(), x, s, vu.into()),
+            Param::ConstantLoad => ("constant_load".into(), x, s, tu.into()),
+            Param::LnStorage(g) => (format!("storage_modulus_scale[{g}]"), x.exp(), x.exp() * s, String::new()),
+            Param::LnLoss(g) => (format!("loss_modulus_scale[{g}]"), x.exp(), x.exp() * s, String::new()),
+            Param::Coulomb => ("coulomb_friction".into(), x, s, tu.into()),
+            Param::AsymCoulomb => ("coulomb_asymmetry".into(), x, s, tu.into()),
+            Param::AsymViscous => ("viscous_asymmetry".into(), x, s, vu.into()),
+            Param::Stribeck => ("stribeck_friction".into(), x, s, tu.into()),
+            Param::LnStribeckVelocity => ("stribeck_velocity".into(), x.exp(), x.exp() * s, axis.units().1.into()),
+        };
+        out.push(row);
+    }
+    let _ = prob;
+    out
+}
+
+/// report.json for drive runs (interfaces.md keys, in the file's units).
+pub fn report_json(
+    runs: &[Run],
+    prob: &DriveProblem,
+    o: &DriveOutcome,
+    temps: &[f64],
+    published: Option<&Value>,
+    seconds: f64,
+) -> Value {
+    let axis = runs[0].axis;
+    let (pu, _, tu, iu, _) = axis.units();
+    let run_json = |r: &Run| {
+        json!({"file": r.name(), "temperature_c": r.mean_temperature_c(), "frequency_hz": r.frequency_hz,
+               "samples": r.time.len(), "drive": r.drive.name(), "axis": axis.name(),
+               "transmission": if r.rigid { "rigid" } else { "compliant" }})
+    };
+    let bm = metrics(&prob.inputs, &o.baseline.sims);
+    let fm = metrics(&prob.inputs, &o.final_fit.sims);
+    let diagnosis: Vec<Value> = o
+        .rounds
+        .iter()
+        .flat_map(|(c, _)| c.iter())
+        .map(|c| json!({"effect": c.effect.name(), "score": c.score, "evidence": c.evidence}))
+        .collect();
+    let added: Vec<Value> = o
+        .final_fit
+        .effects
+        .iter()
+        .map(|&e| {
+            let mut p = Map::new();
+            let mut se = Map::new();
+            for (k, v, s) in effect_parameters(&o.final_fit, e) {
+                p.insert(k.into(), json!(v));
+                se.insert(k.into(), json!(s));
+            }
+            json!({"effect": e.name(), "parameters": p, "std_errors": se})
+        })
+        .collect();
+    // the baseline's own effect (interfaces.md: constant_load), in the final model's value
+    let baseline_effects: Vec<Value> = o
+        .final_fit
+        .value(Param::ConstantLoad)
+        .map(|(v, s)| {
+            json!({"effect": "constant_load", "parameters": {"torque_nm": v}, "std_errors": {"torque_nm": s},
+                   "note": "part of the baseline: a constant torque or force on the link (or a measurement offset); a published offset on the motor side is its negative"})
+        })
+        .into_iter()
+        .collect();
+    let params = |f: &DriveFit| -> Value {
+        parameter_table(prob, f, axis)
+            .into_iter()
+            .map(|(n, v, s, u)| json!({"name": n, "value": v, "std_error": s, "unit": u}))
+            .collect()
+    };
+    let inertia = o.final_fit.value(Param::LnInertia).map(|(x, _)| x.exp()).or(prob.inputs[0].inertia_declared);
+    let inertia_std = o.final_fit.value(Param::LnInertia).map(|(x, s)| x.exp() * s);
+    let identified: Vec<Value> = temps
+        .iter()
+        .map(|t| {
+            json!({"temperature_c": t, "stiffness": null, "stiffness_std": null, "damping": null, "damping_std": null,
+                   "inertia": inertia, "inertia_std": inertia_std, "inertia_declared": prob.inputs[0].inertia_declared.is_some(),
+                   "natural_frequency_hz": null, "damping_ratio": null,
+                   "viscous_damping": o.final_fit.value(Param::Viscous).map(|v| v.0),
+                   "note": if runs.iter().all(|r| r.rigid) { "rigid drive: one moving body, no transmission to identify" } else { "compliant transmission: see parameters (modulus factors)" }})
+        })
+        .collect();
+    let rounds: Vec<Value> = o
+        .rounds
+        .iter()
+        .map(|(c, a)| {
+            json!({
+                "candidates": c.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "start": c.start})).collect::<Vec<_>>(),
+                "attempts": a.iter().map(|a| json!({"effect": a.0.name(), "bic_before": a.1, "bic_after": a.2,
+                    "held_out_relerr_before": a.3, "held_out_relerr_after": a.4, "kept": a.5, "wald_chi2": a.6})).collect::<Vec<_>>(),
+            })
+        })
+        .collect();
+    let mut j = json!({
+        "runs": runs.iter().map(run_json).collect::<Vec<_>>(),
+        "units": {"position": pu, "torque": tu, "inertia": iu},
+        "baseline": metrics_json(&bm, axis, Some(o.baseline.bic()), Some(o.baseline.p.len())),
+        "diagnosis": diagnosis,
+        "added_effects": added,
+        "baseline_effects": baseline_effects,
+        "final": metrics_json(&fm, axis, Some(o.final_fit.bic()), Some(o.final_fit.p.len())),
+        "unexplained": o.unexplained,
+        "identified": identified,
+        "parameters": {"baseline": params(&o.baseline), "final": params(&o.final_fit),
+                       "standard_errors": "block sandwich: (JᵀJ)⁻¹ Σ_b s_b s_bᵀ (JᵀJ)⁻¹ over 20 contiguous blocks per run, so residuals correlated within a block do not shrink them"},
+        "residual": {"baseline_corr_sign_speed": o.residual_corr_sign, "final_corr_sign_speed": o.final_corr_sign},
+        "rounds": rounds,
+        "method": {
+            "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
+            "fit": "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)",
+            "selection": format!("an effect is kept when BIC falls by more than {BIC_MARGIN}, its parameters pass a Wald test with the block-sandwich covariance (χ² above the p = 0.001 quantile) and, with a held-out set, the held-out position error falls by at least {} %", 100.0 * HELD_OUT_GAIN),
+        },
+        "seconds": seconds,
+        "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
+    });
+    if let Some(iv) = &o.inverse {
+        j["inverse_model"] = json!({
+            "note": "IDIM-LS on the measured motion (Savitzky–Golay-smoothed position, central differences): the start of the output-error fit and evidence for the diagnosis",
+            "without_coulomb": {"inertia": iv.inertia, "viscous": iv.viscous, "constant_load": iv.constant_load},
+            "with_coulomb": {"inertia": iv.with_coulomb_inertia, "viscous": iv.with_coulomb_viscous, "constant_load": iv.with_coulomb_load, "coulomb": iv.coulomb},
+            "residual_corr_sign_speed": iv.corr_sign,
+        });
+    }
+    match &o.validation {
+        Some((inputs, b, f)) => {
+            j["validation"] = json!({
+                "runs": inputs.iter().map(|i| json!({"file": i.name, "samples": i.time.len()})).collect::<Vec<_>>(),
+                "baseline": metrics_json(b, axis, None, None),
+                "final": metrics_json(f, axis, None, None),
+            });
+            if let Some(d) = &o.load_column {
+                let mut lc = json!({
+                    "fitted_gain": d.fitted_gain,
+                    "relerr_percent_at_fitted_gain_baseline": d.relerr_at_fitted_gain,
+                    "declared_drive_gain": d.declared_drive_gain,
+                    "applied_gain": d.applied_gain,
+                    "force_log_gain": d.force_log_gain,
+                    "note": if d.applied_gain != 1.0 {
+                        format!("the held-out positions are best explained with the load column × {:.3}, within {} % of the drive gain the file declares ({:.3} N/V){}: the column reads as the pulse command in controller volts, so the held-out set above uses it × the declared drive gain (no parameter is fitted on the held-out set); the figures with the column as recorded are under as_recorded", d.fitted_gain, 100.0 * LOAD_GAIN_AGREEMENT, d.declared_drive_gain.unwrap_or(f64::NAN),
+                            d.force_log_gain.map_or(String::new(), |g| format!(", and the logged drive force exceeds the controller law on the measured positions by {g:.3} × the column")))
+                    } else {
+                        format!("the load column is used as recorded (best-fitting gain {:.3}; declared drive gain {:?})", d.fitted_gain, d.declared_drive_gain)
+                    },
+                });
+                if let Some((b, f)) = &d.as_recorded {
+                    lc["as_recorded"] = json!({"baseline": metrics_json(b, axis, None, None), "final": metrics_json(f, axis, None, None)});
+                }
+                j["validation"]["load_column"] = lc;
+            }
+        }
+        None => {
+            j["held_out"] = json!("no held-out set was given (--validate): effects were kept on BIC alone and the held-out error was not estimated");
+        }
+    }
+    if let Some(p) = published {
+        j["published"] = p.clone();
+        j["comparison"] = comparison(o, p);
+    }
+    j
+}
+
+/// Ours against a published reference (`--published FILE`: parameters by our names, position
+/// relative errors on the estimation and validation sets).
+fn comparison(o: &DriveOutcome, p: &Value) -> Value {
+    // a published offset sits on the motor side (τ = … + offset): our constant load is its negative
+    let ours = |f: &DriveFit, name: &str| -> Option<f64> {
+        match name {
+            "inertia" => f.value(Param::LnInertia).map(|v| v.0.exp()),
+            "viscous_friction" => f.value(Param::Viscous).map(|v| v.0),
+            "coulomb_friction" => f.value(Param::Coulomb).map(|v| v.0),
+            "offset" => f.value(Param::ConstantLoad).map(|v| -v.0),
+            _ => None,
+        }
+    };
+    let se = |f: &DriveFit, name: &str| -> Option<f64> {
+        match name {
+            "inertia" => f.value(Param::LnInertia).map(|v| v.0.exp() * v.1),
+            "viscous_friction" => f.value(Param::Viscous).map(|v| v.1),
+            "coulomb_friction" => f.value(Param::Coulomb).map(|v| v.1),
+            "offset" => f.value(Param::ConstantLoad).map(|v| v.1),
+            _ => None,
+        }
+    };
+    // the model of the published structure (inertia, viscous, Coulomb, offset), when the loop built it
+    let same = o.path.iter().find(|f| f.effects == [DriveEffect::CoulombFriction]);
+    let rows: Vec<Value> = p["parameters"]
+        .as_object()
+        .map(|m| {
+            m.iter()
+                .map(|(k, v)| {
+                    json!({"parameter": k, "published": v,
+                           "ours_same_structure": same.and_then(|f| ours(f, k)),
+                           "ours_same_structure_std": same.and_then(|f| se(f, k)),
+                           "ours_final": ours(&o.final_fit, k)})
+                })
+                .collect()
+        })
+        .unwrap_or_default();
+    json!({"parameters": rows,
+           "same_structure": "the loop's model after adding Coulomb friction (inertia, viscous, Coulomb, constant load), the published model's structure; ours_final adds what the loop kept after it"})
+}
+
+/// report.md for drive runs.
+pub fn report_markdown(j: &Value) -> String {
+    let f = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.5}"));
+    let g = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.4e}"));
+    let pu = j["units"]["position"].as_str().unwrap_or("");
+    let mut s = String::from("# Calibration of drive runs\n\n");
+    s += &format!(
+        "Runs: {}. Units: position {pu}, torque {}, inertia {}.\n\n",
+        j["runs"].as_array().map_or(0, Vec::len),
+        j["units"]["torque"].as_str().unwrap_or(""),
+        j["units"]["inertia"].as_str().unwrap_or("")
+    );
+    s += "## Errors\n\n| model | set | position relerr % | RMSE | fit % | velocity relerr % | torque relerr % |\n|---|---|---|---|---|---|---|\n";
+    for (name, key) in [("baseline", "baseline"), ("final", "final")] {
+        s += &format!(
+            "| {name} | estimation | {} | {} | {} | {} | {} |\n",
+            f(&j[key]["relerr_percent"]),
+            g(&j[key]["rmse"]),
+            f(&j[key]["fit_percent"]),
+            f(&j[key]["velocity_relerr_percent"]),
+            f(&j[key]["torque_relerr_percent"])
+        );
+        if j.get("validation").is_some() {
+            s += &format!(
+                "| {name} | validation | {} | {} | {} | {} | {} |\n",
+                f(&j["validation"][key]["relerr_percent"]),
+                g(&j["validation"][key]["rmse"]),
+                f(&j["validation"][key]["fit_percent"]),
+                f(&j["validation"][key]["velocity_relerr_percent"]),
+                f(&j["validation"][key]["torque_relerr_percent"])
+            );
+        }
+    }
+    if let Some(h) = j["held_out"].as_str() {
+        s += &format!("\n{h}.\n");
+    }
+    let lc = &j["validation"]["load_column"];
+    if let Some(note) = lc["note"].as_str() {
+        s += &format!("\nHeld-out load column: {note}.\n");
+        if lc.get("as_recorded").is_some() {
+            s += &format!(
+                "With the column as recorded: position relerr {} % (baseline), {} % (final).\n",
+                f(&lc["as_recorded"]["baseline"]["relerr_percent"]),
+                f(&lc["as_recorded"]["final"]["relerr_percent"])
+            );
+        }
+    }
+    s += "\n## Parameters (final; ± block-sandwich standard error)\n\n| parameter | value | ± | unit |\n|---|---|---|---|\n";
+    for p in j["parameters"]["final"].as_array().into_iter().flatten() {
+        s += &format!(
+            "| {} | {} | {} | {} |\n",
+            p["name"].as_str().unwrap_or(""),
+            g(&p["value"]),
+            g(&p["std_error"]),
+            p["unit"].as_str().unwrap_or("")
+        );
+    }
+    if let Some(c) = j["comparison"]["parameters"].as_array() {
+        s += "\n## Against the published reference\n\n| parameter | ours (published structure) | ± | ours (final) | published |\n|---|---|---|---|---|\n";
+        for r in c {
+            s += &format!(
+                "| {} | {} | {} | {} | {} |\n",
+                r["parameter"].as_str().unwrap_or(""),
+                f(&r["ours_same_structure"]),
+                f(&r["ours_same_structure_std"]),
+                f(&r["ours_final"]),
+                f(&r["published"])
+            );
+        }
+        let pr = &j["published"]["position_relerr_percent"];
+        s += &format!(
+            "\nPosition relerr, published: {} % estimation, {} % validation; ours (final): {} %, {} %.\n",
+            f(&pr["estimation"]),
+            f(&pr["validation"]),
+            f(&j["final"]["relerr_percent"]),
+            f(&j["validation"]["final"]["relerr_percent"])
+        );
+    }
+    s += "\n## Chain of evidence\n\n";
+    for (i, r) in j["rounds"].as_array().into_iter().flatten().enumerate() {
+        s += &format!("Round {}:\n", i + 1);
+        for a in r["attempts"].as_array().into_iter().flatten() {
+            s += &format!(
+                "- {}: BIC {} → {}, Wald χ² {}, held-out relerr {} → {} %, {}\n",
+                a["effect"].as_str().unwrap_or(""),
+                f(&a["bic_before"]),
+                f(&a["bic_after"]),
+                f(&a["wald_chi2"]),
+                f(&a["held_out_relerr_before"]),
+                f(&a["held_out_relerr_after"]),
+                if a["kept"].as_bool() == Some(true) { "kept" } else { "not kept" }
+            );
+        }
+    }
+    for d in j["diagnosis"].as_array().into_iter().flatten() {
+        s += &format!("\n- {}: {}\n", d["effect"].as_str().unwrap_or(""), d["evidence"].as_str().unwrap_or(""));
+    }
+    s += &format!("\nUnexplained structure left: {}.\n", j["unexplained"]);
+    s
+}
+
+/// plots/residual_<run>.svg: the position error of the baseline and the final model over time,
+/// estimation and held-out runs (every 10th sample).
+pub fn plots(
+    prob: &DriveProblem,
+    o: &DriveOutcome,
+    axis: Axis,
+) -> Result<crate::output::Files, Box<dyn std::error::Error>> {
+    use plotters::style::RGBColor;
+    let (orange, blue) = (RGBColor(255, 127, 14), RGBColor(31, 119, 180));
+    let mut files = Vec::new();
+    let mut one =
+        |inp: &DriveInput, b: &Simulated, f: &Simulated, set: &str| -> Result<(), Box<dyn std::error::Error>> {
+            let every = |v: &[f64]| v.iter().step_by(10).copied().collect::<Vec<f64>>();
+            let t = every(&inp.time);
+            let e0: Vec<f64> = inp.motor.iter().zip(&b.motor).map(|(a, c)| a - c).collect();
+            let e1: Vec<f64> = inp.motor.iter().zip(&f.motor).map(|(a, c)| a - c).collect();
+            let svg = super::report::line_plot(
+                &format!("{} ({set}): position error before and after", inp.name),
+                &format!("measured − model ({})", axis.units().0),
+                &t,
+                &[("baseline", &every(&e0), orange), ("final", &every(&e1), blue)],
+            )?;
+            files.push((format!("plots/residual_{}.svg", inp.name.trim_end_matches(".csv")), svg.into_bytes()));
+            Ok(())
+        };
+    for (i, inp) in prob.inputs.iter().enumerate() {
+        one(inp, &o.baseline.sims[i], &o.final_fit.sims[i], "estimation")?;
+    }
+    if let (Some((inputs, _, _)), Some((sb, sf))) = (&o.validation, &o.validation_sims) {
+        for (i, inp) in inputs.iter().enumerate() {
+            one(inp, &sb[i], &sf[i], "held out")?;
+        }
+    }
+    Ok(files)
+}
