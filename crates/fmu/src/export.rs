@@ -77,15 +77,29 @@ fn null_arg(inst: &mut Component, function: &str, arg: &str) -> Status {
     inst.error(&format!("{function}: argument {arg} is a null pointer"))
 }
 
+/// Longest message passed to the logger, in bytes: caller strings are quoted and cut before
+/// they reach a message (`component::quoted`); this is the last line of defence.
+const LOG_MAX_BYTES: usize = 2048;
+
+/// `s` cut to at most `max` bytes on a character boundary, NULs replaced.
+fn bounded(s: &str, max: usize) -> CString {
+    let mut end = s.len().min(max);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    let cut = if end < s.len() { format!("{}… [cut]", &s[..end]) } else { s.to_string() };
+    CString::new(cut.replace('\0', " ")).unwrap_or_default()
+}
+
 /// Wraps the importer's logger: messages go through "%s" so a '%' in them is never a format.
 unsafe fn log_sink(functions: &Fmi2CallbackFunctions, name: &str) -> component::LogSink {
     let logger = functions.logger;
     let env = functions.component_environment;
-    let name = CString::new(name.replace('\0', " ")).unwrap_or_default();
+    let name = bounded(name, component::QUOTE_MAX_CHARS);
     Box::new(move |s: Status, category: &str, message: &str| {
         if let Some(log) = logger {
-            let cat = CString::new(category.replace('\0', " ")).unwrap_or_default();
-            let msg = CString::new(message.replace('\0', " ")).unwrap_or_default();
+            let cat = bounded(category, 64);
+            let msg = bounded(message, LOG_MAX_BYTES);
             log(env, name.as_ptr(), s as Fmi2Status, cat.as_ptr(), c"%s".as_ptr(), msg.as_ptr());
         }
     })
@@ -144,7 +158,14 @@ pub unsafe extern "C" fn fmi2Instantiate(
 #[no_mangle]
 pub unsafe extern "C" fn fmi2FreeInstance(c: Fmi2Component) {
     if !c.is_null() {
-        let _ = catch_unwind(AssertUnwindSafe(|| drop(Box::from_raw(c as *mut Component))));
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            let inst = Box::from_raw(c as *mut Component);
+            // States the importer did not free belong to the instance (FMI 2.0 §2.1.8): free them.
+            for &p in &inst.live_states {
+                free_state_box(p as Fmi2FmuState);
+            }
+            drop(inst);
+        }));
     }
 }
 
@@ -281,12 +302,28 @@ no_variables!(fmi2GetString, *mut Fmi2String, allowed::GET);
 no_variables!(fmi2SetBoolean, *const Fmi2Boolean, allowed::SET);
 no_variables!(fmi2SetString, *const Fmi2String, allowed::SET);
 
-unsafe fn state_ref<'a>(p: Fmi2FmuState) -> Option<&'a mut StateBox> {
-    if p.is_null() {
+/// The state behind `p` if this instance allocated it and has not freed it: a stray, foreign or
+/// freed pointer is refused without being read.
+unsafe fn state_ref<'a>(inst: &Component, p: Fmi2FmuState) -> Option<&'a mut StateBox> {
+    if p.is_null() || !inst.live_states.contains(&(p as usize)) {
         return None;
     }
     let b = &mut *(p as *mut StateBox);
     (b.tag == STATE_TAG).then_some(b)
+}
+
+/// A new state object, registered with the instance.
+fn new_state(inst: &mut Component, snapshot: Snapshot) -> Fmi2FmuState {
+    let p = Box::into_raw(Box::new(StateBox { tag: STATE_TAG, snapshot })) as Fmi2FmuState;
+    inst.live_states.insert(p as usize);
+    p
+}
+
+/// Frees a state object made by `new_state` (the caller has unregistered it).
+unsafe fn free_state_box(p: Fmi2FmuState) {
+    let mut b = Box::from_raw(p as *mut StateBox);
+    b.tag = 0;
+    drop(b);
 }
 
 #[no_mangle]
@@ -300,9 +337,9 @@ pub unsafe extern "C" fn fmi2GetFMUstate(c: Fmi2Component, state: *mut Fmi2FmuSt
             Err(s) => return s,
         };
         if (*state).is_null() {
-            *state = Box::into_raw(Box::new(StateBox { tag: STATE_TAG, snapshot })) as Fmi2FmuState;
+            *state = new_state(inst, snapshot);
         } else {
-            match state_ref(*state) {
+            match state_ref(inst, *state) {
                 Some(b) => b.snapshot = snapshot, // reuse the importer's state object
                 None => return inst.error("fmi2GetFMUstate: *FMUstate is not a state of this FMU"),
             }
@@ -313,8 +350,8 @@ pub unsafe extern "C" fn fmi2GetFMUstate(c: Fmi2Component, state: *mut Fmi2FmuSt
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SetFMUstate(c: Fmi2Component, state: Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| match state_ref(state) {
-        Some(b) => inst.set_state(&b.snapshot),
+    with_instance(c, |inst| match state_ref(inst, state) {
+        Some(b) => inst.set_state(&b.snapshot.clone()),
         None if state.is_null() => null_arg(inst, "fmi2SetFMUstate", "FMUstate"),
         None => inst.error("fmi2SetFMUstate: FMUstate is not a state of this FMU"),
     })
@@ -326,12 +363,12 @@ pub unsafe extern "C" fn fmi2FreeFMUstate(c: Fmi2Component, state: *mut Fmi2FmuS
         if state.is_null() || (*state).is_null() {
             return Status::Ok;
         }
-        if state_ref(*state).is_none() {
-            return inst.error("fmi2FreeFMUstate: FMUstate is not a state of this FMU");
+        if state_ref(inst, *state).is_none() {
+            return inst.error("fmi2FreeFMUstate: FMUstate is not a live state of this instance");
         }
-        let mut b = Box::from_raw(*state as *mut StateBox);
-        b.tag = 0; // a second free of the same pointer is then refused, not trusted
-        drop(b);
+        // Unregistered first: a second free of the same pointer is then refused, not trusted.
+        inst.live_states.remove(&(*state as usize));
+        free_state_box(*state);
         *state = std::ptr::null_mut();
         Status::Ok
     })
@@ -347,7 +384,7 @@ pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
         if let Err(s) = inst.check("fmi2SerializedFMUstateSize", allowed::FMU_STATE) {
             return s;
         }
-        let Some(b) = state_ref(state) else {
+        let Some(b) = state_ref(inst, state) else {
             return inst.error("fmi2SerializedFMUstateSize: FMUstate is null or foreign");
         };
         if size.is_null() {
@@ -369,7 +406,9 @@ pub unsafe extern "C" fn fmi2SerializeFMUstate(
         if let Err(s) = inst.check("fmi2SerializeFMUstate", allowed::FMU_STATE) {
             return s;
         }
-        let Some(b) = state_ref(state) else { return inst.error("fmi2SerializeFMUstate: FMUstate is null or foreign") };
+        let Some(b) = state_ref(inst, state) else {
+            return inst.error("fmi2SerializeFMUstate: FMUstate is null or foreign");
+        };
         let data = component::serialize(&b.snapshot);
         if size < data.len() {
             return inst.error(&format!("fmi2SerializeFMUstate: buffer of {size} bytes, {} needed", data.len()));
@@ -404,9 +443,9 @@ pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
             Err(e) => return inst.error(&format!("fmi2DeSerializeFMUstate: {e}")),
         };
         if (*state).is_null() {
-            *state = Box::into_raw(Box::new(StateBox { tag: STATE_TAG, snapshot })) as Fmi2FmuState;
+            *state = new_state(inst, snapshot);
         } else {
-            match state_ref(*state) {
+            match state_ref(inst, *state) {
                 Some(b) => b.snapshot = snapshot,
                 None => return inst.error("fmi2DeSerializeFMUstate: *FMUstate is not a state of this FMU"),
             }
