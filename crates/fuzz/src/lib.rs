@@ -35,9 +35,13 @@ use thermovia_fmi2::*;
 use thermovia_importer::loader::{FmuState, Library, NullArg, RawInstance};
 use thermovia_importer::model_description::{ModelDescription, VariableType};
 
-/// Longest a single FMI call may take before the child reports a hang. The FMU's own budget keeps
-/// a step under about a second; the margin covers a loaded CI machine.
+/// Longest a single FMI call may take before the child reports a hang (default; `Launcher::watchdog`
+/// sets another). The FMU's own budget keeps a step under about a second; the margin covers a
+/// loaded CI machine.
 pub const WATCHDOG: Duration = Duration::from_secs(10);
+
+/// The child learns its watchdog from this environment variable (milliseconds).
+const WATCHDOG_ENV: &str = "THERMOVIA_FUZZ_WATCHDOG_MS";
 
 /// Ops per sequence (each op is one to a dozen calls).
 pub const OPS_PER_SEQUENCE: usize = 120;
@@ -863,6 +867,8 @@ pub fn damage(rng: &mut Rng, bytes: &[u8]) -> Vec<u8> {
 /// Runs the ops `indices` of sequence `seq_seed` (the child's work). Returns the outcome and the
 /// number of FMI calls made.
 pub fn run_sequence(target: &Target, seq_seed: u64, indices: &[usize]) -> Outcome {
+    let limit =
+        std::env::var(WATCHDOG_ENV).ok().and_then(|ms| ms.parse().ok()).map(Duration::from_millis).unwrap_or(WATCHDOG);
     let watch = Arc::new(Watch {
         started: Instant::now(),
         op: AtomicU64::new(0),
@@ -876,9 +882,9 @@ pub fn run_sequence(target: &Target, seq_seed: u64, indices: &[usize]) -> Outcom
             let since = watch.since_ms.load(Ordering::Acquire);
             if since > 0 {
                 let now = watch.started.elapsed().as_millis() as u64;
-                if now.saturating_sub(since) > WATCHDOG.as_millis() as u64 {
+                if now.saturating_sub(since) > limit.as_millis() as u64 {
                     let label = watch.label.lock().map(|l| l.clone()).unwrap_or_default();
-                    println!("HANG op {} ({label}) ran over {:?}", watch.op.load(Ordering::Relaxed), WATCHDOG);
+                    println!("HANG op {} ({label}) ran over {limit:?}", watch.op.load(Ordering::Relaxed));
                     let _ = std::io::stdout().flush();
                     std::process::exit(3);
                 }
@@ -957,6 +963,8 @@ pub fn child_main(dir: &Path) -> ! {
 pub struct Launcher {
     pub exe: PathBuf,
     pub dir: PathBuf,
+    /// Per-call limit in the child.
+    pub watchdog: Duration,
 }
 
 impl Launcher {
@@ -969,6 +977,7 @@ impl Launcher {
             .stdin(Stdio::piped())
             .stdout(Stdio::piped())
             .stderr(if trace { Stdio::inherit() } else { Stdio::null() })
+            .env(WATCHDOG_ENV, self.watchdog.as_millis().to_string())
             .spawn();
         let mut child = match child {
             Ok(c) => c,
@@ -979,7 +988,7 @@ impl Launcher {
             let _ = stdin.write_all(line.as_bytes());
         }
         // The parent's own backstop: the child's watchdog should always fire first.
-        let deadline = Instant::now() + WATCHDOG * 4 + Duration::from_secs(indices.len() as u64);
+        let deadline = Instant::now() + self.watchdog * 4 + Duration::from_secs(indices.len() as u64);
         loop {
             match child.try_wait() {
                 Ok(Some(_)) => break,
@@ -1010,16 +1019,18 @@ impl Launcher {
         }
     }
 
-    /// Delta debugging: the smallest subset of `indices` (found within `budget` runs) that fails
-    /// the same way.
-    pub fn shrink(&self, seed: u64, indices: &[usize], kind: &str, budget: usize) -> Vec<usize> {
+    /// Delta debugging: the smallest subset of `indices` (found within `budget` runs and
+    /// `time` seconds) that fails the same way.
+    pub fn shrink(&self, seed: u64, indices: &[usize], kind: &str, budget: usize, time: Duration) -> Vec<usize> {
+        let until = Instant::now() + time;
         let mut cur = indices.to_vec();
         let mut runs = 0;
         let mut chunk = cur.len().div_ceil(2);
-        while chunk >= 1 && runs < budget {
+        let more = |runs: usize| runs < budget && Instant::now() < until;
+        while chunk >= 1 && more(runs) {
             let mut i = 0;
             let mut removed = false;
-            while i < cur.len() && runs < budget {
+            while i < cur.len() && more(runs) {
                 let candidate: Vec<usize> =
                     cur[..i].iter().chain(cur[(i + chunk).min(cur.len())..].iter()).copied().collect();
                 runs += 1;
@@ -1095,9 +1106,17 @@ pub fn campaign(launcher: &Launcher, campaign_seed: u64, calls: u64, jobs: usize
                         }
                         let shrink = r.failures.len() < 3;
                         drop(r);
-                        let ops = if shrink { launcher.shrink(seed, &ops, bad.kind(), 150) } else { ops };
-                        let outcome = launcher.run(seed, &ops);
-                        report.lock().expect("report").failures.push(Failure { seed, outcome, ops });
+                        let ops = if shrink {
+                            launcher.shrink(seed, &ops, bad.kind(), 150, Duration::from_secs(120))
+                        } else {
+                            ops
+                        };
+                        let outcome = if shrink { launcher.run(seed, &ops) } else { outcome };
+                        let failure = Failure { seed, outcome, ops };
+                        if progress {
+                            eprintln!("thermovia-fuzz: found {}", failure);
+                        }
+                        report.lock().expect("report").failures.push(failure);
                         continue;
                     }
                 }
@@ -1128,18 +1147,23 @@ impl std::fmt::Display for Report {
             self.sequences, self.calls, self.seconds, self.crashes, self.hangs, self.violations
         )?;
         for x in &self.failures {
-            writeln!(
-                f,
-                "  {} (sequence seed {}, ops {:?}): {:?}\n    rerun: thermovia-fuzz --replay {} {}",
-                x.outcome.kind(),
-                x.seed,
-                x.ops,
-                x.outcome,
-                x.seed,
-                x.ops.iter().map(|i| i.to_string()).collect::<Vec<_>>().join(",")
-            )?;
+            writeln!(f, "  {x}")?;
         }
         Ok(())
+    }
+}
+
+impl std::fmt::Display for Failure {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let ops = self.ops.iter().map(|i| i.to_string()).collect::<Vec<_>>().join(",");
+        write!(
+            f,
+            "{} (sequence seed {}, ops {ops}): {:?}\n    rerun: THERMOVIA_FUZZ_TRACE=1 thermovia-fuzz --replay {} {ops}",
+            self.outcome.kind(),
+            self.seed,
+            self.outcome,
+            self.seed
+        )
     }
 }
 

@@ -1,6 +1,7 @@
 //! `thermovia-fuzz`: a fuzzing campaign against a packaged FMU (ThermoVIA's by default).
 //!
-//!   thermovia-fuzz [--calls N] [--seed S] [--jobs J] [FMU]     a campaign of about N FMI calls
+//!   thermovia-fuzz [--calls N] [--seed S] [--jobs J] [--watchdog SECONDS] [FMU]
+//!                                                               a campaign of about N FMI calls
 //!   thermovia-fuzz --replay SEED OPS [FMU]                      one sequence's ops (comma list)
 //!   thermovia-fuzz --life-cycles DIR N PER_LOAD                  N life cycles (the valgrind workload)
 //!   thermovia-fuzz --resume DIR STATE STEPS H VRS                continue a serialized state here
@@ -52,6 +53,7 @@ fn main() {
         std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(1);
     let mut jobs = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
     let mut replay: Option<(u64, Vec<usize>)> = None;
+    let mut watchdog = thermovia_fuzz::WATCHDOG;
     let mut fmu = PathBuf::from("target/fmu/ThermoVIA.fmu");
     let mut it = args.into_iter();
     let number = |x: Option<String>, what: &str| -> u64 {
@@ -66,6 +68,7 @@ fn main() {
             "--calls" => calls = number(it.next(), "--calls"),
             "--seed" => seed = number(it.next(), "--seed"),
             "--jobs" => jobs = number(it.next(), "--jobs").max(1) as usize,
+            "--watchdog" => watchdog = std::time::Duration::from_secs(number(it.next(), "--watchdog").max(1)),
             "--replay" => {
                 let s = number(it.next(), "--replay");
                 let ops = it.next().unwrap_or_else(|| die("--replay SEED OPS"));
@@ -77,7 +80,7 @@ fn main() {
                 replay = Some((s, ops));
             }
             "-h" | "--help" => {
-                println!("usage: thermovia-fuzz [--calls N] [--seed S] [--jobs J] [FMU]\n       thermovia-fuzz --replay SEED OPS|all [FMU]");
+                println!("usage: thermovia-fuzz [--calls N] [--seed S] [--jobs J] [--watchdog SECONDS] [FMU]\n       thermovia-fuzz --replay SEED OPS|all [FMU]");
                 return;
             }
             other if other.starts_with('-') => die(&format!("unknown option {other}")),
@@ -88,6 +91,7 @@ fn main() {
     let launcher = Launcher {
         exe: std::env::current_exe().unwrap_or_else(|e| die(&e.to_string())),
         dir: opened.unpacked_dir().to_path_buf(),
+        watchdog,
     };
     if let Some((s, ops)) = replay {
         let outcome = launcher.run(s, &ops);

@@ -25,7 +25,7 @@ fn a_bounded_campaign_finds_no_crash_hang_or_violation() {
     });
     println!("fuzz campaign seed {seed} (rerun: THERMOVIA_FUZZ_SEED={seed})");
     let (_fmu, dir) = unpacked();
-    let launcher = Launcher { exe: PathBuf::from(EXE), dir };
+    let launcher = Launcher { exe: PathBuf::from(EXE), dir, watchdog: thermovia_fuzz::WATCHDOG };
     let report = campaign(&launcher, seed, 100_000, 2, false);
     println!("{report}");
     assert!(report.calls >= 100_000, "{report}");
