@@ -63,6 +63,83 @@ pub mod allowed {
     pub const FMU_STATE: u8 = ANY_BUT_FATAL;
 }
 
+/// Every function that takes an instance, with the phases it may be called in: one table, checked in
+/// one place on entry (`export::with_instance`), as the Reference FMUs' fmi2Functions.c does. The
+/// methods below assume the check was made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Function {
+    SetDebugLogging,
+    SetupExperiment,
+    EnterInitializationMode,
+    ExitInitializationMode,
+    Terminate,
+    Reset,
+    GetReal,
+    GetInteger,
+    GetBoolean,
+    GetString,
+    SetReal,
+    SetInteger,
+    SetBoolean,
+    SetString,
+    GetFmuState,
+    SetFmuState,
+    FreeFmuState,
+    SerializedFmuStateSize,
+    SerializeFmuState,
+    DeSerializeFmuState,
+    GetDirectionalDerivative,
+    SetRealInputDerivatives,
+    GetRealOutputDerivatives,
+    DoStep,
+    CancelStep,
+    GetStatus,
+    GetRealStatus,
+    GetIntegerStatus,
+    GetBooleanStatus,
+    GetStringStatus,
+}
+
+impl Function {
+    /// (C name, allowed phases)
+    pub fn entry(self) -> (&'static str, u8) {
+        use allowed::*;
+        use Function::*;
+        match self {
+            SetDebugLogging => ("fmi2SetDebugLogging", ANY_BUT_FATAL),
+            SetupExperiment => ("fmi2SetupExperiment", SETUP),
+            EnterInitializationMode => ("fmi2EnterInitializationMode", ENTER_INIT),
+            ExitInitializationMode => ("fmi2ExitInitializationMode", EXIT_INIT),
+            Terminate => ("fmi2Terminate", TERMINATE),
+            Reset => ("fmi2Reset", ANY_BUT_FATAL),
+            GetReal => ("fmi2GetReal", GET),
+            GetInteger => ("fmi2GetInteger", GET),
+            GetBoolean => ("fmi2GetBoolean", GET),
+            GetString => ("fmi2GetString", GET),
+            SetReal => ("fmi2SetReal", SET),
+            SetInteger => ("fmi2SetInteger", SET),
+            SetBoolean => ("fmi2SetBoolean", SET),
+            SetString => ("fmi2SetString", SET),
+            GetFmuState => ("fmi2GetFMUstate", FMU_STATE),
+            SetFmuState => ("fmi2SetFMUstate", FMU_STATE),
+            FreeFmuState => ("fmi2FreeFMUstate", FMU_STATE),
+            SerializedFmuStateSize => ("fmi2SerializedFMUstateSize", FMU_STATE),
+            SerializeFmuState => ("fmi2SerializeFMUstate", FMU_STATE),
+            DeSerializeFmuState => ("fmi2DeSerializeFMUstate", FMU_STATE),
+            GetDirectionalDerivative => ("fmi2GetDirectionalDerivative", ANY_BUT_FATAL),
+            SetRealInputDerivatives => ("fmi2SetRealInputDerivatives", ANY_BUT_FATAL),
+            GetRealOutputDerivatives => ("fmi2GetRealOutputDerivatives", ANY_BUT_FATAL),
+            DoStep => ("fmi2DoStep", DO_STEP),
+            CancelStep => ("fmi2CancelStep", ANY_BUT_FATAL),
+            GetStatus => ("fmi2GetStatus", STATUS),
+            GetRealStatus => ("fmi2GetRealStatus", STATUS),
+            GetIntegerStatus => ("fmi2GetIntegerStatus", STATUS),
+            GetBooleanStatus => ("fmi2GetBooleanStatus", STATUS),
+            GetStringStatus => ("fmi2GetStringStatus", STATUS),
+        }
+    }
+}
+
 pub const LOG_EVENTS: u8 = 1;
 pub const LOG_WARNING: u8 = 2;
 pub const LOG_DISCARD: u8 = 4;
@@ -258,9 +335,6 @@ impl Component {
     }
 
     pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Status {
-        if let Err(s) = self.check("fmi2SetDebugLogging", allowed::ANY_BUT_FATAL) {
-            return s;
-        }
         let mut mask = 0;
         for c in categories {
             match category_bit(c) {
@@ -274,9 +348,6 @@ impl Component {
     }
 
     pub fn setup_experiment(&mut self, tolerance: Option<f64>, start: f64, stop: Option<f64>) -> Status {
-        if let Err(s) = self.check("fmi2SetupExperiment", allowed::SETUP) {
-            return s;
-        }
         if !start.is_finite() {
             return self.error(&format!("fmi2SetupExperiment: startTime {start} is not finite"));
         }
@@ -298,11 +369,8 @@ impl Component {
         Status::Ok
     }
 
-    /// A state-machine transition: check, optionally re-derive initial states, move, log.
-    fn transition(&mut self, function: &str, mask: u8, to: Phase, initialize: bool, event: &str) -> Status {
-        if let Err(s) = self.check(function, mask) {
-            return s;
-        }
+    /// A state-machine transition: optionally re-derive initial states, move, log.
+    fn transition(&mut self, to: Phase, initialize: bool, event: &str) -> Status {
         if initialize {
             self.s.model.initialize();
         }
@@ -312,33 +380,18 @@ impl Component {
     }
 
     pub fn enter_initialization_mode(&mut self) -> Status {
-        self.transition(
-            "fmi2EnterInitializationMode",
-            allowed::ENTER_INIT,
-            Phase::InitializationMode,
-            true,
-            "entered initialization mode",
-        )
+        self.transition(Phase::InitializationMode, true, "entered initialization mode")
     }
 
     pub fn exit_initialization_mode(&mut self) -> Status {
-        self.transition(
-            "fmi2ExitInitializationMode",
-            allowed::EXIT_INIT,
-            Phase::StepComplete,
-            true,
-            "exited initialization mode",
-        )
+        self.transition(Phase::StepComplete, true, "exited initialization mode")
     }
 
     pub fn terminate(&mut self) -> Status {
-        self.transition("fmi2Terminate", allowed::TERMINATE, Phase::Terminated, false, "terminated")
+        self.transition(Phase::Terminated, false, "terminated")
     }
 
     pub fn reset(&mut self) -> Status {
-        if let Err(s) = self.check("fmi2Reset", allowed::ANY_BUT_FATAL) {
-            return s;
-        }
         self.s = Snapshot::initial();
         self.logging_on = self.initial_logging_on;
         self.categories = LOG_ALL;
@@ -353,9 +406,6 @@ impl Component {
     }
 
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Status {
-        if let Err(s) = self.check("fmi2GetReal", allowed::GET) {
-            return s;
-        }
         for (vr, slot) in vrs.iter().zip(out.iter_mut()) {
             match self.lookup("fmi2GetReal", BaseType::Real, *vr) {
                 Ok(v) => match v.access {
@@ -377,9 +427,6 @@ impl Component {
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Status {
-        if let Err(s) = self.check("fmi2GetInteger", allowed::GET) {
-            return s;
-        }
         for (vr, slot) in vrs.iter().zip(out.iter_mut()) {
             match self.lookup("fmi2GetInteger", BaseType::Integer, *vr) {
                 Ok(v) => match v.access {
@@ -393,10 +440,7 @@ impl Component {
     }
 
     /// Types with no variables: any value reference is unknown.
-    pub fn no_variables_of_type(&mut self, function: &str, mask: u8, vrs: &[u32]) -> Status {
-        if let Err(s) = self.check(function, mask) {
-            return s;
-        }
+    pub fn no_variables_of_type(&mut self, function: &str, vrs: &[u32]) -> Status {
         match vrs.first() {
             None => Status::Ok,
             Some(vr) => {
@@ -427,9 +471,6 @@ impl Component {
 
     /// Sets values, all or none: every value is checked before any is written.
     fn set_values(&mut self, function: &str, ty: BaseType, vrs: &[u32], values: &[f64]) -> Status {
-        if let Err(s) = self.check(function, allowed::SET) {
-            return s;
-        }
         for (vr, x) in vrs.iter().zip(values) {
             let v = match self.lookup(function, ty, *vr) {
                 Ok(v) => v,
@@ -466,9 +507,6 @@ impl Component {
     }
 
     pub fn do_step(&mut self, t: f64, h: f64) -> Status {
-        if let Err(s) = self.check("fmi2DoStep", allowed::DO_STEP) {
-            return s;
-        }
         if !(h > 0.0 && h.is_finite()) {
             return self.error(&format!("fmi2DoStep: communicationStepSize {h} must be positive and finite"));
         }
@@ -529,34 +567,27 @@ impl Component {
         status
     }
 
-    pub fn last_step_status(&mut self, function: &str) -> Result<Status, Status> {
-        self.check(function, allowed::STATUS)?;
-        Ok(self.last_step_status)
+    pub fn last_step_status(&self) -> Status {
+        self.last_step_status
     }
 
-    pub fn last_successful_time(&mut self, function: &str) -> Result<f64, Status> {
-        self.check(function, allowed::STATUS)?;
-        Ok(self.s.last_successful_time)
+    pub fn last_successful_time(&self) -> f64 {
+        self.s.last_successful_time
     }
 
-    pub fn terminated(&mut self, function: &str) -> Result<bool, Status> {
-        self.check(function, allowed::STATUS)?;
-        Ok(self.s.terminated)
+    pub fn terminated(&self) -> bool {
+        self.s.terminated
     }
 
     pub fn unsupported(&mut self, function: &str, why: &str) -> Status {
         self.error(&format!("{function}: {why}"))
     }
 
-    pub fn get_state(&mut self) -> Result<Snapshot, Status> {
-        self.check("fmi2GetFMUstate", allowed::FMU_STATE)?;
-        Ok(self.s.clone())
+    pub fn get_state(&self) -> Snapshot {
+        self.s.clone()
     }
 
     pub fn set_state(&mut self, snapshot: &Snapshot) -> Status {
-        if let Err(s) = self.check("fmi2SetFMUstate", allowed::FMU_STATE) {
-            return s;
-        }
         self.s = snapshot.clone();
         self.log_event(&format!("FMU state restored at t = {}", self.s.time));
         Status::Ok

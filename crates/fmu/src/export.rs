@@ -9,7 +9,7 @@ use std::ffi::{CStr, CString};
 use std::os::raw::c_char;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use crate::component::{self, allowed, Component, Snapshot, Status};
+use crate::component::{self, Component, Function, Snapshot, Status};
 use thermovia_fmi2::*;
 
 /// Boxed FMU states carry a tag so a stray pointer is refused rather than trusted.
@@ -23,13 +23,18 @@ fn status(s: Status) -> Fmi2Status {
     s as Fmi2Status
 }
 
-/// Runs `f` on the instance behind `c`; null → fmi2Error, panic → fmi2Fatal.
-unsafe fn with_instance(c: Fmi2Component, f: impl FnOnce(&mut Component) -> Status) -> Fmi2Status {
+/// Runs `f` on the instance behind `c` if `function` may be called in its phase (the one check of
+/// the state machine, on entry); null → fmi2Error, panic → fmi2Fatal.
+unsafe fn with_instance(c: Fmi2Component, function: Function, f: impl FnOnce(&mut Component) -> Status) -> Fmi2Status {
     if c.is_null() {
         return FMI2_ERROR;
     }
     let inst = &mut *(c as *mut Component);
-    match catch_unwind(AssertUnwindSafe(|| f(&mut *inst))) {
+    let (name, mask) = function.entry();
+    match catch_unwind(AssertUnwindSafe(|| match inst.check(name, mask) {
+        Ok(()) => f(&mut *inst),
+        Err(s) => s,
+    })) {
         Ok(s) => status(s),
         Err(panic) => {
             let what = panic
@@ -176,7 +181,7 @@ pub unsafe extern "C" fn fmi2SetDebugLogging(
     n: usize,
     categories: *const Fmi2String,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetDebugLogging, |inst| {
         let Some(raw) = slice(categories, n) else { return null_arg(inst, "fmi2SetDebugLogging", "categories") };
         let mut names = Vec::with_capacity(n);
         for &p in raw {
@@ -198,7 +203,7 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
     stop_time_defined: Fmi2Boolean,
     stop_time: Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetupExperiment, |inst| {
         inst.setup_experiment(
             (tolerance_defined != 0).then_some(tolerance),
             start_time,
@@ -209,26 +214,26 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2EnterInitializationMode(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.enter_initialization_mode())
+    with_instance(c, Function::EnterInitializationMode, |inst| inst.enter_initialization_mode())
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2ExitInitializationMode(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.exit_initialization_mode())
+    with_instance(c, Function::ExitInitializationMode, |inst| inst.exit_initialization_mode())
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2Terminate(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.terminate())
+    with_instance(c, Function::Terminate, |inst| inst.terminate())
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2Reset(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.reset())
+    with_instance(c, Function::Reset, |inst| inst.reset())
 }
 
 macro_rules! getter {
-    ($fname:ident, $cty:ty, $method:ident) => {
+    ($fname:ident, $cty:ty, $method:ident, $function:ident) => {
         #[no_mangle]
         pub unsafe extern "C" fn $fname(
             c: Fmi2Component,
@@ -236,7 +241,7 @@ macro_rules! getter {
             nvr: usize,
             value: *mut $cty,
         ) -> Fmi2Status {
-            with_instance(c, |inst| {
+            with_instance(c, Function::$function, |inst| {
                 let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, stringify!($fname), "vr") };
                 let Some(out) = slice_mut(value, nvr) else { return null_arg(inst, stringify!($fname), "value") };
                 inst.$method(vrs, out)
@@ -245,8 +250,8 @@ macro_rules! getter {
     };
 }
 
-getter!(fmi2GetReal, Fmi2Real, get_real);
-getter!(fmi2GetInteger, Fmi2Integer, get_integer);
+getter!(fmi2GetReal, Fmi2Real, get_real, GetReal);
+getter!(fmi2GetInteger, Fmi2Integer, get_integer, GetInteger);
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SetReal(
@@ -255,7 +260,7 @@ pub unsafe extern "C" fn fmi2SetReal(
     nvr: usize,
     value: *const Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetReal, |inst| {
         let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, "fmi2SetReal", "vr") };
         let Some(values) = slice(value, nvr) else { return null_arg(inst, "fmi2SetReal", "value") };
         inst.set_real(vrs, values)
@@ -269,7 +274,7 @@ pub unsafe extern "C" fn fmi2SetInteger(
     nvr: usize,
     value: *const Fmi2Integer,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetInteger, |inst| {
         let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, "fmi2SetInteger", "vr") };
         let Some(values) = slice(value, nvr) else { return null_arg(inst, "fmi2SetInteger", "value") };
         inst.set_integer(vrs, values)
@@ -277,7 +282,7 @@ pub unsafe extern "C" fn fmi2SetInteger(
 }
 
 macro_rules! no_variables {
-    ($fname:ident, $ptr:ty, $mask:expr) => {
+    ($fname:ident, $ptr:ty, $function:ident) => {
         /// This FMU has no variables of this type: only an empty request succeeds.
         #[no_mangle]
         pub unsafe extern "C" fn $fname(
@@ -286,21 +291,21 @@ macro_rules! no_variables {
             nvr: usize,
             value: $ptr,
         ) -> Fmi2Status {
-            with_instance(c, |inst| {
+            with_instance(c, Function::$function, |inst| {
                 let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, stringify!($fname), "vr") };
                 if nvr > 0 && value.is_null() {
                     return null_arg(inst, stringify!($fname), "value");
                 }
-                inst.no_variables_of_type(stringify!($fname), $mask, vrs)
+                inst.no_variables_of_type(stringify!($fname), vrs)
             })
         }
     };
 }
 
-no_variables!(fmi2GetBoolean, *mut Fmi2Boolean, allowed::GET);
-no_variables!(fmi2GetString, *mut Fmi2String, allowed::GET);
-no_variables!(fmi2SetBoolean, *const Fmi2Boolean, allowed::SET);
-no_variables!(fmi2SetString, *const Fmi2String, allowed::SET);
+no_variables!(fmi2GetBoolean, *mut Fmi2Boolean, GetBoolean);
+no_variables!(fmi2GetString, *mut Fmi2String, GetString);
+no_variables!(fmi2SetBoolean, *const Fmi2Boolean, SetBoolean);
+no_variables!(fmi2SetString, *const Fmi2String, SetString);
 
 /// The state behind `p` if this instance allocated it and has not freed it: a stray, foreign or
 /// freed pointer is refused without being read.
@@ -328,14 +333,11 @@ unsafe fn free_state_box(p: Fmi2FmuState) {
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetFMUstate(c: Fmi2Component, state: *mut Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetFmuState, |inst| {
         if state.is_null() {
             return null_arg(inst, "fmi2GetFMUstate", "FMUstate");
         }
-        let snapshot = match inst.get_state() {
-            Ok(s) => s,
-            Err(s) => return s,
-        };
+        let snapshot = inst.get_state();
         if (*state).is_null() {
             *state = new_state(inst, snapshot);
         } else {
@@ -350,7 +352,7 @@ pub unsafe extern "C" fn fmi2GetFMUstate(c: Fmi2Component, state: *mut Fmi2FmuSt
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SetFMUstate(c: Fmi2Component, state: Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| match state_ref(inst, state) {
+    with_instance(c, Function::SetFmuState, |inst| match state_ref(inst, state) {
         Some(b) => inst.set_state(&b.snapshot.clone()),
         None if state.is_null() => null_arg(inst, "fmi2SetFMUstate", "FMUstate"),
         None => inst.error("fmi2SetFMUstate: FMUstate is not a state of this FMU"),
@@ -359,7 +361,7 @@ pub unsafe extern "C" fn fmi2SetFMUstate(c: Fmi2Component, state: Fmi2FmuState) 
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2FreeFMUstate(c: Fmi2Component, state: *mut Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::FreeFmuState, |inst| {
         if state.is_null() || (*state).is_null() {
             return Status::Ok;
         }
@@ -380,10 +382,7 @@ pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
     state: Fmi2FmuState,
     size: *mut usize,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
-        if let Err(s) = inst.check("fmi2SerializedFMUstateSize", allowed::FMU_STATE) {
-            return s;
-        }
+    with_instance(c, Function::SerializedFmuStateSize, |inst| {
         let Some(b) = state_ref(inst, state) else {
             return inst.error("fmi2SerializedFMUstateSize: FMUstate is null or foreign");
         };
@@ -402,10 +401,7 @@ pub unsafe extern "C" fn fmi2SerializeFMUstate(
     bytes: *mut Fmi2Byte,
     size: usize,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
-        if let Err(s) = inst.check("fmi2SerializeFMUstate", allowed::FMU_STATE) {
-            return s;
-        }
+    with_instance(c, Function::SerializeFmuState, |inst| {
         let Some(b) = state_ref(inst, state) else {
             return inst.error("fmi2SerializeFMUstate: FMUstate is null or foreign");
         };
@@ -428,10 +424,7 @@ pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
     size: usize,
     state: *mut Fmi2FmuState,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
-        if let Err(s) = inst.check("fmi2DeSerializeFMUstate", allowed::FMU_STATE) {
-            return s;
-        }
+    with_instance(c, Function::DeSerializeFmuState, |inst| {
         if state.is_null() {
             return null_arg(inst, "fmi2DeSerializeFMUstate", "FMUstate");
         }
@@ -464,7 +457,7 @@ pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
     _dv_known: *const Fmi2Real,
     _dv_unknown: *mut Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetDirectionalDerivative, |inst| {
         inst.unsupported("fmi2GetDirectionalDerivative", "not provided (providesDirectionalDerivative=false)")
     })
 }
@@ -477,7 +470,7 @@ pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
     _order: *const Fmi2Integer,
     _value: *const Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetRealInputDerivatives, |inst| {
         inst.unsupported(
             "fmi2SetRealInputDerivatives",
             "inputs are held over a step (canInterpolateInputs=false); use motor_speed_command for a ramp",
@@ -493,7 +486,9 @@ pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
     _order: *const Fmi2Integer,
     _value: *mut Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| inst.unsupported("fmi2GetRealOutputDerivatives", "maxOutputDerivativeOrder=0"))
+    with_instance(c, Function::GetRealOutputDerivatives, |inst| {
+        inst.unsupported("fmi2GetRealOutputDerivatives", "maxOutputDerivativeOrder=0")
+    })
 }
 
 #[no_mangle]
@@ -503,36 +498,33 @@ pub unsafe extern "C" fn fmi2DoStep(
     communication_step_size: Fmi2Real,
     _no_set_fmu_state_prior_to_current_point: Fmi2Boolean,
 ) -> Fmi2Status {
-    with_instance(c, |inst| inst.do_step(current_communication_point, communication_step_size))
+    with_instance(c, Function::DoStep, |inst| inst.do_step(current_communication_point, communication_step_size))
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2CancelStep(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.unsupported("fmi2CancelStep", "steps are synchronous (canRunAsynchronuously=false)"))
+    with_instance(c, Function::CancelStep, |inst| {
+        inst.unsupported("fmi2CancelStep", "steps are synchronous (canRunAsynchronuously=false)")
+    })
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetStatus(c: Fmi2Component, kind: Fmi2StatusKind, value: *mut Fmi2Status) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetStatus, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetStatus", "value");
         }
         if kind != FMI2_DO_STEP_STATUS {
             return inst.error(&format!("fmi2GetStatus: status kind {kind} has no fmi2Status value here"));
         }
-        match inst.last_step_status("fmi2GetStatus") {
-            Ok(s) => {
-                *value = s as Fmi2Status;
-                Status::Ok
-            }
-            Err(s) => s,
-        }
+        *value = inst.last_step_status() as Fmi2Status;
+        Status::Ok
     })
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetRealStatus(c: Fmi2Component, kind: Fmi2StatusKind, value: *mut Fmi2Real) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetRealStatus, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetRealStatus", "value");
         }
@@ -540,13 +532,8 @@ pub unsafe extern "C" fn fmi2GetRealStatus(c: Fmi2Component, kind: Fmi2StatusKin
             return inst
                 .error(&format!("fmi2GetRealStatus: only fmi2LastSuccessfulTime (2) is a Real status, not {kind}"));
         }
-        match inst.last_successful_time("fmi2GetRealStatus") {
-            Ok(t) => {
-                *value = t;
-                Status::Ok
-            }
-            Err(s) => s,
-        }
+        *value = inst.last_successful_time();
+        Status::Ok
     })
 }
 
@@ -556,7 +543,7 @@ pub unsafe extern "C" fn fmi2GetIntegerStatus(
     kind: Fmi2StatusKind,
     _value: *mut Fmi2Integer,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetIntegerStatus, |inst| {
         inst.error(&format!("fmi2GetIntegerStatus: FMI 2.0 defines no Integer status (kind {kind})"))
     })
 }
@@ -567,7 +554,7 @@ pub unsafe extern "C" fn fmi2GetBooleanStatus(
     kind: Fmi2StatusKind,
     value: *mut Fmi2Boolean,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetBooleanStatus, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetBooleanStatus", "value");
         }
@@ -575,13 +562,8 @@ pub unsafe extern "C" fn fmi2GetBooleanStatus(
             return inst
                 .error(&format!("fmi2GetBooleanStatus: only fmi2Terminated (3) is a Boolean status, not {kind}"));
         }
-        match inst.terminated("fmi2GetBooleanStatus") {
-            Ok(t) => {
-                *value = t as Fmi2Boolean;
-                Status::Ok
-            }
-            Err(s) => s,
-        }
+        *value = inst.terminated() as Fmi2Boolean;
+        Status::Ok
     })
 }
 
@@ -591,7 +573,7 @@ pub unsafe extern "C" fn fmi2GetStringStatus(
     kind: Fmi2StatusKind,
     _value: *mut Fmi2String,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetStringStatus, |inst| {
         let why = if kind == FMI2_PENDING_STATUS {
             "no asynchronous step is ever pending"
         } else {
