@@ -4,6 +4,9 @@
 #                 libclang-<ver>.so. The image ships libclang-cpp.so.14, a different library that
 #                 bindgen cannot use, so the check looks for the very file bindgen loads.
 #   libtbb12      ecospy's native library links it (tests/python/test_importers.py).
+#   valgrind      memcheck over 1,000 FMU life cycles and a cross-process state round trip
+#                 (crates/fuzz/tests/reliability.rs); the check looks for the valgrind command and
+#                 its memcheck tool, which the tests run.
 #
 # Usage: scripts/setup-system.sh [--dry-run]
 #   --dry-run  print what would be installed and why, install nothing; exit 0 either way.
@@ -36,6 +39,19 @@ has_libclang() {
 
 has_shared_lib() { ldconfig -p 2>/dev/null | grep -q "^[[:space:]]*$1[[:space:]]"; }
 
+# The valgrind launcher alone is not enough: memcheck is a separate tool binary under its libexec
+# folder (SETUP_SYSTEM_VALGRIND_DIRS, space-separated, replaces the system folders: the tests use it).
+has_valgrind() {
+  command -v valgrind >/dev/null 2>&1 || return 1
+  local d
+  # shellcheck disable=SC2206
+  local dirs=(${SETUP_SYSTEM_VALGRIND_DIRS:-/usr/libexec/valgrind /usr/lib/x86_64-linux-gnu/valgrind /usr/lib/valgrind})
+  for d in "${dirs[@]}"; do
+    compgen -G "$d/memcheck-*-linux" >/dev/null && return 0
+  done
+  return 1
+}
+
 missing=()
 reasons=()
 if ! has_libclang; then
@@ -46,9 +62,13 @@ if ! has_shared_lib libtbb.so.12; then
   missing+=(libtbb12)
   reasons+=("libtbb12: no libtbb.so.12 for ecospy (third-party importer test)")
 fi
+if ! has_valgrind; then
+  missing+=(valgrind)
+  reasons+=("valgrind: no valgrind with its memcheck tool (leak test over 1,000 life cycles)")
+fi
 
 if ((${#missing[@]} == 0)); then
-  echo "setup-system: nothing to install (libclang and libtbb12 present)"
+  echo "setup-system: nothing to install (libclang, libtbb12 and valgrind present)"
   exit 0
 fi
 for r in "${reasons[@]}"; do echo "setup-system: would install $r"; done
@@ -62,3 +82,4 @@ SUDO=""
 $SUDO apt-get update -qq
 DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq "${missing[@]}"
 has_libclang || { echo "setup-system: libclang-dev installed but no libclang.so found" >&2; exit 1; }
+has_valgrind || { echo "setup-system: valgrind installed but no memcheck tool found" >&2; exit 1; }

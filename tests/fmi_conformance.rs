@@ -7,6 +7,7 @@ use std::ptr;
 
 use thermovia_fmi2::*;
 use thermovia_importer::loader::RawInstance;
+use thermovia_importer::model_description::VariableType;
 use thermovia_importer::{Fmu, HarnessError, Instance};
 
 fn vr(inst: &Instance, name: &str) -> u32 {
@@ -335,4 +336,62 @@ fn variable_communication_steps_give_the_same_trajectory() {
         assert!(err < 1e-9, "max difference {err:e}");
     }
     assert!(uniform[uniform.len() - 2].abs() > 0.1, "the link moved");
+}
+
+/// Reliability (issue 13): every call returns in bounded time; a step whose work would exceed the
+/// budget is discarded at once with the reason, the state kept at the last successful time.
+#[test]
+fn huge_steps_and_extreme_legal_values_return_quickly() {
+    let f = common::fmu();
+    for h in [1e6, 1e10, 1e300, f64::MAX] {
+        let mut i = initialized(&f);
+        let started = std::time::Instant::now();
+        match i.step(h) {
+            Err(HarnessError::Discarded { time, log }) => {
+                assert_eq!(time, 0.0, "h = {h}");
+                assert!(log.join(" ").contains("budget"), "h = {h}: {log:?}");
+            }
+            other => panic!("h = {h}: expected a discard, got {other:?}"),
+        }
+        assert!(started.elapsed().as_secs_f64() < 2.0, "h = {h} took {:?}", started.elapsed());
+    }
+    // The audit's hangs: the largest legal stiffness and spring count; the smallest internal step.
+    let extremes = [("spring_count", 1e3), ("spring_stiffness", 1e7), ("max_internal_step", 1e-7)];
+    for (name, x) in extremes {
+        let mut i = f.instantiate(None).unwrap();
+        i.initialize(0.0, None, &[(name, x)]).unwrap();
+        let started = std::time::Instant::now();
+        let _ = i.step(1.0);
+        assert!(started.elapsed().as_secs_f64() < 2.0, "{name} = {x} took {:?}", started.elapsed());
+    }
+}
+
+/// FMI's min and max are inclusive: the binary takes exactly the declared bounds, refuses beyond.
+#[test]
+fn declared_bounds_are_accepted_and_the_next_number_outside_refused() {
+    let f = common::fmu();
+    let real = |s: &Option<String>| s.as_deref().map(|x| x.parse::<f64>().unwrap());
+    let params = f.description.variables.iter().filter(|v| v.causality == "parameter" && v.ty == VariableType::Real);
+    for v in params {
+        let (Some(lo), Some(hi)) = (real(&v.min), real(&v.max)) else { panic!("{} declares no range", v.name) };
+        for (x, ok) in [(lo, true), (hi, true), (lo.next_down(), false), (hi.next_up(), false)] {
+            let mut i = f.instantiate(None).unwrap();
+            let got = i.initialize(0.0, None, &[(v.name.as_str(), x)]).is_ok();
+            assert_eq!(got, ok, "{} = {x}", v.name);
+        }
+    }
+}
+
+#[test]
+fn caller_strings_in_log_messages_are_quoted_and_cut() {
+    let f = common::fmu();
+    let long = "G".repeat(200_000);
+    let err = RawInstance::instantiate(f.library(), "a", &long, None, false).err().unwrap();
+    assert!(err.len() < 1_000, "{} bytes", err.len());
+    assert!(err.contains("200000 characters"), "{err}");
+    let mut i = f.instantiate(None).unwrap();
+    let raw = i.raw_mut();
+    assert_eq!(raw.set_debug_logging(true, &[long.as_str()]), FMI2_ERROR);
+    let log = last_log(raw);
+    assert!(log.len() < 1_000 && log.contains("200000 characters"), "{} bytes", log.len());
 }

@@ -32,3 +32,14 @@ def test_versioned_or_plain_libclang_is_enough(tmp_path):
 def test_bad_argument_is_refused():
     run = subprocess.run(["bash", str(SCRIPT), "--install-everything"], capture_output=True, text=True)
     assert run.returncode == 2 and "--install-everything" in run.stderr, run.stderr
+
+
+def test_valgrind_needs_its_memcheck_tool(tmp_path):
+    """The launcher without memcheck-<arch>-linux (what the leak test runs) is not enough."""
+    env = dict(os.environ, SETUP_SYSTEM_VALGRIND_DIRS=str(tmp_path))
+    run = lambda: subprocess.run(["bash", str(SCRIPT), "--dry-run"], env=env, capture_output=True, text=True, check=True)
+    assert "would install valgrind" in run().stdout
+    (tmp_path / "memcheck-amd64-linux").touch()
+    out = run().stdout
+    if subprocess.run(["bash", "-c", "command -v valgrind"], capture_output=True).returncode == 0:
+        assert "valgrind" not in out.replace("and valgrind present", ""), out

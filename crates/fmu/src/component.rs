@@ -63,6 +63,83 @@ pub mod allowed {
     pub const FMU_STATE: u8 = ANY_BUT_FATAL;
 }
 
+/// Every function that takes an instance, with the phases it may be called in: one table, checked in
+/// one place on entry (`export::with_instance`), as the Reference FMUs' fmi2Functions.c does. The
+/// methods below assume the check was made.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Function {
+    SetDebugLogging,
+    SetupExperiment,
+    EnterInitializationMode,
+    ExitInitializationMode,
+    Terminate,
+    Reset,
+    GetReal,
+    GetInteger,
+    GetBoolean,
+    GetString,
+    SetReal,
+    SetInteger,
+    SetBoolean,
+    SetString,
+    GetFmuState,
+    SetFmuState,
+    FreeFmuState,
+    SerializedFmuStateSize,
+    SerializeFmuState,
+    DeSerializeFmuState,
+    GetDirectionalDerivative,
+    SetRealInputDerivatives,
+    GetRealOutputDerivatives,
+    DoStep,
+    CancelStep,
+    GetStatus,
+    GetRealStatus,
+    GetIntegerStatus,
+    GetBooleanStatus,
+    GetStringStatus,
+}
+
+impl Function {
+    /// (C name, allowed phases)
+    pub fn entry(self) -> (&'static str, u8) {
+        use allowed::*;
+        use Function::*;
+        match self {
+            SetDebugLogging => ("fmi2SetDebugLogging", ANY_BUT_FATAL),
+            SetupExperiment => ("fmi2SetupExperiment", SETUP),
+            EnterInitializationMode => ("fmi2EnterInitializationMode", ENTER_INIT),
+            ExitInitializationMode => ("fmi2ExitInitializationMode", EXIT_INIT),
+            Terminate => ("fmi2Terminate", TERMINATE),
+            Reset => ("fmi2Reset", ANY_BUT_FATAL),
+            GetReal => ("fmi2GetReal", GET),
+            GetInteger => ("fmi2GetInteger", GET),
+            GetBoolean => ("fmi2GetBoolean", GET),
+            GetString => ("fmi2GetString", GET),
+            SetReal => ("fmi2SetReal", SET),
+            SetInteger => ("fmi2SetInteger", SET),
+            SetBoolean => ("fmi2SetBoolean", SET),
+            SetString => ("fmi2SetString", SET),
+            GetFmuState => ("fmi2GetFMUstate", FMU_STATE),
+            SetFmuState => ("fmi2SetFMUstate", FMU_STATE),
+            FreeFmuState => ("fmi2FreeFMUstate", FMU_STATE),
+            SerializedFmuStateSize => ("fmi2SerializedFMUstateSize", FMU_STATE),
+            SerializeFmuState => ("fmi2SerializeFMUstate", FMU_STATE),
+            DeSerializeFmuState => ("fmi2DeSerializeFMUstate", FMU_STATE),
+            GetDirectionalDerivative => ("fmi2GetDirectionalDerivative", ANY_BUT_FATAL),
+            SetRealInputDerivatives => ("fmi2SetRealInputDerivatives", ANY_BUT_FATAL),
+            GetRealOutputDerivatives => ("fmi2GetRealOutputDerivatives", ANY_BUT_FATAL),
+            DoStep => ("fmi2DoStep", DO_STEP),
+            CancelStep => ("fmi2CancelStep", ANY_BUT_FATAL),
+            GetStatus => ("fmi2GetStatus", STATUS),
+            GetRealStatus => ("fmi2GetRealStatus", STATUS),
+            GetIntegerStatus => ("fmi2GetIntegerStatus", STATUS),
+            GetBooleanStatus => ("fmi2GetBooleanStatus", STATUS),
+            GetStringStatus => ("fmi2GetStringStatus", STATUS),
+        }
+    }
+}
+
 pub const LOG_EVENTS: u8 = 1;
 pub const LOG_WARNING: u8 = 2;
 pub const LOG_DISCARD: u8 = 4;
@@ -120,6 +197,24 @@ pub struct Component {
     categories: u8,
     pub(crate) s: Snapshot,
     last_step_status: Status,
+    /// Addresses of the FMU states this instance allocated and has not freed: the C layer
+    /// trusts a state pointer only if it is here, and fmi2FreeInstance frees what is left.
+    pub(crate) live_states: std::collections::HashSet<usize>,
+}
+
+/// Longest part of a caller's string that a log message quotes.
+pub const QUOTE_MAX_CHARS: usize = 200;
+
+/// A caller's string as a log message shows it: quoted with escapes, cut to
+/// [`QUOTE_MAX_CHARS`] characters (saying how long it was), so no input makes a message long.
+pub fn quoted(s: &str) -> String {
+    let n = s.chars().count();
+    if n <= QUOTE_MAX_CHARS {
+        format!("{s:?}")
+    } else {
+        let head: String = s.chars().take(QUOTE_MAX_CHARS).collect();
+        format!("{head:?}… ({n} characters)")
+    }
 }
 
 /// Decodes an `fmuResourceLocation` URI (`file:///abs`, `file:/abs`, `file://localhost/abs`,
@@ -130,21 +225,23 @@ pub fn resource_path_from_uri(uri: &str) -> Result<std::path::PathBuf, String> {
         .map(|r| format!("/{r}"))
         .or_else(|| uri.strip_prefix("file:///").map(|r| format!("/{r}")))
         .or_else(|| uri.strip_prefix("file:/").map(|r| format!("/{r}")))
-        .ok_or_else(|| format!("fmuResourceLocation {uri:?} is not a file: URI"))?;
+        .ok_or_else(|| format!("fmuResourceLocation {} is not a file: URI", quoted(uri)))?;
     let bytes = rest.as_bytes();
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
         if bytes[i] == b'%' {
-            let hex = rest.get(i + 1..i + 3).ok_or_else(|| format!("truncated %-escape in {uri:?}"))?;
-            out.push(u8::from_str_radix(hex, 16).map_err(|_| format!("bad %-escape %{hex} in {uri:?}"))?);
+            let hex = rest.get(i + 1..i + 3).ok_or_else(|| format!("truncated %-escape in {}", quoted(uri)))?;
+            out.push(
+                u8::from_str_radix(hex, 16).map_err(|_| format!("bad %-escape {} in {}", quoted(hex), quoted(uri)))?,
+            );
             i += 3;
         } else {
             out.push(bytes[i]);
             i += 1;
         }
     }
-    let s = String::from_utf8(out).map_err(|_| format!("{uri:?} is not UTF-8 after decoding"))?;
+    let s = String::from_utf8(out).map_err(|_| format!("{} is not UTF-8 after decoding", quoted(uri)))?;
     Ok(std::path::PathBuf::from(s.trim_end_matches('/').to_string()))
 }
 
@@ -169,7 +266,8 @@ impl Component {
         }
         if fmu_guid != guid() {
             return Err(format!(
-                "fmi2Instantiate: GUID {fmu_guid:?} does not match this binary's {:?} (modelDescription.xml from another build?)",
+                "fmi2Instantiate: GUID {} does not match this binary's {:?} (modelDescription.xml from another build?)",
+                quoted(fmu_guid),
                 guid()
             ));
         }
@@ -178,13 +276,14 @@ impl Component {
             resource_path_from_uri(uri).map_err(|e| format!("fmi2Instantiate: {e}"))?;
         }
         Ok(Component {
-            name: name.to_string(),
+            name: name.chars().take(QUOTE_MAX_CHARS).collect(),
             log,
             initial_logging_on: logging_on,
             logging_on,
             categories: LOG_ALL,
             s: Snapshot::initial(),
             last_step_status: Status::Ok,
+            live_states: Default::default(),
         })
     }
 
@@ -236,14 +335,11 @@ impl Component {
     }
 
     pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Status {
-        if let Err(s) = self.check("fmi2SetDebugLogging", allowed::ANY_BUT_FATAL) {
-            return s;
-        }
         let mut mask = 0;
         for c in categories {
             match category_bit(c) {
                 Some(b) => mask |= b,
-                None => return self.error(&format!("fmi2SetDebugLogging: unknown log category {c:?}")),
+                None => return self.error(&format!("fmi2SetDebugLogging: unknown log category {}", quoted(c))),
             }
         }
         self.logging_on = on;
@@ -252,9 +348,6 @@ impl Component {
     }
 
     pub fn setup_experiment(&mut self, tolerance: Option<f64>, start: f64, stop: Option<f64>) -> Status {
-        if let Err(s) = self.check("fmi2SetupExperiment", allowed::SETUP) {
-            return s;
-        }
         if !start.is_finite() {
             return self.error(&format!("fmi2SetupExperiment: startTime {start} is not finite"));
         }
@@ -276,11 +369,8 @@ impl Component {
         Status::Ok
     }
 
-    /// A state-machine transition: check, optionally re-derive initial states, move, log.
-    fn transition(&mut self, function: &str, mask: u8, to: Phase, initialize: bool, event: &str) -> Status {
-        if let Err(s) = self.check(function, mask) {
-            return s;
-        }
+    /// A state-machine transition: optionally re-derive initial states, move, log.
+    fn transition(&mut self, to: Phase, initialize: bool, event: &str) -> Status {
         if initialize {
             self.s.model.initialize();
         }
@@ -290,33 +380,18 @@ impl Component {
     }
 
     pub fn enter_initialization_mode(&mut self) -> Status {
-        self.transition(
-            "fmi2EnterInitializationMode",
-            allowed::ENTER_INIT,
-            Phase::InitializationMode,
-            true,
-            "entered initialization mode",
-        )
+        self.transition(Phase::InitializationMode, true, "entered initialization mode")
     }
 
     pub fn exit_initialization_mode(&mut self) -> Status {
-        self.transition(
-            "fmi2ExitInitializationMode",
-            allowed::EXIT_INIT,
-            Phase::StepComplete,
-            true,
-            "exited initialization mode",
-        )
+        self.transition(Phase::StepComplete, true, "exited initialization mode")
     }
 
     pub fn terminate(&mut self) -> Status {
-        self.transition("fmi2Terminate", allowed::TERMINATE, Phase::Terminated, false, "terminated")
+        self.transition(Phase::Terminated, false, "terminated")
     }
 
     pub fn reset(&mut self) -> Status {
-        if let Err(s) = self.check("fmi2Reset", allowed::ANY_BUT_FATAL) {
-            return s;
-        }
         self.s = Snapshot::initial();
         self.logging_on = self.initial_logging_on;
         self.categories = LOG_ALL;
@@ -331,13 +406,18 @@ impl Component {
     }
 
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Status {
-        if let Err(s) = self.check("fmi2GetReal", allowed::GET) {
-            return s;
-        }
         for (vr, slot) in vrs.iter().zip(out.iter_mut()) {
             match self.lookup("fmi2GetReal", BaseType::Real, *vr) {
                 Ok(v) => match v.access {
-                    Access::Real { get, .. } => *slot = get(&mut self.s.model),
+                    Access::Real { get, .. } => {
+                        *slot = get(&mut self.s.model);
+                        if !slot.is_finite() {
+                            // Never reached by a state this FMU computed (fmi2DoStep discards a step
+                            // that would make an output non-finite); the guard keeps the promise.
+                            let x = *slot;
+                            return self.error(&format!("fmi2GetReal: {} is {x}, not a finite number", v.name));
+                        }
+                    }
                     Access::Integer { .. } => unreachable!("looked up as Real"),
                 },
                 Err(s) => return s,
@@ -347,9 +427,6 @@ impl Component {
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Status {
-        if let Err(s) = self.check("fmi2GetInteger", allowed::GET) {
-            return s;
-        }
         for (vr, slot) in vrs.iter().zip(out.iter_mut()) {
             match self.lookup("fmi2GetInteger", BaseType::Integer, *vr) {
                 Ok(v) => match v.access {
@@ -363,10 +440,7 @@ impl Component {
     }
 
     /// Types with no variables: any value reference is unknown.
-    pub fn no_variables_of_type(&mut self, function: &str, mask: u8, vrs: &[u32]) -> Status {
-        if let Err(s) = self.check(function, mask) {
-            return s;
-        }
+    pub fn no_variables_of_type(&mut self, function: &str, vrs: &[u32]) -> Status {
         match vrs.first() {
             None => Status::Ok,
             Some(vr) => {
@@ -397,9 +471,6 @@ impl Component {
 
     /// Sets values, all or none: every value is checked before any is written.
     fn set_values(&mut self, function: &str, ty: BaseType, vrs: &[u32], values: &[f64]) -> Status {
-        if let Err(s) = self.check(function, allowed::SET) {
-            return s;
-        }
         for (vr, x) in vrs.iter().zip(values) {
             let v = match self.lookup(function, ty, *vr) {
                 Ok(v) => v,
@@ -436,9 +507,6 @@ impl Component {
     }
 
     pub fn do_step(&mut self, t: f64, h: f64) -> Status {
-        if let Err(s) = self.check("fmi2DoStep", allowed::DO_STEP) {
-            return s;
-        }
         if !(h > 0.0 && h.is_finite()) {
             return self.error(&format!("fmi2DoStep: communicationStepSize {h} must be positive and finite"));
         }
@@ -458,7 +526,19 @@ impl Component {
             }
         }
         if advance > 0.0 {
-            if let Err(failure) = self.s.model.step(advance) {
+            // The states alone (the caches follow them): cheap enough for every step.
+            let m = &self.s.model;
+            let before = (m.mechanics, m.thermal.clone(), m.adaptive_step);
+            let outcome =
+                self.s.model.step(advance).map_err(|f| f.to_string()).and_then(|()| {
+                    match nonfinite_after_step(&mut self.s.model) {
+                        Some((name, x)) => Err(format!("output {name} would be {x}")),
+                        None => Ok(()),
+                    }
+                });
+            if let Err(why) = outcome {
+                let m = &mut self.s.model;
+                (m.mechanics, m.thermal, m.adaptive_step) = before;
                 self.s.phase = Phase::StepFailed;
                 self.s.last_successful_time = t;
                 self.last_step_status = Status::Discard;
@@ -466,7 +546,7 @@ impl Component {
                     Status::Discard,
                     "logStatusDiscard",
                     LOG_DISCARD,
-                    &format!("fmi2DoStep: step from t = {t} by {h} discarded: {failure}; state kept at t = {t}"),
+                    &format!("fmi2DoStep: step from t = {t} by {h} discarded: {why}; state kept at t = {t}"),
                 );
                 return Status::Discard;
             }
@@ -487,38 +567,118 @@ impl Component {
         status
     }
 
-    pub fn last_step_status(&mut self, function: &str) -> Result<Status, Status> {
-        self.check(function, allowed::STATUS)?;
-        Ok(self.last_step_status)
+    pub fn last_step_status(&self) -> Status {
+        self.last_step_status
     }
 
-    pub fn last_successful_time(&mut self, function: &str) -> Result<f64, Status> {
-        self.check(function, allowed::STATUS)?;
-        Ok(self.s.last_successful_time)
+    pub fn last_successful_time(&self) -> f64 {
+        self.s.last_successful_time
     }
 
-    pub fn terminated(&mut self, function: &str) -> Result<bool, Status> {
-        self.check(function, allowed::STATUS)?;
-        Ok(self.s.terminated)
+    pub fn terminated(&self) -> bool {
+        self.s.terminated
     }
 
     pub fn unsupported(&mut self, function: &str, why: &str) -> Status {
         self.error(&format!("{function}: {why}"))
     }
 
-    pub fn get_state(&mut self) -> Result<Snapshot, Status> {
-        self.check("fmi2GetFMUstate", allowed::FMU_STATE)?;
-        Ok(self.s.clone())
+    pub fn get_state(&self) -> Snapshot {
+        self.s.clone()
     }
 
     pub fn set_state(&mut self, snapshot: &Snapshot) -> Status {
-        if let Err(s) = self.check("fmi2SetFMUstate", allowed::FMU_STATE) {
-            return s;
-        }
         self.s = snapshot.clone();
         self.log_event(&format!("FMU state restored at t = {}", self.s.time));
         Status::Ok
     }
+}
+
+/// The first output (in table order) that is not a finite number, with its value.
+pub fn nonfinite_output(m: &mut Model) -> Option<(&'static str, f64)> {
+    VARIABLES.iter().filter(|v| v.causality != Causality::Input && !v.has_start()).find_map(|v| {
+        let x = match v.access {
+            Access::Real { get, .. } => get(m),
+            Access::Integer { get, .. } => get(m) as f64,
+        };
+        (!x.is_finite()).then_some((v.name, x))
+    })
+}
+
+/// The outputs a successful `Model::step` can still leave non-finite, checked on every step (the
+/// hot path: a few ns). `Model::step` has checked the mechanical states and the temperatures; the
+/// moduli, the effective stiffness and damping and the melt fraction are bounded functions of the
+/// PCL temperature whose bounds the parameter ranges keep finite (at most about 1e12 Pa, 2e15 N·m/rad
+/// and 3e17 N·m·s/rad); what remains is the torque (a product with the states, which may overflow)
+/// and the two energy integrals. `fmi2GetReal` refuses a non-finite value as the backstop.
+fn nonfinite_after_step(m: &mut Model) -> Option<(&'static str, f64)> {
+    let torque = m.transmitted_torque();
+    [("transmitted_torque", torque), ("heater_energy", m.thermal.heater_energy), ("heat_lost", m.thermal.heat_lost)]
+        .into_iter()
+        .find(|(_, x)| !x.is_finite())
+}
+
+/// Checks a state by meaning, after its bytes passed the format checks: what a forged buffer
+/// with a recomputed checksum could carry and this FMU could never have saved.
+pub fn validate(s: &Snapshot) -> Result<(), String> {
+    let finite = |x: f64, what: &str| if x.is_finite() { Ok(()) } else { Err(format!("{what} {x} is not finite")) };
+    if s.phase == Phase::Fatal {
+        return Err("the state is in phase Fatal, which no FMU state may restore".into());
+    }
+    finite(s.start_time, "start time")?;
+    finite(s.time, "time")?;
+    finite(s.last_successful_time, "last successful time")?;
+    if s.time < s.start_time {
+        return Err(format!("time {} is before start time {}", s.time, s.start_time));
+    }
+    if s.last_successful_time != s.time {
+        return Err(format!("last successful time {} differs from time {}", s.last_successful_time, s.time));
+    }
+    if s.phase == Phase::Instantiated && s.time != s.start_time {
+        return Err(format!("phase Instantiated at time {}, not at start time {}", s.time, s.start_time));
+    }
+    if let Some(stop) = s.stop_time {
+        finite(stop, "stop time")?;
+        if stop < s.start_time {
+            return Err(format!("stop time {stop} is before start time {}", s.start_time));
+        }
+        if s.time > stop + 1e-9 * stop.abs().max(1.0) {
+            return Err(format!("time {} is after stop time {stop}", s.time));
+        }
+    }
+    if s.terminated
+        && (s.stop_time.is_none() || !matches!(s.phase, Phase::StepFailed | Phase::Terminated | Phase::Error))
+    {
+        return Err(format!("terminated in phase {:?} without reaching a stop time", s.phase));
+    }
+    let m = &s.model;
+    for (i, x) in m.mechanics.iter().enumerate() {
+        finite(*x, &format!("mechanical state {i}"))?;
+    }
+    let th = &m.thermal;
+    finite(th.housing_temperature, "housing temperature")?;
+    finite(th.pcl_temperature, "PCL temperature")?;
+    finite(th.pcl_enthalpy, "PCL enthalpy")?;
+    finite(th.heat_lost, "heat lost")?;
+    if !(th.heater_energy.is_finite() && th.heater_energy >= 0.0) {
+        return Err(format!("heater energy {} is not a finite non-negative number", th.heater_energy));
+    }
+    let back = thermovia_model::thermal::pcl_temperature_from_enthalpy(m.params(), th.pcl_enthalpy, th.pcl_temperature);
+    if (back - th.pcl_temperature).abs() > 1e-6 * th.pcl_temperature.abs().max(1.0) {
+        return Err(format!(
+            "PCL temperature {} K does not belong to PCL enthalpy {} J ({back} K)",
+            th.pcl_temperature, th.pcl_enthalpy
+        ));
+    }
+    // The adaptive solver's step guess grows at most fivefold beyond a sub-step.
+    let step_max = 5.0 * m.params().max_internal_step * (1.0 + 1e-12);
+    if !(m.adaptive_step >= 0.0 && m.adaptive_step <= step_max) {
+        return Err(format!("adaptive step {} is outside [0, {step_max}]", m.adaptive_step));
+    }
+    if let Some((name, x)) = nonfinite_output(&mut m.clone()) {
+        return Err(format!("output {name} would be {x}"));
+    }
+    Ok(())
 }
 
 // ---- serialized FMU state: versioned, pointer-free, checked ----
@@ -628,8 +788,8 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     let g = r.take(glen, "GUID")?;
     if g != guid().as_bytes() {
         return Err(format!(
-            "state was saved by an FMU with GUID {:?}, this is {:?}",
-            String::from_utf8_lossy(g),
+            "state was saved by an FMU with GUID {}, this is {:?}",
+            quoted(&String::from_utf8_lossy(g)),
             guid()
         ));
     }
@@ -646,8 +806,13 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     }
     let phase_bits = r.u8("phase")?;
     let phase = Phase::from_bits(phase_bits).ok_or_else(|| format!("unknown phase {phase_bits}"))?;
-    let terminated = r.u8("terminated")? != 0;
-    let has_stop = r.u8("has stop time")? != 0;
+    let flag = |r: &mut Reader, what: &str| match r.u8(what)? {
+        0 => Ok(false),
+        1 => Ok(true),
+        b => Err(format!("{what} flag is {b}, not 0 or 1")),
+    };
+    let terminated = flag(&mut r, "terminated")?;
+    let has_stop = flag(&mut r, "has stop time")?;
     let time = r.f64("time")?;
     let start_time = r.f64("start time")?;
     let stop = r.f64("stop time")?;
@@ -686,7 +851,7 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     if r.at != sum_at {
         return Err(format!("{} unread bytes in the state payload", sum_at - r.at));
     }
-    Ok(Snapshot {
+    let snapshot = Snapshot {
         model,
         phase,
         time,
@@ -694,7 +859,9 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
         stop_time: has_stop.then_some(stop),
         last_successful_time,
         terminated,
-    })
+    };
+    validate(&snapshot).map_err(|e| format!("the state is well-formed but impossible: {e}"))?;
+    Ok(snapshot)
 }
 
 #[cfg(test)]
@@ -740,5 +907,53 @@ mod tests {
         other_version[8] = 99;
         assert!(deserialize(&other_version).unwrap_err().contains("version"));
         assert!(deserialize(b"PNG\x89 not a state").is_err());
+    }
+
+    /// Rewrites `bytes` with `edit` applied to the payload and a recomputed checksum, as anyone
+    /// can: the checksum catches damage, not forgery, so the meaning must be checked.
+    fn forge(bytes: &[u8], edit: impl Fn(&mut [u8])) -> Vec<u8> {
+        let payload_at = 8 + 4 + 4 + guid().len() + 8;
+        let mut b = bytes.to_vec();
+        let n = b.len();
+        edit(&mut b[payload_at..n - 8]);
+        let sum = fnv1a64(&b[..n - 8]);
+        b[n - 8..].copy_from_slice(&sum.to_le_bytes());
+        b
+    }
+
+    #[test]
+    fn forged_states_with_a_valid_checksum_are_refused_by_meaning() {
+        let mut m = Model::default();
+        m.step(0.25).unwrap();
+        let s = Snapshot {
+            model: m,
+            phase: Phase::StepComplete,
+            time: 0.25,
+            start_time: 0.0,
+            stop_time: Some(3.0),
+            last_successful_time: 0.25,
+            terminated: false,
+        };
+        let bytes = serialize(&s);
+        assert_eq!(deserialize(&forge(&bytes, |_| {})).unwrap(), s, "an untouched forge is the state itself");
+        let f64_at = |k: usize| 3 + 8 * k; // time, start, stop, last successful time
+        let put = |p: &mut [u8], at: usize, x: f64| p[at..at + 8].copy_from_slice(&x.to_le_bytes());
+        let cases: Vec<(&str, Vec<u8>)> = vec![
+            ("phase Fatal", forge(&bytes, |p| p[0] = Phase::Fatal as u8)),
+            ("flag", forge(&bytes, |p| p[1] = 7)),
+            ("time NaN", forge(&bytes, |p| put(p, f64_at(0), f64::NAN))),
+            ("time after stop", forge(&bytes, |p| put(p, f64_at(2), 0.1))),
+            ("last successful time", forge(&bytes, |p| put(p, f64_at(3), 0.2))),
+            ("terminated", forge(&bytes, |p| p[1] = 1)),
+            ("state NaN", {
+                // the mechanical, thermal and adaptive-step states close the payload: 11 f64
+                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * 11;
+                forge(&bytes, |p| put(p, states_at + 16, f64::NAN))
+            }),
+        ];
+        for (what, forged) in cases {
+            let e = deserialize(&forged).expect_err(what);
+            assert!(!e.contains("checksum") && !e.contains("length"), "{what}: {e}");
+        }
     }
 }

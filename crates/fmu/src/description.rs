@@ -3,7 +3,7 @@
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
-use crate::variables::{format_number, Access, Causality, Enumeration, Lower, VARIABLES};
+use crate::variables::{format_number, Access, Causality, Enumeration, VARIABLES};
 
 pub const MODEL_IDENTIFIER: &str = "ThermoVIA";
 
@@ -166,10 +166,10 @@ fn render(guid: &str) -> String {
                 t.push_attribute(("displayUnit", "degC"));
             }
         }
-        if let Lower::Inclusive(b) | Lower::Exclusive(b) = v.lower {
+        if let Some(b) = v.min {
             t.push_attribute(("min", format_number(b).as_str()));
         }
-        if let Some(b) = v.upper {
+        if let Some(b) = v.max {
             t.push_attribute(("max", format_number(b).as_str()));
         }
         if v.has_start() {
@@ -213,16 +213,19 @@ fn render(guid: &str) -> String {
 /// the interface changes the GUID.
 pub fn guid() -> &'static str {
     use std::sync::OnceLock;
-    static GUID: OnceLock<String> = OnceLock::new();
-    GUID.get_or_init(|| {
+    // Kept inline, not on the heap: a process that loads and unloads the library loses nothing.
+    static GUID: OnceLock<[u8; 38]> = OnceLock::new();
+    let bytes = GUID.get_or_init(|| {
         let mut h: u128 = 0x6c62272e07bb014262b821756295c58d;
         for b in render("").bytes() {
             h ^= b as u128;
             h = h.wrapping_mul(0x0000000001000000000000000000013B);
         }
         let x = format!("{h:032x}");
-        format!("{{{}-{}-{}-{}-{}}}", &x[0..8], &x[8..12], &x[12..16], &x[16..20], &x[20..32])
-    })
+        let g = format!("{{{}-{}-{}-{}-{}}}", &x[0..8], &x[8..12], &x[12..16], &x[16..20], &x[20..32]);
+        g.as_bytes().try_into().expect("a braced GUID has 38 characters")
+    });
+    std::str::from_utf8(bytes).expect("ASCII")
 }
 
 /// The complete `modelDescription.xml`.

@@ -9,7 +9,7 @@ use std::ffi::{CStr, CString};
 use std::os::raw::c_char;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 
-use crate::component::{self, allowed, Component, Snapshot, Status};
+use crate::component::{self, Component, Function, Snapshot, Status};
 use thermovia_fmi2::*;
 
 /// Boxed FMU states carry a tag so a stray pointer is refused rather than trusted.
@@ -23,13 +23,18 @@ fn status(s: Status) -> Fmi2Status {
     s as Fmi2Status
 }
 
-/// Runs `f` on the instance behind `c`; null → fmi2Error, panic → fmi2Fatal.
-unsafe fn with_instance(c: Fmi2Component, f: impl FnOnce(&mut Component) -> Status) -> Fmi2Status {
+/// Runs `f` on the instance behind `c` if `function` may be called in its phase (the one check of
+/// the state machine, on entry); null → fmi2Error, panic → fmi2Fatal.
+unsafe fn with_instance(c: Fmi2Component, function: Function, f: impl FnOnce(&mut Component) -> Status) -> Fmi2Status {
     if c.is_null() {
         return FMI2_ERROR;
     }
     let inst = &mut *(c as *mut Component);
-    match catch_unwind(AssertUnwindSafe(|| f(&mut *inst))) {
+    let (name, mask) = function.entry();
+    match catch_unwind(AssertUnwindSafe(|| match inst.check(name, mask) {
+        Ok(()) => f(&mut *inst),
+        Err(s) => s,
+    })) {
         Ok(s) => status(s),
         Err(panic) => {
             let what = panic
@@ -77,15 +82,29 @@ fn null_arg(inst: &mut Component, function: &str, arg: &str) -> Status {
     inst.error(&format!("{function}: argument {arg} is a null pointer"))
 }
 
+/// Longest message passed to the logger, in bytes: caller strings are quoted and cut before
+/// they reach a message (`component::quoted`); this is the last line of defence.
+const LOG_MAX_BYTES: usize = 2048;
+
+/// `s` cut to at most `max` bytes on a character boundary, NULs replaced.
+fn bounded(s: &str, max: usize) -> CString {
+    let mut end = s.len().min(max);
+    while !s.is_char_boundary(end) {
+        end -= 1;
+    }
+    let cut = if end < s.len() { format!("{}… [cut]", &s[..end]) } else { s.to_string() };
+    CString::new(cut.replace('\0', " ")).unwrap_or_default()
+}
+
 /// Wraps the importer's logger: messages go through "%s" so a '%' in them is never a format.
 unsafe fn log_sink(functions: &Fmi2CallbackFunctions, name: &str) -> component::LogSink {
     let logger = functions.logger;
     let env = functions.component_environment;
-    let name = CString::new(name.replace('\0', " ")).unwrap_or_default();
+    let name = bounded(name, component::QUOTE_MAX_CHARS);
     Box::new(move |s: Status, category: &str, message: &str| {
         if let Some(log) = logger {
-            let cat = CString::new(category.replace('\0', " ")).unwrap_or_default();
-            let msg = CString::new(message.replace('\0', " ")).unwrap_or_default();
+            let cat = bounded(category, 64);
+            let msg = bounded(message, LOG_MAX_BYTES);
             log(env, name.as_ptr(), s as Fmi2Status, cat.as_ptr(), c"%s".as_ptr(), msg.as_ptr());
         }
     })
@@ -144,7 +163,14 @@ pub unsafe extern "C" fn fmi2Instantiate(
 #[no_mangle]
 pub unsafe extern "C" fn fmi2FreeInstance(c: Fmi2Component) {
     if !c.is_null() {
-        let _ = catch_unwind(AssertUnwindSafe(|| drop(Box::from_raw(c as *mut Component))));
+        let _ = catch_unwind(AssertUnwindSafe(|| {
+            let inst = Box::from_raw(c as *mut Component);
+            // States the importer did not free belong to the instance (FMI 2.0 §2.1.8): free them.
+            for &p in &inst.live_states {
+                free_state_box(p as Fmi2FmuState);
+            }
+            drop(inst);
+        }));
     }
 }
 
@@ -155,7 +181,7 @@ pub unsafe extern "C" fn fmi2SetDebugLogging(
     n: usize,
     categories: *const Fmi2String,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetDebugLogging, |inst| {
         let Some(raw) = slice(categories, n) else { return null_arg(inst, "fmi2SetDebugLogging", "categories") };
         let mut names = Vec::with_capacity(n);
         for &p in raw {
@@ -177,7 +203,7 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
     stop_time_defined: Fmi2Boolean,
     stop_time: Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetupExperiment, |inst| {
         inst.setup_experiment(
             (tolerance_defined != 0).then_some(tolerance),
             start_time,
@@ -188,26 +214,26 @@ pub unsafe extern "C" fn fmi2SetupExperiment(
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2EnterInitializationMode(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.enter_initialization_mode())
+    with_instance(c, Function::EnterInitializationMode, |inst| inst.enter_initialization_mode())
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2ExitInitializationMode(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.exit_initialization_mode())
+    with_instance(c, Function::ExitInitializationMode, |inst| inst.exit_initialization_mode())
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2Terminate(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.terminate())
+    with_instance(c, Function::Terminate, |inst| inst.terminate())
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2Reset(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.reset())
+    with_instance(c, Function::Reset, |inst| inst.reset())
 }
 
 macro_rules! getter {
-    ($fname:ident, $cty:ty, $method:ident) => {
+    ($fname:ident, $cty:ty, $method:ident, $function:ident) => {
         #[no_mangle]
         pub unsafe extern "C" fn $fname(
             c: Fmi2Component,
@@ -215,7 +241,7 @@ macro_rules! getter {
             nvr: usize,
             value: *mut $cty,
         ) -> Fmi2Status {
-            with_instance(c, |inst| {
+            with_instance(c, Function::$function, |inst| {
                 let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, stringify!($fname), "vr") };
                 let Some(out) = slice_mut(value, nvr) else { return null_arg(inst, stringify!($fname), "value") };
                 inst.$method(vrs, out)
@@ -224,8 +250,8 @@ macro_rules! getter {
     };
 }
 
-getter!(fmi2GetReal, Fmi2Real, get_real);
-getter!(fmi2GetInteger, Fmi2Integer, get_integer);
+getter!(fmi2GetReal, Fmi2Real, get_real, GetReal);
+getter!(fmi2GetInteger, Fmi2Integer, get_integer, GetInteger);
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SetReal(
@@ -234,7 +260,7 @@ pub unsafe extern "C" fn fmi2SetReal(
     nvr: usize,
     value: *const Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetReal, |inst| {
         let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, "fmi2SetReal", "vr") };
         let Some(values) = slice(value, nvr) else { return null_arg(inst, "fmi2SetReal", "value") };
         inst.set_real(vrs, values)
@@ -248,7 +274,7 @@ pub unsafe extern "C" fn fmi2SetInteger(
     nvr: usize,
     value: *const Fmi2Integer,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetInteger, |inst| {
         let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, "fmi2SetInteger", "vr") };
         let Some(values) = slice(value, nvr) else { return null_arg(inst, "fmi2SetInteger", "value") };
         inst.set_integer(vrs, values)
@@ -256,7 +282,7 @@ pub unsafe extern "C" fn fmi2SetInteger(
 }
 
 macro_rules! no_variables {
-    ($fname:ident, $ptr:ty, $mask:expr) => {
+    ($fname:ident, $ptr:ty, $function:ident) => {
         /// This FMU has no variables of this type: only an empty request succeeds.
         #[no_mangle]
         pub unsafe extern "C" fn $fname(
@@ -265,44 +291,57 @@ macro_rules! no_variables {
             nvr: usize,
             value: $ptr,
         ) -> Fmi2Status {
-            with_instance(c, |inst| {
+            with_instance(c, Function::$function, |inst| {
                 let Some(vrs) = slice(vr, nvr) else { return null_arg(inst, stringify!($fname), "vr") };
                 if nvr > 0 && value.is_null() {
                     return null_arg(inst, stringify!($fname), "value");
                 }
-                inst.no_variables_of_type(stringify!($fname), $mask, vrs)
+                inst.no_variables_of_type(stringify!($fname), vrs)
             })
         }
     };
 }
 
-no_variables!(fmi2GetBoolean, *mut Fmi2Boolean, allowed::GET);
-no_variables!(fmi2GetString, *mut Fmi2String, allowed::GET);
-no_variables!(fmi2SetBoolean, *const Fmi2Boolean, allowed::SET);
-no_variables!(fmi2SetString, *const Fmi2String, allowed::SET);
+no_variables!(fmi2GetBoolean, *mut Fmi2Boolean, GetBoolean);
+no_variables!(fmi2GetString, *mut Fmi2String, GetString);
+no_variables!(fmi2SetBoolean, *const Fmi2Boolean, SetBoolean);
+no_variables!(fmi2SetString, *const Fmi2String, SetString);
 
-unsafe fn state_ref<'a>(p: Fmi2FmuState) -> Option<&'a mut StateBox> {
-    if p.is_null() {
+/// The state behind `p` if this instance allocated it and has not freed it: a stray, foreign or
+/// freed pointer is refused without being read.
+unsafe fn state_ref<'a>(inst: &Component, p: Fmi2FmuState) -> Option<&'a mut StateBox> {
+    if p.is_null() || !inst.live_states.contains(&(p as usize)) {
         return None;
     }
     let b = &mut *(p as *mut StateBox);
     (b.tag == STATE_TAG).then_some(b)
 }
 
+/// A new state object, registered with the instance.
+fn new_state(inst: &mut Component, snapshot: Snapshot) -> Fmi2FmuState {
+    let p = Box::into_raw(Box::new(StateBox { tag: STATE_TAG, snapshot })) as Fmi2FmuState;
+    inst.live_states.insert(p as usize);
+    p
+}
+
+/// Frees a state object made by `new_state` (the caller has unregistered it).
+unsafe fn free_state_box(p: Fmi2FmuState) {
+    let mut b = Box::from_raw(p as *mut StateBox);
+    b.tag = 0;
+    drop(b);
+}
+
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetFMUstate(c: Fmi2Component, state: *mut Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetFmuState, |inst| {
         if state.is_null() {
             return null_arg(inst, "fmi2GetFMUstate", "FMUstate");
         }
-        let snapshot = match inst.get_state() {
-            Ok(s) => s,
-            Err(s) => return s,
-        };
+        let snapshot = inst.get_state();
         if (*state).is_null() {
-            *state = Box::into_raw(Box::new(StateBox { tag: STATE_TAG, snapshot })) as Fmi2FmuState;
+            *state = new_state(inst, snapshot);
         } else {
-            match state_ref(*state) {
+            match state_ref(inst, *state) {
                 Some(b) => b.snapshot = snapshot, // reuse the importer's state object
                 None => return inst.error("fmi2GetFMUstate: *FMUstate is not a state of this FMU"),
             }
@@ -313,8 +352,8 @@ pub unsafe extern "C" fn fmi2GetFMUstate(c: Fmi2Component, state: *mut Fmi2FmuSt
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2SetFMUstate(c: Fmi2Component, state: Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| match state_ref(state) {
-        Some(b) => inst.set_state(&b.snapshot),
+    with_instance(c, Function::SetFmuState, |inst| match state_ref(inst, state) {
+        Some(b) => inst.set_state(&b.snapshot.clone()),
         None if state.is_null() => null_arg(inst, "fmi2SetFMUstate", "FMUstate"),
         None => inst.error("fmi2SetFMUstate: FMUstate is not a state of this FMU"),
     })
@@ -322,16 +361,16 @@ pub unsafe extern "C" fn fmi2SetFMUstate(c: Fmi2Component, state: Fmi2FmuState) 
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2FreeFMUstate(c: Fmi2Component, state: *mut Fmi2FmuState) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::FreeFmuState, |inst| {
         if state.is_null() || (*state).is_null() {
             return Status::Ok;
         }
-        if state_ref(*state).is_none() {
-            return inst.error("fmi2FreeFMUstate: FMUstate is not a state of this FMU");
+        if state_ref(inst, *state).is_none() {
+            return inst.error("fmi2FreeFMUstate: FMUstate is not a live state of this instance");
         }
-        let mut b = Box::from_raw(*state as *mut StateBox);
-        b.tag = 0; // a second free of the same pointer is then refused, not trusted
-        drop(b);
+        // Unregistered first: a second free of the same pointer is then refused, not trusted.
+        inst.live_states.remove(&(*state as usize));
+        free_state_box(*state);
         *state = std::ptr::null_mut();
         Status::Ok
     })
@@ -343,11 +382,8 @@ pub unsafe extern "C" fn fmi2SerializedFMUstateSize(
     state: Fmi2FmuState,
     size: *mut usize,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
-        if let Err(s) = inst.check("fmi2SerializedFMUstateSize", allowed::FMU_STATE) {
-            return s;
-        }
-        let Some(b) = state_ref(state) else {
+    with_instance(c, Function::SerializedFmuStateSize, |inst| {
+        let Some(b) = state_ref(inst, state) else {
             return inst.error("fmi2SerializedFMUstateSize: FMUstate is null or foreign");
         };
         if size.is_null() {
@@ -365,11 +401,10 @@ pub unsafe extern "C" fn fmi2SerializeFMUstate(
     bytes: *mut Fmi2Byte,
     size: usize,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
-        if let Err(s) = inst.check("fmi2SerializeFMUstate", allowed::FMU_STATE) {
-            return s;
-        }
-        let Some(b) = state_ref(state) else { return inst.error("fmi2SerializeFMUstate: FMUstate is null or foreign") };
+    with_instance(c, Function::SerializeFmuState, |inst| {
+        let Some(b) = state_ref(inst, state) else {
+            return inst.error("fmi2SerializeFMUstate: FMUstate is null or foreign");
+        };
         let data = component::serialize(&b.snapshot);
         if size < data.len() {
             return inst.error(&format!("fmi2SerializeFMUstate: buffer of {size} bytes, {} needed", data.len()));
@@ -389,10 +424,7 @@ pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
     size: usize,
     state: *mut Fmi2FmuState,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
-        if let Err(s) = inst.check("fmi2DeSerializeFMUstate", allowed::FMU_STATE) {
-            return s;
-        }
+    with_instance(c, Function::DeSerializeFmuState, |inst| {
         if state.is_null() {
             return null_arg(inst, "fmi2DeSerializeFMUstate", "FMUstate");
         }
@@ -404,9 +436,9 @@ pub unsafe extern "C" fn fmi2DeSerializeFMUstate(
             Err(e) => return inst.error(&format!("fmi2DeSerializeFMUstate: {e}")),
         };
         if (*state).is_null() {
-            *state = Box::into_raw(Box::new(StateBox { tag: STATE_TAG, snapshot })) as Fmi2FmuState;
+            *state = new_state(inst, snapshot);
         } else {
-            match state_ref(*state) {
+            match state_ref(inst, *state) {
                 Some(b) => b.snapshot = snapshot,
                 None => return inst.error("fmi2DeSerializeFMUstate: *FMUstate is not a state of this FMU"),
             }
@@ -425,7 +457,7 @@ pub unsafe extern "C" fn fmi2GetDirectionalDerivative(
     _dv_known: *const Fmi2Real,
     _dv_unknown: *mut Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetDirectionalDerivative, |inst| {
         inst.unsupported("fmi2GetDirectionalDerivative", "not provided (providesDirectionalDerivative=false)")
     })
 }
@@ -438,7 +470,7 @@ pub unsafe extern "C" fn fmi2SetRealInputDerivatives(
     _order: *const Fmi2Integer,
     _value: *const Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::SetRealInputDerivatives, |inst| {
         inst.unsupported(
             "fmi2SetRealInputDerivatives",
             "inputs are held over a step (canInterpolateInputs=false); use motor_speed_command for a ramp",
@@ -454,7 +486,9 @@ pub unsafe extern "C" fn fmi2GetRealOutputDerivatives(
     _order: *const Fmi2Integer,
     _value: *mut Fmi2Real,
 ) -> Fmi2Status {
-    with_instance(c, |inst| inst.unsupported("fmi2GetRealOutputDerivatives", "maxOutputDerivativeOrder=0"))
+    with_instance(c, Function::GetRealOutputDerivatives, |inst| {
+        inst.unsupported("fmi2GetRealOutputDerivatives", "maxOutputDerivativeOrder=0")
+    })
 }
 
 #[no_mangle]
@@ -464,36 +498,33 @@ pub unsafe extern "C" fn fmi2DoStep(
     communication_step_size: Fmi2Real,
     _no_set_fmu_state_prior_to_current_point: Fmi2Boolean,
 ) -> Fmi2Status {
-    with_instance(c, |inst| inst.do_step(current_communication_point, communication_step_size))
+    with_instance(c, Function::DoStep, |inst| inst.do_step(current_communication_point, communication_step_size))
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2CancelStep(c: Fmi2Component) -> Fmi2Status {
-    with_instance(c, |inst| inst.unsupported("fmi2CancelStep", "steps are synchronous (canRunAsynchronuously=false)"))
+    with_instance(c, Function::CancelStep, |inst| {
+        inst.unsupported("fmi2CancelStep", "steps are synchronous (canRunAsynchronuously=false)")
+    })
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetStatus(c: Fmi2Component, kind: Fmi2StatusKind, value: *mut Fmi2Status) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetStatus, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetStatus", "value");
         }
         if kind != FMI2_DO_STEP_STATUS {
             return inst.error(&format!("fmi2GetStatus: status kind {kind} has no fmi2Status value here"));
         }
-        match inst.last_step_status("fmi2GetStatus") {
-            Ok(s) => {
-                *value = s as Fmi2Status;
-                Status::Ok
-            }
-            Err(s) => s,
-        }
+        *value = inst.last_step_status() as Fmi2Status;
+        Status::Ok
     })
 }
 
 #[no_mangle]
 pub unsafe extern "C" fn fmi2GetRealStatus(c: Fmi2Component, kind: Fmi2StatusKind, value: *mut Fmi2Real) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetRealStatus, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetRealStatus", "value");
         }
@@ -501,13 +532,8 @@ pub unsafe extern "C" fn fmi2GetRealStatus(c: Fmi2Component, kind: Fmi2StatusKin
             return inst
                 .error(&format!("fmi2GetRealStatus: only fmi2LastSuccessfulTime (2) is a Real status, not {kind}"));
         }
-        match inst.last_successful_time("fmi2GetRealStatus") {
-            Ok(t) => {
-                *value = t;
-                Status::Ok
-            }
-            Err(s) => s,
-        }
+        *value = inst.last_successful_time();
+        Status::Ok
     })
 }
 
@@ -517,7 +543,7 @@ pub unsafe extern "C" fn fmi2GetIntegerStatus(
     kind: Fmi2StatusKind,
     _value: *mut Fmi2Integer,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetIntegerStatus, |inst| {
         inst.error(&format!("fmi2GetIntegerStatus: FMI 2.0 defines no Integer status (kind {kind})"))
     })
 }
@@ -528,7 +554,7 @@ pub unsafe extern "C" fn fmi2GetBooleanStatus(
     kind: Fmi2StatusKind,
     value: *mut Fmi2Boolean,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetBooleanStatus, |inst| {
         if value.is_null() {
             return null_arg(inst, "fmi2GetBooleanStatus", "value");
         }
@@ -536,13 +562,8 @@ pub unsafe extern "C" fn fmi2GetBooleanStatus(
             return inst
                 .error(&format!("fmi2GetBooleanStatus: only fmi2Terminated (3) is a Boolean status, not {kind}"));
         }
-        match inst.terminated("fmi2GetBooleanStatus") {
-            Ok(t) => {
-                *value = t as Fmi2Boolean;
-                Status::Ok
-            }
-            Err(s) => s,
-        }
+        *value = inst.terminated() as Fmi2Boolean;
+        Status::Ok
     })
 }
 
@@ -552,7 +573,7 @@ pub unsafe extern "C" fn fmi2GetStringStatus(
     kind: Fmi2StatusKind,
     _value: *mut Fmi2String,
 ) -> Fmi2Status {
-    with_instance(c, |inst| {
+    with_instance(c, Function::GetStringStatus, |inst| {
         let why = if kind == FMI2_PENDING_STATUS {
             "no asynchronous step is ever pending"
         } else {

@@ -44,16 +44,6 @@ impl Variability {
     }
 }
 
-/// Lower bound of a variable's legal range.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Lower {
-    None,
-    /// v ≥ bound
-    Inclusive(f64),
-    /// v > bound
-    Exclusive(f64),
-}
-
 pub type RealGet = fn(&mut Model) -> f64;
 pub type RealSet = fn(&mut Model, f64);
 pub type IntGet = fn(&mut Model) -> i32;
@@ -80,8 +70,10 @@ pub struct Variable {
     pub variability: Variability,
     /// FMI unit name ("" for dimensionless).
     pub unit: &'static str,
-    pub lower: Lower,
-    pub upper: Option<f64>,
+    /// Inclusive bounds, the same numbers in modelDescription.xml and in the binary's checks.
+    /// Every parameter and input has both: its physical range, which also bounds the work of a step.
+    pub min: Option<f64>,
+    pub max: Option<f64>,
     pub description: &'static str,
     /// Where the default comes from: PAPER, LIT, EST (with the reasoning) or MODE/NUMERICS.
     pub source: &'static str,
@@ -118,17 +110,9 @@ impl Variable {
         if !v.is_finite() {
             return Err(format!("{} = {v} is not a finite number", self.name));
         }
-        match self.lower {
-            Lower::Inclusive(b) if v < b => {
-                return Err(format!("{} = {v} is below its minimum {b} {}", self.name, self.unit))
-            }
-            Lower::Exclusive(b) if v <= b => {
-                return Err(format!("{} = {v} must be greater than {b} {}", self.name, self.unit))
-            }
-            _ => {}
-        }
-        match self.upper {
-            Some(b) if v > b => Err(format!("{} = {v} is above its maximum {b} {}", self.name, self.unit)),
+        match (self.min, self.max) {
+            (Some(b), _) if v < b => Err(format!("{} = {v} is below its minimum {b} {}", self.name, self.unit)),
+            (_, Some(b)) if v > b => Err(format!("{} = {v} is above its maximum {b} {}", self.name, self.unit)),
             _ => Ok(()),
         }
     }
@@ -141,15 +125,15 @@ impl Variable {
 }
 
 macro_rules! real_param {
-    ($vr:expr, $field:ident, $var:ident, $unit:expr, $lower:expr, $upper:expr, $desc:expr, $src:expr) => {
+    ($vr:expr, $field:ident, $var:ident, $unit:expr, $min:expr, $max:expr, $desc:expr, $src:expr) => {
         Variable {
             name: stringify!($field),
             value_reference: $vr,
             causality: Causality::Parameter,
             variability: Variability::$var,
             unit: $unit,
-            lower: $lower,
-            upper: $upper,
+            min: Some($min),
+            max: Some($max),
             description: $desc,
             source: $src,
             access: Access::Real { get: |m| m.params().$field, set: Some(|m, v| m.params_mut().$field = v) },
@@ -166,8 +150,8 @@ macro_rules! real_calculated {
             causality: Causality::CalculatedParameter,
             variability: Variability::Fixed,
             unit: $unit,
-            lower: Lower::None,
-            upper: None,
+            min: None,
+            max: None,
             description: $desc,
             source: $src,
             access: Access::Real { get: $get, set: None },
@@ -177,15 +161,15 @@ macro_rules! real_calculated {
 }
 
 macro_rules! real_input {
-    ($vr:expr, $field:ident, $unit:expr, $lower:expr, $desc:expr) => {
+    ($vr:expr, $field:ident, $unit:expr, $min:expr, $max:expr, $desc:expr) => {
         Variable {
             name: stringify!($field),
             value_reference: $vr,
             causality: Causality::Input,
             variability: Variability::Continuous,
             unit: $unit,
-            lower: $lower,
-            upper: None,
+            min: Some($min),
+            max: Some($max),
             description: $desc,
             source: "input",
             access: Access::Real { get: |m| m.inputs.$field, set: Some(|m, v| m.inputs.$field = v) },
@@ -202,8 +186,8 @@ macro_rules! real_output {
             causality: Causality::Output,
             variability: Variability::Continuous,
             unit: $unit,
-            lower: Lower::None,
-            upper: None,
+            min: None,
+            max: None,
             description: $desc,
             source: "output",
             access: Access::Real { get: $get, set: None },
@@ -212,8 +196,12 @@ macro_rules! real_output {
     };
 }
 
-use Lower::{Exclusive as Gt, Inclusive as Ge};
-const NONE: Lower = Lower::None;
+/// Temperatures: from 1 K to 10,000 K (every material property here is long gone at either end,
+/// but the numerics stay finite).
+const T_MIN: f64 = 1.0;
+const T_MAX: f64 = 1e4;
+/// Angles: ±1e6 rad (160,000 turns).
+const ANGLE: f64 = 1e6;
 
 pub static MATERIAL_TABLE: Enumeration = Enumeration {
     name: "MaterialTable",
@@ -251,13 +239,13 @@ pub static THERMAL_DRIVE: Enumeration = Enumeration {
 
 pub static VARIABLES: &[Variable] = &[
     // ---- inputs
-    real_input!(0, heater_power, "W", Ge(0.0), "Electrical power into the heaters (>= 0)"),
-    real_input!(1, motor_torque, "N.m", NONE, "Torque from the motor on the motor side (motor_drive = 0)"),
-    real_input!(2, load_torque, "N.m", NONE, "External torque on the output link"),
-    real_input!(3, ambient_temperature, "K", Gt(0.0), "Temperature of the surroundings"),
-    real_input!(4, motor_angle_command, "rad", NONE, "Motor angle at the start of the step (motor_drive = 1)"),
-    real_input!(5, motor_speed_command, "rad/s", NONE, "Motor speed over the step (motor_drive = 1)"),
-    real_input!(6, housing_temperature_command, "K", Gt(0.0), "Measured housing temperature (thermal_drive = 1)"),
+    real_input!(0, heater_power, "W", 0.0, 1e4, "Electrical power into the heaters (>= 0)"),
+    real_input!(1, motor_torque, "N.m", -1e4, 1e4, "Torque from the motor on the motor side (motor_drive = 0)"),
+    real_input!(2, load_torque, "N.m", -1e4, 1e4, "External torque on the output link"),
+    real_input!(3, ambient_temperature, "K", T_MIN, T_MAX, "Temperature of the surroundings"),
+    real_input!(4, motor_angle_command, "rad", -ANGLE, ANGLE, "Motor angle at the start of the step (motor_drive = 1)"),
+    real_input!(5, motor_speed_command, "rad/s", -1e4, 1e4, "Motor speed over the step (motor_drive = 1)"),
+    real_input!(6, housing_temperature_command, "K", T_MIN, T_MAX, "Measured housing temperature (thermal_drive = 1)"),
     // ---- outputs
     real_output!(100, motor_angle, "rad", "Motor / housing angle θm", |m| m.motor_angle()),
     real_output!(101, motor_speed, "rad/s", "Motor speed θm'", |m| m.motor_speed()),
@@ -274,54 +262,54 @@ pub static VARIABLES: &[Variable] = &[
     real_output!(112, heater_energy, "J", "Electrical energy into the heaters since initialisation", |m| m.thermal.heater_energy),
     real_output!(113, heat_lost, "J", "Heat lost to ambient since initialisation", |m| m.thermal.heat_lost),
     // ---- mechanical parameters
-    real_param!(200, motor_inertia, Fixed, "kg.m2", Gt(0.0), None, "J_m, motor + gearbox inertia on the housing side", "EST: rotor inertia reflected through the gearbox; the paper gives none"),
-    real_param!(201, motor_damping, Fixed, "N.m.s/rad", Ge(0.0), None, "B_m, viscous loss of motor and gearbox", "EST: small; the motor is position-controlled in the experiments"),
-    real_param!(202, link_inertia, Fixed, "kg.m2", Gt(0.0), None, "J_l, output link with its 0.91 kg mass", "EST: 0.91 kg at 0.14 m plus a light PETG link (the paper's value is lost)"),
-    real_param!(203, link_damping, Fixed, "N.m.s/rad", Ge(0.0), None, "B_l, viscous link damping to ground (effect link_damping)", "PAPER: bearing friction minimised in the experiments; off"),
-    real_param!(204, spring_stiffness, Fixed, "N/m", Ge(0.0), None, "Stiffness of each compression spring", "PAPER Table 1: 1.16 N/mm"),
-    real_param!(205, spring_count, Fixed, "", Ge(0.0), None, "Number of springs", "PAPER Table 1: 12 (total 13.92 N/mm)"),
-    real_param!(206, spring_radius, Fixed, "m", Gt(0.0), None, "r_s, distance of the springs from the axis", "PAPER Table 1: 22.20 mm (K_s r_s² = 6.86 N·m/rad)"),
-    real_param!(207, pcl_radius, Fixed, "m", Gt(0.0), None, "r_p, mean distance of the PCL from the axis", "PAPER Table 1: 20.75 mm"),
-    real_param!(208, pcl_shape_factor, Fixed, "m", Gt(0.0), None, "κ = 3A/L0, PCL cavities' area over thickness", "EST: A ≈ 143 mm², L0 ≈ 6.7 mm per cavity, so cold PCL adds ~4× the spring stiffness"),
+    real_param!(200, motor_inertia, Fixed, "kg.m2", 1e-9, 1e3, "J_m, motor + gearbox inertia on the housing side", "EST: rotor inertia reflected through the gearbox; the paper gives none"),
+    real_param!(201, motor_damping, Fixed, "N.m.s/rad", 0.0, 1e4, "B_m, viscous loss of motor and gearbox", "EST: small; the motor is position-controlled in the experiments"),
+    real_param!(202, link_inertia, Fixed, "kg.m2", 1e-9, 1e3, "J_l, output link with its 0.91 kg mass", "EST: 0.91 kg at 0.14 m plus a light PETG link (the paper's value is lost)"),
+    real_param!(203, link_damping, Fixed, "N.m.s/rad", 0.0, 1e4, "B_l, viscous link damping to ground (effect link_damping)", "PAPER: bearing friction minimised in the experiments; off"),
+    real_param!(204, spring_stiffness, Fixed, "N/m", 0.0, 1e7, "Stiffness of each compression spring", "PAPER Table 1: 1.16 N/mm"),
+    real_param!(205, spring_count, Fixed, "", 0.0, 1e3, "Number of springs", "PAPER Table 1: 12 (total 13.92 N/mm)"),
+    real_param!(206, spring_radius, Fixed, "m", 1e-6, 10.0, "r_s, distance of the springs from the axis", "PAPER Table 1: 22.20 mm (K_s r_s² = 6.86 N·m/rad)"),
+    real_param!(207, pcl_radius, Fixed, "m", 1e-6, 10.0, "r_p, mean distance of the PCL from the axis", "PAPER Table 1: 20.75 mm"),
+    real_param!(208, pcl_shape_factor, Fixed, "m", 1e-9, 10.0, "κ = 3A/L0, PCL cavities' area over thickness", "EST: A ≈ 143 mm², L0 ≈ 6.7 mm per cavity, so cold PCL adds ~4× the spring stiffness"),
     real_calculated!(280, spring_bank_stiffness, "N.m/rad", "K_s = k·n·r_s², torsional stiffness of the spring bank", "from spring_stiffness, spring_count, spring_radius", |m| m.params().spring_torsional_stiffness()),
     real_calculated!(281, modulus_to_torsion, "m3/rad", "κ·r_p²: PCL torsional stiffness per pascal of modulus (K_pcl = E'·this)", "from pcl_shape_factor, pcl_radius", |m| m.params().modulus_to_torsion()),
-    real_param!(209, excitation_frequency, Tunable, "Hz", Gt(0.0), None, "Frequency of the harmonic run: C = K''/ω (hysteretic loss)", "PAPER: 0.5 and 1 Hz"),
-    real_param!(210, storage_modulus_scale, Tunable, "", Gt(0.0), None, "Multiplies E'(T) of the material table (calibration of the storage modulus)", "CALIBRATION: 1 = the table as it is"),
-    real_param!(211, loss_modulus_scale, Tunable, "", Gt(0.0), None, "Multiplies E''(T) of the material table (calibration of the loss modulus)", "CALIBRATION: 1 = the table as it is"),
+    real_param!(209, excitation_frequency, Tunable, "Hz", 1e-3, 1e4, "Frequency of the harmonic run: C = K''/ω (hysteretic loss)", "PAPER: 0.5 and 1 Hz"),
+    real_param!(210, storage_modulus_scale, Tunable, "", 1e-6, 1e6, "Multiplies E'(T) of the material table (calibration of the storage modulus)", "CALIBRATION: 1 = the table as it is"),
+    real_param!(211, loss_modulus_scale, Tunable, "", 1e-6, 1e6, "Multiplies E''(T) of the material table (calibration of the loss modulus)", "CALIBRATION: 1 = the table as it is"),
     // ---- effects, all off by default
-    real_param!(220, maxwell_stiffness, Fixed, "N.m/rad", Ge(0.0), None, "K_M of a Maxwell branch (effect frequency_dependent_modulus)", "EFFECT: off"),
-    real_param!(221, maxwell_relaxation_time, Fixed, "s", Gt(0.0), None, "λ of the Maxwell branch", "EFFECT: 0.1 s placeholder while K_M = 0"),
-    real_param!(222, coulomb_friction, Fixed, "N.m", Ge(0.0), None, "Coulomb friction torque on the link (effect coulomb_friction)", "EFFECT: off"),
-    real_param!(223, stribeck_friction, Fixed, "N.m", Ge(0.0), None, "Static friction above Coulomb, fading with speed", "EFFECT: off"),
-    real_param!(224, stribeck_velocity, Fixed, "rad/s", Gt(0.0), None, "Speed scale of the Stribeck excess", "EST: 0.05 rad/s"),
-    real_param!(225, friction_smoothing_velocity, Fixed, "rad/s", Gt(0.0), None, "tanh smoothing of sign(θl') in the friction law", "NUMERICS: 1e-3 rad/s"),
-    real_param!(226, backlash_width, Fixed, "rad", Ge(0.0), None, "Total play of the transmission; dead zone ±width/2 that never pulls (effect backlash)", "EFFECT: off"),
-    real_param!(227, gravity_link_mass, Fixed, "kg", Ge(0.0), None, "Mass on a link in a vertical plane (effect gravity)", "EFFECT: off (the device carries 0.91 kg, PAPER)"),
-    real_param!(228, gravity_com_distance, Fixed, "m", Ge(0.0), None, "Distance of that mass's centre from the axis", "PAPER: link length 140 mm"),
-    real_param!(229, gravity_offset, Fixed, "rad", NONE, None, "Link angle of the hanging rest position", "EFFECT: 0"),
-    real_param!(231, coulomb_friction_asymmetry, Fixed, "N.m", NONE, None, "Half the difference of the Coulomb levels: F+ = coulomb_friction + this, F- = coulomb_friction - this (effect asymmetric_friction)", "EFFECT: off"),
-    real_param!(232, viscous_friction_asymmetry, Fixed, "N.m.s/rad", NONE, None, "Half the difference of the viscous coefficients: B+ = link_damping + this, B- = link_damping - this (effect asymmetric_friction)", "EFFECT: off"),
-    real_param!(230, thermal_lag_time_constant, Fixed, "s", Ge(0.0), None, "Lag of the PCL behind the prescribed housing temperature (thermal_drive = 1; effect thermal_lag)", "EFFECT: off"),
+    real_param!(220, maxwell_stiffness, Fixed, "N.m/rad", 0.0, 1e9, "K_M of a Maxwell branch (effect frequency_dependent_modulus)", "EFFECT: off"),
+    real_param!(221, maxwell_relaxation_time, Fixed, "s", 1e-6, 1e4, "λ of the Maxwell branch", "EFFECT: 0.1 s placeholder while K_M = 0"),
+    real_param!(222, coulomb_friction, Fixed, "N.m", 0.0, 1e4, "Coulomb friction torque on the link (effect coulomb_friction)", "EFFECT: off"),
+    real_param!(223, stribeck_friction, Fixed, "N.m", 0.0, 1e4, "Static friction above Coulomb, fading with speed", "EFFECT: off"),
+    real_param!(224, stribeck_velocity, Fixed, "rad/s", 1e-6, 1e4, "Speed scale of the Stribeck excess", "EST: 0.05 rad/s"),
+    real_param!(225, friction_smoothing_velocity, Fixed, "rad/s", 1e-9, 1e3, "tanh smoothing of sign(θl') in the friction law", "NUMERICS: 1e-3 rad/s"),
+    real_param!(226, backlash_width, Fixed, "rad", 0.0, 10.0, "Total play of the transmission; dead zone ±width/2 that never pulls (effect backlash)", "EFFECT: off"),
+    real_param!(227, gravity_link_mass, Fixed, "kg", 0.0, 1e4, "Mass on a link in a vertical plane (effect gravity)", "EFFECT: off (the device carries 0.91 kg, PAPER)"),
+    real_param!(228, gravity_com_distance, Fixed, "m", 0.0, 100.0, "Distance of that mass's centre from the axis", "PAPER: link length 140 mm"),
+    real_param!(229, gravity_offset, Fixed, "rad", -100.0, 100.0, "Link angle of the hanging rest position", "EFFECT: 0"),
+    real_param!(231, coulomb_friction_asymmetry, Fixed, "N.m", -1e4, 1e4, "Half the difference of the Coulomb levels: F+ = coulomb_friction + this, F- = coulomb_friction - this (effect asymmetric_friction)", "EFFECT: off"),
+    real_param!(232, viscous_friction_asymmetry, Fixed, "N.m.s/rad", -1e4, 1e4, "Half the difference of the viscous coefficients: B+ = link_damping + this, B- = link_damping - this (effect asymmetric_friction)", "EFFECT: off"),
+    real_param!(230, thermal_lag_time_constant, Fixed, "s", 0.0, 1e6, "Lag of the PCL behind the prescribed housing temperature (thermal_drive = 1; effect thermal_lag)", "EFFECT: off"),
     // ---- thermal parameters
-    real_param!(240, pcl_mass, Fixed, "kg", Gt(0.0), None, "PCL mass, all cavities", "PAPER Table 1: 1.10 g × 3 cavities"),
-    real_param!(241, pcl_specific_heat_solid, Fixed, "J/(kg.K)", Gt(0.0), None, "c_s of solid PCL", "LIT: ≈ 1.7 J/(g·K)"),
-    real_param!(242, pcl_specific_heat_melt, Fixed, "J/(kg.K)", Gt(0.0), None, "c_l of molten PCL", "LIT: ≈ 2.1 J/(g·K)"),
-    real_param!(243, pcl_latent_heat, Fixed, "J/kg", Ge(0.0), None, "Heat of fusion of this PCL", "LIT/PAPER: ≈ 70 J/g"),
-    real_param!(244, pcl_melting_temperature, Fixed, "K", Gt(0.0), None, "Centre of the melting range", "LIT: melting 56–64 °C; 58 °C"),
-    real_param!(245, pcl_melting_width, Fixed, "K", Gt(0.0), None, "Half-width of the tanh melting step", "EST: 2.5 K (onset 50–55 °C, LIT)"),
-    real_param!(246, housing_heat_capacity, Fixed, "J/K", Gt(0.0), None, "C_h of heater foils and housing skin that heat quickly", "EST: the paper's 250–500 J budget leaves room for little more than the PCL"),
-    real_param!(247, heater_pcl_conductance, Fixed, "W/K", Gt(0.0), None, "G_hp from heaters into the PCL", "EST: k = 0.2 W/(m·K) (LIT) over ≈ 18 cm² heater contact, 3 mm path, ×3 for the slab mean"),
-    real_param!(248, housing_ambient_conductance, Fixed, "W/K", Ge(0.0), None, "G_ha from housing to ambient", "EST: natural convection ≈ 8 W/(m²·K) over ≈ 25 cm² exposed"),
+    real_param!(240, pcl_mass, Fixed, "kg", 1e-9, 1e3, "PCL mass, all cavities", "PAPER Table 1: 1.10 g × 3 cavities"),
+    real_param!(241, pcl_specific_heat_solid, Fixed, "J/(kg.K)", 1.0, 1e5, "c_s of solid PCL", "LIT: ≈ 1.7 J/(g·K)"),
+    real_param!(242, pcl_specific_heat_melt, Fixed, "J/(kg.K)", 1.0, 1e5, "c_l of molten PCL", "LIT: ≈ 2.1 J/(g·K)"),
+    real_param!(243, pcl_latent_heat, Fixed, "J/kg", 0.0, 1e7, "Heat of fusion of this PCL", "LIT/PAPER: ≈ 70 J/g"),
+    real_param!(244, pcl_melting_temperature, Fixed, "K", T_MIN, T_MAX, "Centre of the melting range", "LIT: melting 56–64 °C; 58 °C"),
+    real_param!(245, pcl_melting_width, Fixed, "K", 1e-3, 1e3, "Half-width of the tanh melting step", "EST: 2.5 K (onset 50–55 °C, LIT)"),
+    real_param!(246, housing_heat_capacity, Fixed, "J/K", 1e-6, 1e7, "C_h of heater foils and housing skin that heat quickly", "EST: the paper's 250–500 J budget leaves room for little more than the PCL"),
+    real_param!(247, heater_pcl_conductance, Fixed, "W/K", 1e-9, 1e4, "G_hp from heaters into the PCL", "EST: k = 0.2 W/(m·K) (LIT) over ≈ 18 cm² heater contact, 3 mm path, ×3 for the slab mean"),
+    real_param!(248, housing_ambient_conductance, Fixed, "W/K", 0.0, 1e4, "G_ha from housing to ambient", "EST: natural convection ≈ 8 W/(m²·K) over ≈ 25 cm² exposed"),
     // ---- initial state
-    real_param!(260, initial_motor_angle, Fixed, "rad", NONE, None, "θm at initialisation", "0"),
-    real_param!(261, initial_link_angle, Fixed, "rad", NONE, None, "θl at initialisation", "0"),
-    real_param!(264, initial_motor_speed, Fixed, "rad/s", NONE, None, "θm' at initialisation (rigid: the body's speed)", "0"),
-    real_param!(265, initial_link_speed, Fixed, "rad/s", NONE, None, "θl' at initialisation (compliant transmission)", "0"),
-    real_param!(262, initial_housing_temperature, Fixed, "K", Gt(0.0), None, "Housing temperature at initialisation", "PAPER: room 22 °C"),
-    real_param!(263, initial_pcl_temperature, Fixed, "K", Gt(0.0), None, "PCL temperature at initialisation", "PAPER: room 22 °C"),
+    real_param!(260, initial_motor_angle, Fixed, "rad", -ANGLE, ANGLE, "θm at initialisation", "0"),
+    real_param!(261, initial_link_angle, Fixed, "rad", -ANGLE, ANGLE, "θl at initialisation", "0"),
+    real_param!(264, initial_motor_speed, Fixed, "rad/s", -1e4, 1e4, "θm' at initialisation (rigid: the body's speed)", "0"),
+    real_param!(265, initial_link_speed, Fixed, "rad/s", -1e4, 1e4, "θl' at initialisation (compliant transmission)", "0"),
+    real_param!(262, initial_housing_temperature, Fixed, "K", T_MIN, T_MAX, "Housing temperature at initialisation", "PAPER: room 22 °C"),
+    real_param!(263, initial_pcl_temperature, Fixed, "K", T_MIN, T_MAX, "PCL temperature at initialisation", "PAPER: room 22 °C"),
     // ---- numerics
-    real_param!(270, max_internal_step, Fixed, "s", Gt(0.0), None, "Longest internal sub-step, independent of the communication step", "NUMERICS"),
-    real_param!(271, solver_tolerance, Fixed, "", Gt(0.0), Some(1e-2), "Error tolerance of the adaptive solver (used when friction, backlash or gravity is on)", "NUMERICS"),
+    real_param!(270, max_internal_step, Fixed, "s", 1e-7, 10.0, "Longest internal sub-step, independent of the communication step", "NUMERICS"),
+    real_param!(271, solver_tolerance, Fixed, "", 1e-14, 1e-2, "Error tolerance of the adaptive solver (used when friction, backlash or gravity is on)", "NUMERICS"),
     // ---- modes (Integer)
     Variable {
         name: "material_table",
@@ -329,8 +317,8 @@ pub static VARIABLES: &[Variable] = &[
         causality: Causality::Parameter,
         variability: Variability::Fixed,
         unit: "",
-        lower: Ge(1.0),
-        upper: Some(4.0),
+        min: Some(1.0),
+        max: Some(4.0),
         description: "PCL moduli: 1 repaired experimental (default), 2 printed experimental, 3 repaired estimated, 4 printed estimated",
         source: "PAPER Table 2; repair EST (docs/physics.md §4)",
         access: Access::Integer {
@@ -347,8 +335,8 @@ pub static VARIABLES: &[Variable] = &[
         causality: Causality::Parameter,
         variability: Variability::Fixed,
         unit: "",
-        lower: Ge(0.0),
-        upper: Some(1.0),
+        min: Some(0.0),
+        max: Some(1.0),
         description: "0: motor_torque drives the motor; 1: the motor follows motor_angle_command",
         source: "MODE",
         access: Access::Integer {
@@ -365,8 +353,8 @@ pub static VARIABLES: &[Variable] = &[
         causality: Causality::Parameter,
         variability: Variability::Fixed,
         unit: "",
-        lower: Ge(0.0),
-        upper: Some(1.0),
+        min: Some(0.0),
+        max: Some(1.0),
         description: "0: springs and PCL couple motor and link; 1: rigid, motor and link one body of inertia motor_inertia + link_inertia, damping motor_damping + link_damping",
         source: "MODE",
         access: Access::Integer {
@@ -383,8 +371,8 @@ pub static VARIABLES: &[Variable] = &[
         causality: Causality::Parameter,
         variability: Variability::Fixed,
         unit: "",
-        lower: Ge(0.0),
-        upper: Some(1.0),
+        min: Some(0.0),
+        max: Some(1.0),
         description: "0: heater_power drives the thermal network; 1: the housing follows housing_temperature_command",
         source: "MODE",
         access: Access::Integer {
@@ -407,36 +395,37 @@ pub fn by_name(name: &str) -> Option<&'static Variable> {
 pub fn by_reference(ty: BaseType, vr: u32) -> Option<&'static Variable> {
     use std::sync::OnceLock;
     // Read-only after first use: one dense row-index table per base type (value references are
-    // small), so the C API's hot get/set path costs an array access, not a search.
-    static INDEX: OnceLock<[Vec<Option<u16>>; 2]> = OnceLock::new();
+    // small), so the C API's hot get/set path costs an array access, not a search. Inline arrays,
+    // no heap: unloading the library loses nothing.
+    const NO_ROW: u8 = u8::MAX;
+    static INDEX: OnceLock<[[u8; VR_LIMIT]; 2]> = OnceLock::new();
     let index = INDEX.get_or_init(|| {
-        let mut tables = [Vec::new(), Vec::new()];
+        let mut tables = [[NO_ROW; VR_LIMIT]; 2];
         for (i, v) in VARIABLES.iter().enumerate() {
-            let t = &mut tables[v.base_type() as usize];
-            let r = v.value_reference as usize;
-            if t.len() <= r {
-                t.resize(r + 1, None);
-            }
-            t[r] = Some(i as u16);
+            tables[v.base_type() as usize][v.value_reference as usize] = i as u8;
         }
         tables
     });
-    let row = (*index[ty as usize].get(vr as usize)?)?;
-    Some(&VARIABLES[row as usize])
+    match *index[ty as usize].get(vr as usize)? {
+        NO_ROW => None,
+        row => Some(&VARIABLES[row as usize]),
+    }
 }
+
+/// Every value reference is below this (the index in `by_reference` is this long).
+pub const VR_LIMIT: usize = 512;
 
 /// The README's variable table (Markdown), generated from `VARIABLES`.
 pub fn markdown_table() -> String {
     let mut s = String::from("| name | causality | variability | type | unit | start | range | description | source |\n|---|---|---|---|---|---|---|---|---|\n");
     for v in VARIABLES {
         let start = if v.has_start() { format_number(v.start()) } else { String::new() };
-        let lo = match v.lower {
-            Lower::None => String::new(),
-            Lower::Inclusive(b) => format!("≥ {}", format_number(b)),
-            Lower::Exclusive(b) => format!("> {}", format_number(b)),
+        let range = match (v.min, v.max) {
+            (Some(lo), Some(hi)) => format!("{} … {}", format_number(lo), format_number(hi)),
+            (Some(lo), None) => format!("≥ {}", format_number(lo)),
+            (None, Some(hi)) => format!("≤ {}", format_number(hi)),
+            (None, None) => String::new(),
         };
-        let hi = v.upper.map(|b| format!("≤ {}", format_number(b))).unwrap_or_default();
-        let range = [lo, hi].into_iter().filter(|s| !s.is_empty()).collect::<Vec<_>>().join(", ");
         s += &format!(
             "| `{}` | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             v.name,
@@ -469,10 +458,12 @@ mod tests {
 
     #[test]
     fn value_references_are_unique_per_base_type_and_names_unique() {
+        assert!(VARIABLES.len() < u8::MAX as usize, "the row index is a u8");
         let mut seen = std::collections::HashSet::new();
         let mut names = std::collections::HashSet::new();
         for v in VARIABLES {
             assert!(seen.insert((v.base_type(), v.value_reference)), "duplicate vr {}", v.value_reference);
+            assert!((v.value_reference as usize) < VR_LIMIT, "vr {} needs a longer index", v.value_reference);
             assert!(names.insert(v.name), "duplicate name {}", v.name);
         }
     }
@@ -483,7 +474,7 @@ mod tests {
             if let Some(e) = v.enumeration {
                 let values: Vec<f64> = e.items.iter().map(|(x, _, _)| *x as f64).collect();
                 assert_eq!(v.base_type(), BaseType::Integer, "{}", v.name);
-                let (Lower::Inclusive(lo), Some(hi)) = (v.lower, v.upper) else { panic!("{} needs a range", v.name) };
+                let (Some(lo), Some(hi)) = (v.min, v.max) else { panic!("{} needs a range", v.name) };
                 let expected: Vec<f64> = (lo as i32..=hi as i32).map(f64::from).collect();
                 assert_eq!(values, expected, "{}", v.name);
             }
@@ -494,6 +485,22 @@ mod tests {
     fn every_start_value_is_inside_its_own_range() {
         for v in VARIABLES.iter().filter(|v| v.has_start()) {
             v.check_range(v.start()).unwrap();
+        }
+    }
+
+    /// FMI's min and max are inclusive: the binary takes exactly the bounds it declares and
+    /// refuses the next representable number outside them.
+    #[test]
+    fn every_parameter_and_input_has_an_inclusive_range_the_check_agrees_with() {
+        for v in VARIABLES.iter().filter(|v| v.has_start()) {
+            let (Some(lo), Some(hi)) = (v.min, v.max) else { panic!("{} has no complete range", v.name) };
+            assert!(lo <= v.start() && v.start() <= hi, "{}", v.name);
+            v.check_range(lo).unwrap();
+            v.check_range(hi).unwrap();
+            assert!(v.check_range(lo.next_down()).is_err(), "{}", v.name);
+            assert!(v.check_range(hi.next_up()).is_err(), "{}", v.name);
+            assert_eq!(format_number(lo).parse::<f64>().unwrap(), lo, "{}", v.name);
+            assert_eq!(format_number(hi).parse::<f64>().unwrap(), hi, "{}", v.name);
         }
     }
 

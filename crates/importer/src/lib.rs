@@ -169,6 +169,11 @@ impl Fmu {
         &self.lib
     }
 
+    /// The folder the archive was unpacked into (removed when the `Fmu` is dropped).
+    pub fn unpacked_dir(&self) -> &Path {
+        &self.unpacked
+    }
+
     /// A new instance, named `<identifier>_<n>` unless `name` is given.
     pub fn instantiate(&self, name: Option<&str>) -> Result<Instance, HarnessError> {
         let n = self.instance_counter.fetch_add(1, Ordering::Relaxed);

@@ -358,6 +358,216 @@ impl RawInstance {
     }
 }
 
+/// Which pointer argument a deliberately bad call passes as NULL (with a non-zero count where the
+/// function takes one): the conformance tests and the fuzzer check that each is refused, not
+/// dereferenced.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NullArg {
+    GetRealValues,
+    SetRealValues,
+    GetIntegerValues,
+    SetIntegerValues,
+    GetBooleanValues,
+    SetBooleanValues,
+    GetStringValues,
+    SetStringValues,
+    SetDebugLoggingCategories,
+    GetFmuStateOut,
+    SetFmuState,
+    FreeFmuStateOut,
+    SerializedSizeOut,
+    SerializeBuffer,
+    DeserializeBuffer,
+    GetStatusOut,
+    GetRealStatusOut,
+    GetBooleanStatusOut,
+}
+
+impl NullArg {
+    pub const ALL: [NullArg; 18] = [
+        NullArg::GetRealValues,
+        NullArg::SetRealValues,
+        NullArg::GetIntegerValues,
+        NullArg::SetIntegerValues,
+        NullArg::GetBooleanValues,
+        NullArg::SetBooleanValues,
+        NullArg::GetStringValues,
+        NullArg::SetStringValues,
+        NullArg::SetDebugLoggingCategories,
+        NullArg::GetFmuStateOut,
+        NullArg::SetFmuState,
+        NullArg::FreeFmuStateOut,
+        NullArg::SerializedSizeOut,
+        NullArg::SerializeBuffer,
+        NullArg::DeserializeBuffer,
+        NullArg::GetStatusOut,
+        NullArg::GetRealStatusOut,
+        NullArg::GetBooleanStatusOut,
+    ];
+}
+
+/// The remaining calls of the API as safe methods (the fuzzer reaches all 34 functions).
+impl RawInstance {
+    pub fn get_string(&mut self, vrs: &[u32]) -> Fmi2Status {
+        let mut out: Vec<Fmi2String> = vec![std::ptr::null(); vrs.len()];
+        // SAFETY: both arrays have `len` elements.
+        unsafe { (self.lib.api.get_string)(self.c, vrs.as_ptr(), vrs.len(), out.as_mut_ptr()) }
+    }
+    pub fn set_string(&mut self, vrs: &[u32], values: &[&str]) -> Fmi2Status {
+        assert_eq!(vrs.len(), values.len(), "one value per value reference");
+        let owned: Vec<CString> = values.iter().map(|v| CString::new(*v).unwrap_or_default()).collect();
+        let ptrs: Vec<Fmi2String> = owned.iter().map(|c| c.as_ptr()).collect();
+        // SAFETY: both arrays have `len` elements; the strings outlive the call.
+        unsafe { (self.lib.api.set_string)(self.c, vrs.as_ptr(), vrs.len(), ptrs.as_ptr()) }
+    }
+    pub fn get_directional_derivative(&mut self, unknown: &[u32], known: &[u32], dv_known: &[f64]) -> Fmi2Status {
+        assert_eq!(known.len(), dv_known.len(), "one seed per known");
+        let mut dv_unknown = vec![0.0; unknown.len()];
+        // SAFETY: every array has the length passed with it.
+        unsafe {
+            (self.lib.api.get_directional_derivative)(
+                self.c,
+                unknown.as_ptr(),
+                unknown.len(),
+                known.as_ptr(),
+                known.len(),
+                dv_known.as_ptr(),
+                dv_unknown.as_mut_ptr(),
+            )
+        }
+    }
+    pub fn set_real_input_derivatives(&mut self, vrs: &[u32], orders: &[i32], values: &[f64]) -> Fmi2Status {
+        assert!(orders.len() == vrs.len() && values.len() == vrs.len(), "one order and value per reference");
+        // SAFETY: every array has `len` elements.
+        unsafe {
+            (self.lib.api.set_real_input_derivatives)(self.c, vrs.as_ptr(), vrs.len(), orders.as_ptr(), values.as_ptr())
+        }
+    }
+    pub fn get_real_output_derivatives(&mut self, vrs: &[u32], orders: &[i32]) -> Fmi2Status {
+        assert_eq!(orders.len(), vrs.len(), "one order per reference");
+        let mut out = vec![0.0; vrs.len()];
+        // SAFETY: every array has `len` elements.
+        unsafe {
+            (self.lib.api.get_real_output_derivatives)(
+                self.c,
+                vrs.as_ptr(),
+                vrs.len(),
+                orders.as_ptr(),
+                out.as_mut_ptr(),
+            )
+        }
+    }
+    pub fn cancel_step(&mut self) -> Fmi2Status {
+        // SAFETY: valid component.
+        unsafe { (self.lib.api.cancel_step)(self.c) }
+    }
+    pub fn get_status(&mut self, kind: Fmi2StatusKind) -> (Fmi2Status, Fmi2Status) {
+        let mut v: Fmi2Status = -1;
+        // SAFETY: valid out pointer.
+        let s = unsafe { (self.lib.api.get_status)(self.c, kind, &mut v) };
+        (s, v)
+    }
+    pub fn get_real_status(&mut self, kind: Fmi2StatusKind) -> (Fmi2Status, f64) {
+        let mut v = f64::NAN;
+        // SAFETY: valid out pointer.
+        let s = unsafe { (self.lib.api.get_real_status)(self.c, kind, &mut v) };
+        (s, v)
+    }
+    pub fn get_integer_status(&mut self, kind: Fmi2StatusKind) -> Fmi2Status {
+        let mut v: Fmi2Integer = 0;
+        // SAFETY: valid out pointer.
+        unsafe { (self.lib.api.get_integer_status)(self.c, kind, &mut v) }
+    }
+    pub fn get_boolean_status(&mut self, kind: Fmi2StatusKind) -> (Fmi2Status, Fmi2Boolean) {
+        let mut v: Fmi2Boolean = -1;
+        // SAFETY: valid out pointer.
+        let s = unsafe { (self.lib.api.get_boolean_status)(self.c, kind, &mut v) };
+        (s, v)
+    }
+    pub fn get_string_status(&mut self, kind: Fmi2StatusKind) -> Fmi2Status {
+        let mut v: Fmi2String = std::ptr::null();
+        // SAFETY: valid out pointer.
+        unsafe { (self.lib.api.get_string_status)(self.c, kind, &mut v) }
+    }
+    pub fn do_step_with(&mut self, t: f64, h: f64, no_set_prior: bool) -> Fmi2Status {
+        // SAFETY: valid component.
+        unsafe { (self.lib.api.do_step)(self.c, t, h, no_set_prior as Fmi2Boolean) }
+    }
+    /// fmi2SerializedFMUstateSize alone.
+    pub fn serialized_fmu_state_size(&mut self, state: &FmuState) -> (Fmi2Status, usize) {
+        let mut size = 0usize;
+        // SAFETY: valid out pointer; the state is live.
+        let s = unsafe { (self.lib.api.serialized_fmu_state_size)(self.c, state.0, &mut size) };
+        (s, size)
+    }
+    /// fmi2SerializeFMUstate into a buffer of the caller's size (too small must be refused).
+    pub fn serialize_fmu_state_into(&mut self, state: &FmuState, buf: &mut [u8]) -> Fmi2Status {
+        // SAFETY: the buffer is valid for its length; the state is live.
+        unsafe { (self.lib.api.serialize_fmu_state)(self.c, state.0, buf.as_mut_ptr() as *mut Fmi2Byte, buf.len()) }
+    }
+    /// fmi2DeSerializeFMUstate into an existing state object (reused, as FMI allows).
+    pub fn deserialize_fmu_state_into(&mut self, bytes: &[u8], state: &FmuState) -> Fmi2Status {
+        let mut p = state.0;
+        // SAFETY: `bytes` is valid for its length; the state is live and stays the same object.
+        unsafe { (self.lib.api.deserialize_fmu_state)(self.c, bytes.as_ptr() as *const Fmi2Byte, bytes.len(), &mut p) }
+    }
+    /// Forgets the instance's FMU states without freeing them, so that dropping the instance calls
+    /// fmi2FreeInstance with states still allocated (which must then free them).
+    pub fn forget_fmu_states(&mut self) {
+        self.states.clear();
+    }
+    /// Number of FMU states this instance holds.
+    pub fn fmu_state_count(&self) -> usize {
+        self.states.len()
+    }
+    /// Calls the function behind `which` with that pointer NULL.
+    pub fn call_with_null(&mut self, which: NullArg) -> Fmi2Status {
+        let api = self.lib.api;
+        let c = self.c;
+        let vr = [0u32];
+        let null_mut_f64: *mut f64 = std::ptr::null_mut();
+        // SAFETY: the FMU must check each NULL; every other pointer is valid.
+        unsafe {
+            match which {
+                NullArg::GetRealValues => (api.get_real)(c, vr.as_ptr(), 1, null_mut_f64),
+                NullArg::SetRealValues => (api.set_real)(c, vr.as_ptr(), 1, std::ptr::null()),
+                NullArg::GetIntegerValues => (api.get_integer)(c, vr.as_ptr(), 1, std::ptr::null_mut()),
+                NullArg::SetIntegerValues => (api.set_integer)(c, vr.as_ptr(), 1, std::ptr::null()),
+                NullArg::GetBooleanValues => (api.get_boolean)(c, vr.as_ptr(), 1, std::ptr::null_mut()),
+                NullArg::SetBooleanValues => (api.set_boolean)(c, vr.as_ptr(), 1, std::ptr::null()),
+                NullArg::GetStringValues => (api.get_string)(c, vr.as_ptr(), 1, std::ptr::null_mut()),
+                NullArg::SetStringValues => (api.set_string)(c, vr.as_ptr(), 1, std::ptr::null()),
+                NullArg::SetDebugLoggingCategories => (api.set_debug_logging)(c, 1, 2, std::ptr::null()),
+                NullArg::GetFmuStateOut => (api.get_fmu_state)(c, std::ptr::null_mut()),
+                NullArg::SetFmuState => (api.set_fmu_state)(c, std::ptr::null_mut()),
+                NullArg::FreeFmuStateOut => (api.free_fmu_state)(c, std::ptr::null_mut()),
+                NullArg::SerializedSizeOut => (api.serialized_fmu_state_size)(
+                    c,
+                    self.states.first().copied().unwrap_or(std::ptr::null_mut()),
+                    std::ptr::null_mut(),
+                ),
+                NullArg::SerializeBuffer => (api.serialize_fmu_state)(
+                    c,
+                    self.states.first().copied().unwrap_or(std::ptr::null_mut()),
+                    std::ptr::null_mut(),
+                    4096,
+                ),
+                NullArg::DeserializeBuffer => {
+                    let mut p: Fmi2FmuState = std::ptr::null_mut();
+                    let s = (api.deserialize_fmu_state)(c, std::ptr::null(), 64, &mut p);
+                    if !p.is_null() {
+                        self.states.push(p);
+                    }
+                    s
+                }
+                NullArg::GetStatusOut => (api.get_status)(c, FMI2_DO_STEP_STATUS, std::ptr::null_mut()),
+                NullArg::GetRealStatusOut => (api.get_real_status)(c, FMI2_LAST_SUCCESSFUL_TIME, null_mut_f64),
+                NullArg::GetBooleanStatusOut => (api.get_boolean_status)(c, FMI2_TERMINATED, std::ptr::null_mut()),
+            }
+        }
+    }
+}
+
 impl Drop for RawInstance {
     fn drop(&mut self) {
         // SAFETY: states and the component were made by this library and are freed once.

@@ -45,7 +45,18 @@ pub enum StepFailure {
     SolverStalled { at_time_in_step: f64 },
     /// A state became NaN or infinite.
     NonFinite,
+    /// `h / max_internal_step` sub-steps are more than [`MAX_SUBSTEPS_PER_STEP`]; nothing was done.
+    TooManySubsteps { needed: f64 },
+    /// The adaptive solver used [`MAX_SOLVER_ATTEMPTS_PER_STEP`] attempts before the step's end.
+    SolverBudget { at_time_in_step: f64 },
 }
+
+/// Work budget of one `Model::step`, so that every call returns in bounded time (about a second on
+/// a 2020s core in the worst case measured; see the README's reliability section): at most this many
+/// internal sub-steps...
+pub const MAX_SUBSTEPS_PER_STEP: f64 = 100_000.0;
+/// ...and at most this many attempted Dormand–Prince steps over all sub-steps.
+pub const MAX_SOLVER_ATTEMPTS_PER_STEP: u64 = 1_000_000;
 
 impl std::fmt::Display for StepFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -54,6 +65,16 @@ impl std::fmt::Display for StepFailure {
                 write!(f, "the adaptive solver could not meet solver_tolerance {at_time_in_step} s into the step")
             }
             StepFailure::NonFinite => write!(f, "a state became NaN or infinite"),
+            StepFailure::TooManySubsteps { needed } => write!(
+                f,
+                "the step needs {needed:e} internal sub-steps of max_internal_step, more than the budget of \
+                 {MAX_SUBSTEPS_PER_STEP:e}; take shorter communication steps or raise max_internal_step"
+            ),
+            StepFailure::SolverBudget { at_time_in_step } => write!(
+                f,
+                "the adaptive solver used its budget of {MAX_SOLVER_ATTEMPTS_PER_STEP} attempts {at_time_in_step} s \
+                 into the step; take shorter communication steps, or loosen solver_tolerance or the friction smoothing"
+            ),
         }
     }
 }
@@ -164,8 +185,12 @@ impl Model {
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
-        let substeps =
-            if h <= self.params.max_internal_step { 1 } else { (h / self.params.max_internal_step).ceil() as usize };
+        let needed = (h / self.params.max_internal_step).ceil();
+        if needed.is_nan() || needed > MAX_SUBSTEPS_PER_STEP {
+            return Err(StepFailure::TooManySubsteps { needed });
+        }
+        let substeps = if h <= self.params.max_internal_step { 1 } else { needed as usize };
+        let mut attempts_left = MAX_SOLVER_ATTEMPTS_PER_STEP;
         let hs = h / substeps as f64;
         let before = (self.mechanics, self.thermal.clone(), self.adaptive_step);
         if self.params.motor_drive == MotorDrive::PrescribedAngle {
@@ -204,11 +229,17 @@ impl Model {
                 &drive,
                 hs,
                 &mut self.adaptive_step,
+                &mut attempts_left,
             )
             .is_none()
             {
                 (self.mechanics, self.thermal, self.adaptive_step) = before;
-                return Err(StepFailure::SolverStalled { at_time_in_step: i as f64 * hs });
+                let at_time_in_step = i as f64 * hs;
+                return Err(if attempts_left == 0 {
+                    StepFailure::SolverBudget { at_time_in_step }
+                } else {
+                    StepFailure::SolverStalled { at_time_in_step }
+                });
             }
         }
         let finite = self.mechanics.iter().all(|v| v.is_finite())

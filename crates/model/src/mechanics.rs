@@ -233,7 +233,8 @@ pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
 }
 
 /// Adaptive Dormand–Prince 5(4) over `[0, h]`; `step_guess` carries the last accepted step size
-/// from call to call. Returns None when the error control cannot make progress.
+/// from call to call; every attempted step costs one of `attempts_left` (the caller's work budget).
+/// Returns None when the error control cannot make progress or the budget runs out.
 pub fn integrate_adaptive(
     p: &Params,
     c: &Coefficients,
@@ -241,6 +242,7 @@ pub fn integrate_adaptive(
     u: &Drive,
     h: f64,
     step_guess: &mut f64,
+    attempts_left: &mut u64,
 ) -> Option<()> {
     const A: [[f64; 6]; 6] = [
         [1.0 / 5.0, 0.0, 0.0, 0.0, 0.0, 0.0],
@@ -259,13 +261,12 @@ pub fn integrate_adaptive(
     let mut k = [State::zeros(); 7];
     k[0] = derivative(p, c, x, u);
     let mut rejected_in_a_row = 0;
-    // A tolerance below what rounding allows gives endless tiny steps: cap the work per call.
-    let mut attempts = 0;
+    // A tolerance below what rounding allows gives endless tiny steps: the caller caps the work.
     while t < h {
-        attempts += 1;
-        if attempts > 200_000 {
+        if *attempts_left == 0 {
             return None;
         }
+        *attempts_left -= 1;
         let last = t + dt >= h * (1.0 - 1e-12);
         if last {
             dt = h - t;
