@@ -8,7 +8,9 @@ pub mod mechanics;
 pub mod params;
 pub mod thermal;
 
-use mechanics::{Coefficients, Drive, Propagator, State};
+use std::sync::Arc;
+
+use mechanics::{Coefficients, Drive, LinearStep, PropagatorTable, State};
 pub use params::{MotorDrive, Params, ThermalDrive};
 use thermal::{ThermalInputs, ThermalState};
 
@@ -83,7 +85,10 @@ pub struct Model {
     /// restored run continue bit-identically).
     pub adaptive_step: f64,
     coefficients: Option<(f64, Coefficients)>,
-    propagator: Option<Propagator>,
+    /// Propagator tables of the last two step lengths (shared with clones until one adds a node).
+    tables: Vec<Arc<PropagatorTable>>,
+    /// The last linear step used: (PCL temperature, step key, step).
+    linear_step: Option<(f64, f64, LinearStep)>,
 }
 
 impl PartialEq for Model {
@@ -111,7 +116,8 @@ impl Model {
             mechanics: State::zeros(),
             adaptive_step: 0.0,
             coefficients: None,
-            propagator: None,
+            tables: Vec::new(),
+            linear_step: None,
         };
         m.initialize();
         m
@@ -124,6 +130,8 @@ impl Model {
     /// Mutable parameters; cached coefficients are dropped so they are rebuilt from the new values.
     pub fn params_mut(&mut self) -> &mut Params {
         self.coefficients = None;
+        self.tables.clear();
+        self.linear_step = None;
         &mut self.params
     }
 
@@ -152,6 +160,34 @@ impl Model {
         }
     }
 
+    /// The exact linear step of length `key` with the moduli at PCL temperature `t` (interpolated
+    /// in the propagator table; reused while t and key stay).
+    fn prepare_linear_step(&mut self, t: f64, key: f64) {
+        if matches!(&self.linear_step, Some((t0, k0, _)) if *t0 == t && *k0 == key) {
+            return;
+        }
+        let i = match self.tables.iter().position(|tb| tb.step_length() == key) {
+            Some(i) => i,
+            None => {
+                self.tables.truncate(1);
+                self.tables.insert(0, Arc::new(PropagatorTable::new(key)));
+                0
+            }
+        };
+        let table = Arc::make_mut(&mut self.tables[i]);
+        match &mut self.linear_step {
+            Some((t0, k0, step)) => {
+                table.at(&self.params, t, step);
+                (*t0, *k0) = (t, key);
+            }
+            None => {
+                let mut step = LinearStep::ZERO;
+                table.at(&self.params, t, &mut step);
+                self.linear_step = Some((t, key, step));
+            }
+        }
+    }
+
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
         let substeps =
@@ -175,23 +211,21 @@ impl Model {
             let t_start = self.thermal.pcl_temperature;
             self.thermal.advance(&self.params, &thermal_inputs, hs);
             let t_mid = 0.5 * (t_start + self.thermal.pcl_temperature);
-            let c = self.coefficients_at(on_temperature_lattice(t_mid));
             if linear {
-                let stale = !matches!(&self.propagator, Some(pr) if pr.matches(&self.params, &c, hs));
-                if stale {
-                    self.propagator = Some(Propagator::new(&self.params, &c, hs));
+                let key = mechanics::canonical_step(hs);
+                self.prepare_linear_step(t_mid, key);
+                let step = &self.linear_step.as_ref().expect("prepared").2;
+                let mut x = step.apply(&self.mechanics, &drive);
+                if hs != key {
+                    // The last ≤ 4.7e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).
+                    x += mechanics::linear_rate(&self.params, &step.coefficients(), &x, &drive) * (hs - key);
                 }
-                let pr = self.propagator.as_ref().expect("built above");
-                self.mechanics = pr.apply(&self.mechanics, &drive);
-            } else if mechanics::integrate_adaptive(
-                &self.params,
-                &c,
-                &mut self.mechanics,
-                &drive,
-                hs,
-                &mut self.adaptive_step,
-            )
-            .is_none()
+                self.mechanics = x;
+                continue;
+            }
+            let c = self.coefficients_at(on_temperature_lattice(t_mid));
+            if mechanics::integrate_adaptive(&self.params, &c, &mut self.mechanics, &drive, hs, &mut self.adaptive_step)
+                .is_none()
             {
                 (self.mechanics, self.thermal, self.adaptive_step) = before;
                 return Err(StepFailure::SolverStalled { at_time_in_step: i as f64 * hs });

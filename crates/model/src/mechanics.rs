@@ -12,6 +12,7 @@
 
 use nalgebra::{SMatrix, SVector};
 
+use super::material::TABLE_TEMPERATURES_C;
 use super::params::{MotorDrive, Params};
 
 pub const N_STATE: usize = 5;
@@ -36,6 +37,9 @@ pub struct Coefficients {
 }
 
 impl Coefficients {
+    pub const ZERO: Coefficients =
+        Coefficients { storage_modulus: 0.0, loss_modulus: 0.0, stiffness: 0.0, damping: 0.0 };
+
     pub fn at(p: &Params, pcl_temperature_k: f64) -> Self {
         let (e1, e2) = p.material_table.moduli_pa(pcl_temperature_k - super::params::ZERO_CELSIUS);
         let (e1, e2) = (e1 * p.storage_modulus_scale, e2 * p.loss_modulus_scale);
@@ -70,24 +74,8 @@ const N_AUG: usize = N_STATE + 2;
 /// e^{Ah} and Γ = ∫₀ʰ e^{As} ds B for one step length and coefficient set.
 #[derive(Clone, Debug)]
 pub struct Propagator {
-    key: [f64; 10],
-    phi: SMatrix<f64, N_STATE, N_STATE>,
-    gamma: SMatrix<f64, N_STATE, 2>,
-}
-
-fn propagator_key(p: &Params, c: &Coefficients, h: f64) -> [f64; 10] {
-    [
-        h,
-        c.stiffness,
-        c.damping,
-        p.maxwell_stiffness,
-        p.maxwell_relaxation_time,
-        p.motor_inertia,
-        p.motor_damping,
-        p.link_inertia,
-        p.link_damping,
-        p.motor_drive as i32 as f64,
-    ]
+    pub phi: SMatrix<f64, N_STATE, N_STATE>,
+    pub gamma: SMatrix<f64, N_STATE, 2>,
 }
 
 /// A and B of the linear system (valid when `Params::mechanics_is_linear`).
@@ -125,18 +113,170 @@ impl Propagator {
         m.fixed_view_mut::<N_STATE, 2>(0, N_STATE).copy_from(&(b * h));
         let e = m.exp();
         Propagator {
-            key: propagator_key(p, c, h),
             phi: e.fixed_view::<N_STATE, N_STATE>(0, 0).into_owned(),
             gamma: e.fixed_view::<N_STATE, 2>(0, N_STATE).into_owned(),
         }
     }
+}
 
-    pub fn matches(&self, p: &Params, c: &Coefficients, h: f64) -> bool {
-        self.key == propagator_key(p, c, h)
+/// Spacing of the temperature lattice on which [`PropagatorTable`] tabulates propagators, K. A
+/// binary fraction, so the material table's rows (22, 40, 50, 60 °C), where the moduli's log-linear
+/// pieces meet, fall on nodes and no interpolation stencil straddles a kink.
+pub const PROPAGATOR_LATTICE: f64 = 0.125;
+
+/// Mantissa bits dropped from a step length to key the propagator cache: steps within 2^-31
+/// (4.7e-10) relative of each other share one propagator, see [`canonical_step`].
+const STEP_KEY_DROPPED_BITS: u32 = 22;
+
+/// The step length a propagator is built for: `h` rounded to 30 mantissa bits (relative change
+/// ≤ 4.7e-10). A function of `h` alone, so a restored run keys its cache as the original did.
+/// Masters that pass h as t(k+1) − t(k) (fmpy) send steps that differ from 1 ms in the last bits
+/// (by up to 3e-11 relative at t = 200 s); they all land on one key, and [`Model::step`](crate::Model::step)
+/// covers the remainder h − h_key exactly to first order (an Euler step of ≤ 5e-13 s).
+pub fn canonical_step(h: f64) -> f64 {
+    let half = 1u64 << (STEP_KEY_DROPPED_BITS - 1);
+    f64::from_bits((h.to_bits() + half) & !((1u64 << STEP_KEY_DROPPED_BITS) - 1))
+}
+
+const N_PROP: usize = N_STATE * N_AUG;
+const N_NODE: usize = N_PROP + 2;
+
+/// [Φ | Γ] (5×7, row-major) of one step, followed by the transmission's stiffness and damping it
+/// was built for.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LinearStep {
+    v: [f64; N_NODE],
+}
+
+impl LinearStep {
+    pub const ZERO: LinearStep = LinearStep { v: [0.0; N_NODE] };
+
+    pub fn new(p: &Params, c: &Coefficients, h: f64) -> Self {
+        let pr = Propagator::new(p, c, h);
+        let mut v = [0.0; N_NODE];
+        for i in 0..N_STATE {
+            for j in 0..N_STATE {
+                v[i * N_AUG + j] = pr.phi[(i, j)];
+            }
+            v[i * N_AUG + N_STATE] = pr.gamma[(i, 0)];
+            v[i * N_AUG + N_STATE + 1] = pr.gamma[(i, 1)];
+        }
+        v[N_PROP] = c.stiffness;
+        v[N_PROP + 1] = c.damping;
+        LinearStep { v }
+    }
+
+    /// K_s r_s² + K'(T) and C(T) this step was built (or interpolated) for.
+    pub fn coefficients(&self) -> Coefficients {
+        Coefficients { stiffness: self.v[N_PROP], damping: self.v[N_PROP + 1], ..Coefficients::ZERO }
     }
 
     pub fn apply(&self, x: &State, u: &Drive) -> State {
-        self.phi * x + self.gamma * u
+        let v = [x[0], x[1], x[2], x[3], x[4], u[0], u[1]];
+        let mut y = State::zeros();
+        for i in 0..N_STATE {
+            let row = &self.v[i * N_AUG..(i + 1) * N_AUG];
+            y[i] = row.iter().zip(v).map(|(a, b)| a * b).sum();
+        }
+        y
+    }
+}
+
+/// x' = A x + B u of the linear mechanics (what [`derivative`] gives with every nonlinear effect
+/// off), for the last sliver of a step whose length differs from its propagator's key.
+pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
+    let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
+    let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
+    let q = x[MAXWELL_DEFLECTION];
+    let tau = c.stiffness * delta + c.damping * rate + p.maxwell_stiffness * (delta - q);
+    let motor_accel = match p.motor_drive {
+        MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
+        MotorDrive::PrescribedAngle => 0.0,
+    };
+    let link_accel = (tau + u[1] - p.link_damping * x[LINK_SPEED]) / p.link_inertia;
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_accel, (delta - q) / p.maxwell_relaxation_time])
+}
+
+/// Exact linear steps of one length tabulated on a lattice of the PCL temperature
+/// ([`PROPAGATOR_LATTICE`]) between the material table's first and last rows, nodes built lazily
+/// (one matrix exponential each, never again while the parameters and the step stay), and
+/// interpolated by a cubic through four nodes of the same log-linear piece. Outside the table's
+/// rows the moduli are held, so the end nodes are exact there. The interpolation error is
+/// O(Δ⁴): below 1e-9 of the propagator's entries (tests/physics.rs measures the whole step
+/// against a fine reference while heating), far under the 10 µK lattice rounding it replaces.
+#[derive(Clone, Debug)]
+pub struct PropagatorTable {
+    h: f64,
+    nodes: Vec<Option<LinearStep>>,
+}
+
+fn node_celsius(n: usize) -> f64 {
+    TABLE_TEMPERATURES_C[0] + n as f64 * PROPAGATOR_LATTICE
+}
+
+/// Node index of each material table row.
+fn row_nodes() -> [usize; 4] {
+    TABLE_TEMPERATURES_C.map(|t| ((t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE).round() as usize)
+}
+
+impl PropagatorTable {
+    pub fn new(h: f64) -> Self {
+        PropagatorTable { h, nodes: vec![None; row_nodes()[3] + 1] }
+    }
+
+    pub fn step_length(&self) -> f64 {
+        self.h
+    }
+
+    fn node(&mut self, p: &Params, n: usize) -> &LinearStep {
+        let h = self.h;
+        self.nodes[n].get_or_insert_with(|| {
+            LinearStep::new(p, &Coefficients::at(p, super::params::ZERO_CELSIUS + node_celsius(n)), h)
+        })
+    }
+
+    /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
+    pub fn at(&mut self, p: &Params, t_kelvin: f64, out: &mut LinearStep) {
+        let rows = row_nodes();
+        let t = t_kelvin - super::params::ZERO_CELSIUS;
+        let x = (t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE;
+        if x.is_nan() || x <= 0.0 {
+            out.clone_from(self.node(p, 0));
+            return;
+        }
+        if x >= rows[3] as f64 {
+            out.clone_from(self.node(p, rows[3]));
+            return;
+        }
+        // x > 0, so truncation is floor.
+        let i = x as usize;
+        // The log-linear piece [rows[k], rows[k+1]] holding [i, i+1]; a stencil of four nodes in it.
+        let k = if i < rows[1] {
+            0
+        } else if i < rows[2] {
+            1
+        } else {
+            2
+        };
+        let j = i.saturating_sub(1).clamp(rows[k], rows[k + 1] - 3);
+        let s = x - j as f64;
+        let w = [
+            -(s - 1.0) * (s - 2.0) * (s - 3.0) / 6.0,
+            s * (s - 2.0) * (s - 3.0) / 2.0,
+            -s * (s - 1.0) * (s - 3.0) / 2.0,
+            s * (s - 1.0) * (s - 2.0) / 6.0,
+        ];
+        for n in j..j + 4 {
+            self.node(p, n);
+        }
+        let node = |d: usize| match &self.nodes[j + d] {
+            Some(n) => &n.v,
+            None => unreachable!("built above"),
+        };
+        let (n0, n1, n2, n3) = (node(0), node(1), node(2), node(3));
+        for ((((o, a), b), c), d) in out.v.iter_mut().zip(n0).zip(n1).zip(n2).zip(n3) {
+            *o = w[0] * a + w[1] * b + w[2] * c + w[3] * d;
+        }
     }
 }
 
