@@ -10,7 +10,7 @@ pub mod thermal;
 
 use std::sync::Arc;
 
-use mechanics::{Coefficients, Drive, LinearStep, PropagatorTable, State};
+use mechanics::{Coefficients, Drive, EtdStep, LinearStep, PropagatorTable, State};
 pub use params::{MotorDrive, Params, ThermalDrive};
 use thermal::{ThermalInputs, ThermalState};
 
@@ -60,6 +60,9 @@ impl std::fmt::Display for StepFailure {
     }
 }
 
+/// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
+const MAX_ETD_LEVEL: u32 = 10;
+
 /// Spacing of the temperature lattice on which the mechanics reads its moduli, K.
 pub const MODULUS_TEMPERATURE_LATTICE: f64 = 1e-5;
 
@@ -86,9 +89,13 @@ pub struct Model {
     pub adaptive_step: f64,
     coefficients: Option<(f64, Coefficients)>,
     /// Propagator tables of the last two step lengths (shared with clones until one adds a node).
-    tables: Vec<Arc<PropagatorTable>>,
+    tables: Vec<Arc<PropagatorTable<LinearStep>>>,
     /// The last linear step used: (PCL temperature, step key, step).
     linear_step: Option<(f64, f64, LinearStep)>,
+    /// Exponential Runge–Kutta coefficient tables, one per sub-step length (key / 2^level).
+    etd_tables: Vec<Arc<PropagatorTable<EtdStep>>>,
+    /// The last coefficients used at each sub-step length: (PCL temperature, length, step).
+    etd_steps: Vec<(f64, f64, EtdStep)>,
 }
 
 impl PartialEq for Model {
@@ -118,6 +125,8 @@ impl Model {
             coefficients: None,
             tables: Vec::new(),
             linear_step: None,
+            etd_tables: Vec::new(),
+            etd_steps: Vec::new(),
         };
         m.initialize();
         m
@@ -132,6 +141,8 @@ impl Model {
         self.coefficients = None;
         self.tables.clear();
         self.linear_step = None;
+        self.etd_tables.clear();
+        self.etd_steps.clear();
         &mut self.params
     }
 
@@ -188,6 +199,68 @@ impl Model {
         }
     }
 
+    /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of `len` at
+    /// PCL temperature `t`.
+    fn prepare_etd(&mut self, t: f64, len: f64) -> usize {
+        let i = match self.etd_steps.iter().position(|(_, l, _)| *l == len) {
+            Some(i) if self.etd_steps[i].0 == t => return i,
+            Some(i) => i,
+            None => {
+                self.etd_steps.push((f64::NAN, len, EtdStep::ZERO));
+                self.etd_steps.len() - 1
+            }
+        };
+        let k = match self.etd_tables.iter().position(|tb| tb.step_length() == len) {
+            Some(k) => k,
+            None => {
+                if self.etd_tables.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
+                    self.etd_tables.remove(0);
+                }
+                self.etd_tables.push(Arc::new(PropagatorTable::new(len)));
+                self.etd_tables.len() - 1
+            }
+        };
+        let entry = &mut self.etd_steps[i];
+        Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        entry.0 = t;
+        i
+    }
+
+    /// Advances the mechanics over one sub-step of length `key` by exponential Runge–Kutta
+    /// steps of key/2^level, the level adapted by the embedded error estimate (kept in
+    /// `adaptive_step` as the last accepted length). False (state unchanged) when even
+    /// key/2^MAX_ETD_LEVEL fails the tolerance.
+    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> bool {
+        let full: u64 = 1 << MAX_ETD_LEVEL;
+        let mut level = if self.adaptive_step > 0.0 {
+            ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
+        } else {
+            0
+        };
+        let mut x = self.mechanics;
+        let mut pos = 0u64;
+        while pos < full {
+            let len = key / (1u64 << level) as f64;
+            let i = self.prepare_etd(t, len);
+            let (x_new, err) = self.etd_steps[i].2.step(&self.params, &x, u);
+            if err <= 1.0 {
+                x = x_new;
+                pos += full >> level;
+                // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
+                if err < 1.0 / 32.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
+                    level -= 1;
+                }
+            } else if level == MAX_ETD_LEVEL {
+                return false;
+            } else {
+                level += 1;
+            }
+        }
+        self.mechanics = x;
+        self.adaptive_step = key / (1u64 << level) as f64;
+        true
+    }
+
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
         let substeps =
@@ -222,6 +295,19 @@ impl Model {
                 }
                 self.mechanics = x;
                 continue;
+            }
+            if self.params.backlash_width == 0.0 {
+                // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part.
+                let key = mechanics::canonical_step(hs);
+                if self.advance_exponential(t_mid, key, &drive) {
+                    if hs != key {
+                        let i = self.etd_steps.iter().position(|(_, l, _)| *l == self.adaptive_step).unwrap_or(0);
+                        let c = self.etd_steps[i].2.coefficients();
+                        let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
+                        self.mechanics += rate * (hs - key);
+                    }
+                    continue;
+                }
             }
             let c = self.coefficients_at(on_temperature_lattice(t_mid));
             if mechanics::integrate_adaptive(&self.params, &c, &mut self.mechanics, &drive, hs, &mut self.adaptive_step)

@@ -182,6 +182,185 @@ impl LinearStep {
     }
 }
 
+/// What a [`PropagatorTable`] holds at each node: values built for one coefficient set and step,
+/// interpolated entry by entry.
+pub trait Tabulated: Clone + std::fmt::Debug {
+    fn build(p: &Params, c: &Coefficients, h: f64) -> Self;
+    fn values(&self) -> &[f64];
+    fn values_mut(&mut self) -> &mut [f64];
+}
+
+impl Tabulated for LinearStep {
+    fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
+        LinearStep::new(p, c, h)
+    }
+    fn values(&self) -> &[f64] {
+        &self.v
+    }
+    fn values_mut(&mut self) -> &mut [f64] {
+        &mut self.v
+    }
+}
+
+const E_FULL: usize = 0; // e^{Ah}, 5×5
+const G_FULL: usize = 25; // Γ(h), 5×2
+const E_HALF: usize = 35; // e^{Ah/2}
+const G_HALF: usize = 60; // Γ(h/2)
+const Q_HALF: usize = 70; // (h/2) φ1(Ah/2) b
+const P1: usize = 75; // h φ1(Ah) b
+const F1: usize = 80; // h (φ1 − 3φ2 + 4φ3)(Ah) b
+const F2: usize = 85; // h (φ2 − 2φ3)(Ah) b
+const F3: usize = 90; // h (−φ2 + 4φ3)(Ah) b
+const COEFFS: usize = 95; // stiffness, damping
+const LENGTH: usize = 97; // h
+const N_ETD: usize = 98;
+
+/// Coefficients of one exponential Runge–Kutta step (Cox–Matthews ETDRK4 with the ETDRK3 of the
+/// same family as its embedded error estimate) for x' = A x + B u + b n(x), where the linear
+/// transmission is A, B (exact) and the smooth nonlinear link torque n (gravity, tanh-smoothed
+/// friction) enters through b = e_θl'/J_l. Built from two matrix exponentials of 10×10
+/// augmented matrices (e^{Ah}, Γ and the φ-functions applied to b at h and h/2).
+#[derive(Clone, Debug, PartialEq)]
+pub struct EtdStep {
+    v: [f64; N_ETD],
+}
+
+/// [e^{Ah}, Γ(h), h φ1(Ah) b, h φ2(Ah) b, h φ3(Ah) b] from one augmented exponential.
+fn phi_blocks(
+    a: &SMatrix<f64, N_STATE, N_STATE>,
+    b: &SMatrix<f64, N_STATE, 2>,
+    link: f64,
+    h: f64,
+) -> SMatrix<f64, 10, 10> {
+    let mut m = SMatrix::<f64, 10, 10>::zeros();
+    m.fixed_view_mut::<N_STATE, N_STATE>(0, 0).copy_from(&(a * h));
+    m.fixed_view_mut::<N_STATE, 2>(0, N_STATE).copy_from(&(b * h));
+    m[(LINK_SPEED, 7)] = link * h;
+    m[(7, 8)] = 1.0;
+    m[(8, 9)] = 1.0;
+    m.exp()
+}
+
+impl Tabulated for EtdStep {
+    fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
+        let (a, b) = linear_system(p, c);
+        let link = 1.0 / p.link_inertia;
+        let full = phi_blocks(&a, &b, link, h);
+        let half = phi_blocks(&a, &b, link, 0.5 * h);
+        let mut v = [0.0; N_ETD];
+        for i in 0..N_STATE {
+            for j in 0..N_STATE {
+                v[E_FULL + i * N_STATE + j] = full[(i, j)];
+                v[E_HALF + i * N_STATE + j] = half[(i, j)];
+            }
+            for j in 0..2 {
+                v[G_FULL + i * 2 + j] = full[(i, N_STATE + j)];
+                v[G_HALF + i * 2 + j] = half[(i, N_STATE + j)];
+            }
+            let (p1, p2, p3) = (full[(i, 7)], full[(i, 8)], full[(i, 9)]);
+            v[Q_HALF + i] = half[(i, 7)];
+            v[P1 + i] = p1;
+            v[F1 + i] = p1 - 3.0 * p2 + 4.0 * p3;
+            v[F2 + i] = p2 - 2.0 * p3;
+            v[F3 + i] = -p2 + 4.0 * p3;
+        }
+        v[COEFFS] = c.stiffness;
+        v[COEFFS + 1] = c.damping;
+        v[LENGTH] = h;
+        EtdStep { v }
+    }
+    fn values(&self) -> &[f64] {
+        &self.v
+    }
+    fn values_mut(&mut self) -> &mut [f64] {
+        &mut self.v
+    }
+}
+
+/// The embedded estimate measures the third-order solution. With Stribeck friction it has been
+/// seen to pass steps whose error is larger (tests/physics.rs, torque-driven at 60 °C: 2.6e-6
+/// rad over 20 s at `solver_tolerance`, under 1e-7 at 1/100 of it), so the exponential
+/// integrator asks 100× more of it then; gravity and Coulomb friction alone stay under 1e-7 rad
+/// at `solver_tolerance` itself.
+const STRIBECK_TOLERANCE_FACTOR: f64 = 0.01;
+
+/// The smooth nonlinear link torque the exponential integrator treats explicitly, N·m.
+pub fn smooth_link_torque(p: &Params, x: &State) -> f64 {
+    link_friction(p, x[LINK_SPEED]) + link_gravity(p, x[LINK_ANGLE])
+}
+
+impl EtdStep {
+    pub const ZERO: EtdStep = EtdStep { v: [0.0; N_ETD] };
+
+    /// The step's length, s.
+    pub fn length(&self) -> f64 {
+        self.v[LENGTH]
+    }
+
+    /// K_s r_s² + K'(T) and C(T) this step was built (or interpolated) for.
+    pub fn coefficients(&self) -> Coefficients {
+        Coefficients { stiffness: self.v[COEFFS], damping: self.v[COEFFS + 1], ..Coefficients::ZERO }
+    }
+
+    /// M x + G u + col·s for the 5×5 block at `m`, the 5×2 block at `g` and the column at `col`.
+    fn affine(&self, m: usize, x: &State, g: usize, u: &Drive, col: usize, s: f64) -> State {
+        let v = &self.v;
+        let mut y = State::zeros();
+        for i in 0..N_STATE {
+            let row = &v[m + i * N_STATE..m + (i + 1) * N_STATE];
+            let mut acc = v[g + 2 * i] * u[0] + v[g + 2 * i + 1] * u[1] + v[col + i] * s;
+            for j in 0..N_STATE {
+                acc += row[j] * x[j];
+            }
+            y[i] = acc;
+        }
+        y
+    }
+
+    fn column(&self, col: usize) -> State {
+        State::from_column_slice(&self.v[col..col + N_STATE])
+    }
+
+    /// One ETDRK4 step from x; returns the new state and the scaled error estimate (≤ 1: accept).
+    pub fn step(&self, p: &Params, x: &State, u: &Drive) -> (State, f64) {
+        let n_x = smooth_link_torque(p, x);
+        let a = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_x);
+        let n_a = smooth_link_torque(p, &a);
+        let b = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_a);
+        let n_b = smooth_link_torque(p, &b);
+        let c = self.affine(E_HALF, &a, G_HALF, u, Q_HALF, 2.0 * n_b - n_x);
+        let n_c = smooth_link_torque(p, &c);
+        let ex = self.affine(E_FULL, x, G_FULL, u, F1, n_x); // e^{Ah}x + Γu + f1 n_x
+        let x4 = ex + self.column(F2) * (2.0 * (n_a + n_b)) + self.column(F3) * n_c;
+        // ETDRK3: b3 = e^{Ah}x + Γu + hφ1 b (2 n_a − n_x); x3 = … + 4 f2 n_a + f3 n(b3)
+        let b3 = ex - self.column(F1) * n_x + self.column(P1) * (2.0 * n_a - n_x);
+        let n_b3 = smooth_link_torque(p, &b3);
+        let x3 = ex + self.column(F2) * (4.0 * n_a) + self.column(F3) * n_b3;
+        // Smoothed friction is steep near zero link speed (slope (F_c + F_s)/v_s): where a stage
+        // sees that zone, or the speed changes sign, the step must resolve it (h·slope/J_l ≤ ½)
+        // before the embedded estimate means anything.
+        if p.coulomb_friction != 0.0 || p.stribeck_friction != 0.0 {
+            let zone = 20.0 * p.friction_smoothing_velocity;
+            let speeds = [x[LINK_SPEED], a[LINK_SPEED], b[LINK_SPEED], c[LINK_SPEED], x4[LINK_SPEED], b3[LINK_SPEED]];
+            let near = speeds.iter().any(|v| v.abs() < zone) || speeds.iter().any(|v| v.signum() != speeds[0].signum());
+            let slope = (p.coulomb_friction + p.stribeck_friction) / (p.friction_smoothing_velocity * p.link_inertia);
+            if near && self.length() * slope > 0.1 {
+                return (x4, f64::INFINITY);
+            }
+        }
+        let tol = if p.stribeck_friction != 0.0 { STRIBECK_TOLERANCE_FACTOR } else { 1.0 } * p.solver_tolerance;
+        let mut err: f64 = 0.0;
+        for i in 0..N_STATE {
+            let scale = tol * (1.0 + x[i].abs().max(x4[i].abs()));
+            err = err.max(((x4[i] - x3[i]) / scale).abs());
+        }
+        if !err.is_finite() || !x4.iter().all(|v| v.is_finite()) {
+            err = f64::INFINITY;
+        }
+        (x4, err)
+    }
+}
+
 /// x' = A x + B u of the linear mechanics (what [`derivative`] gives with every nonlinear effect
 /// off), for the last sliver of a step whose length differs from its propagator's key.
 pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
@@ -205,9 +384,9 @@ pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State 
 /// O(Δ⁴): below 1e-9 of the propagator's entries (tests/physics.rs measures the whole step
 /// against a fine reference while heating), far under the 10 µK lattice rounding it replaces.
 #[derive(Clone, Debug)]
-pub struct PropagatorTable {
+pub struct PropagatorTable<N: Tabulated> {
     h: f64,
-    nodes: Vec<Option<LinearStep>>,
+    nodes: Vec<Option<N>>,
 }
 
 fn node_celsius(n: usize) -> f64 {
@@ -219,7 +398,7 @@ fn row_nodes() -> [usize; 4] {
     TABLE_TEMPERATURES_C.map(|t| ((t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE).round() as usize)
 }
 
-impl PropagatorTable {
+impl<N: Tabulated> PropagatorTable<N> {
     pub fn new(h: f64) -> Self {
         PropagatorTable { h, nodes: vec![None; row_nodes()[3] + 1] }
     }
@@ -228,15 +407,14 @@ impl PropagatorTable {
         self.h
     }
 
-    fn node(&mut self, p: &Params, n: usize) -> &LinearStep {
+    fn node(&mut self, p: &Params, n: usize) -> &N {
         let h = self.h;
-        self.nodes[n].get_or_insert_with(|| {
-            LinearStep::new(p, &Coefficients::at(p, super::params::ZERO_CELSIUS + node_celsius(n)), h)
-        })
+        self.nodes[n]
+            .get_or_insert_with(|| N::build(p, &Coefficients::at(p, super::params::ZERO_CELSIUS + node_celsius(n)), h))
     }
 
     /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
-    pub fn at(&mut self, p: &Params, t_kelvin: f64, out: &mut LinearStep) {
+    pub fn at(&mut self, p: &Params, t_kelvin: f64, out: &mut N) {
         let rows = row_nodes();
         let t = t_kelvin - super::params::ZERO_CELSIUS;
         let x = (t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE;
@@ -270,11 +448,11 @@ impl PropagatorTable {
             self.node(p, n);
         }
         let node = |d: usize| match &self.nodes[j + d] {
-            Some(n) => &n.v,
+            Some(n) => n.values(),
             None => unreachable!("built above"),
         };
         let (n0, n1, n2, n3) = (node(0), node(1), node(2), node(3));
-        for ((((o, a), b), c), d) in out.v.iter_mut().zip(n0).zip(n1).zip(n2).zip(n3) {
+        for ((((o, a), b), c), d) in out.values_mut().iter_mut().zip(n0).zip(n1).zip(n2).zip(n3) {
             *o = w[0] * a + w[1] * b + w[2] * c + w[3] * d;
         }
     }
