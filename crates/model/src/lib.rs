@@ -90,6 +90,8 @@ pub struct Model {
     coefficients: Option<(f64, Coefficients)>,
     /// Propagator tables of the last two step lengths (shared with clones until one adds a node).
     tables: Vec<Arc<PropagatorTable<LinearStep>>>,
+    /// Keys of step lengths ([`mechanics::StepKeys`]).
+    step_keys: mechanics::StepKeys,
     /// The last linear step used: (PCL temperature, step key, step).
     linear_step: Option<(f64, f64, LinearStep)>,
     /// Exponential Runge–Kutta coefficient tables, one per sub-step length (key / 2^level).
@@ -124,6 +126,7 @@ impl Model {
             adaptive_step: 0.0,
             coefficients: None,
             tables: Vec::new(),
+            step_keys: mechanics::StepKeys::default(),
             linear_step: None,
             etd_tables: Vec::new(),
             etd_steps: Vec::new(),
@@ -285,7 +288,7 @@ impl Model {
             self.thermal.advance(&self.params, &thermal_inputs, hs);
             let t_mid = 0.5 * (t_start + self.thermal.pcl_temperature);
             if linear {
-                let key = mechanics::canonical_step(hs);
+                let key = self.step_keys.key(hs);
                 self.prepare_linear_step(t_mid, key);
                 let step = &self.linear_step.as_ref().expect("prepared").2;
                 let mut x = step.apply(&self.mechanics, &drive);
@@ -298,7 +301,7 @@ impl Model {
             }
             if self.params.backlash_width == 0.0 {
                 // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part.
-                let key = mechanics::canonical_step(hs);
+                let key = self.step_keys.key(hs);
                 if self.advance_exponential(t_mid, key, &drive) {
                     if hs != key {
                         let i = self.etd_steps.iter().position(|(_, l, _)| *l == self.adaptive_step).unwrap_or(0);

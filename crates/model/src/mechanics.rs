@@ -124,18 +124,76 @@ impl Propagator {
 /// pieces meet, fall on nodes and no interpolation stencil straddles a kink.
 pub const PROPAGATOR_LATTICE: f64 = 0.125;
 
-/// Mantissa bits dropped from a step length to key the propagator cache: steps within 2^-31
-/// (4.7e-10) relative of each other share one propagator, see [`canonical_step`].
-const STEP_KEY_DROPPED_BITS: u32 = 22;
+/// Significant decimal digits of the step length that key the propagator cache, see
+/// [`canonical_step`].
+const STEP_KEY_DIGITS: i32 = 10;
 
-/// The step length a propagator is built for: `h` rounded to 30 mantissa bits (relative change
-/// ≤ 4.7e-10). A function of `h` alone, so a restored run keys its cache as the original did.
-/// Masters that pass h as t(k+1) − t(k) (fmpy) send steps that differ from 1 ms in the last bits
-/// (by up to 3e-11 relative at t = 200 s); they all land on one key, and [`Model::step`](crate::Model::step)
-/// covers the remainder h − h_key exactly to first order (an Euler step of ≤ 5e-13 s).
+/// Rounds step lengths to [`STEP_KEY_DIGITS`] significant decimal digits within one decade
+/// [lo, hi) of powers of ten; a cache of the last decade makes the common case a multiply, a
+/// round and a divide.
+#[derive(Clone, Copy, Debug)]
+pub struct StepKeys {
+    lo: f64,
+    hi: f64,
+    /// 10^digits: key = round(h·scale)/scale (digits ≥ 0) or round(h/scale)·scale (digits < 0).
+    scale: f64,
+    below_one_digit: bool,
+}
+
+impl Default for StepKeys {
+    fn default() -> Self {
+        StepKeys { lo: f64::NAN, hi: f64::NAN, scale: 1.0, below_one_digit: false }
+    }
+}
+
+impl StepKeys {
+    /// The step length a propagator is built for: `h` rounded to 10 significant decimal digits
+    /// (relative change ≤ 5e-10), so 1 ms keys as exactly 1e-3. A function of `h` alone (the
+    /// decade cache only saves work), so a restored run keys its cache as the original did.
+    /// Masters that pass h as t(k+1) − t(k) (fmpy) send steps that differ from 1 ms in the last
+    /// bits (by up to 3e-11 relative at t = 200 s); they all land on the key 1e-3, and
+    /// [`Model::step`](crate::Model::step) covers the remainder h − key to first order (an Euler
+    /// step of ≤ 5e-13 s, error ~ (h − key)² |A|² |x|).
+    pub fn key(&mut self, h: f64) -> f64 {
+        if !(h >= self.lo && h < self.hi) {
+            if !(h > 0.0 && h.is_finite()) {
+                return h;
+            }
+            self.decade(h);
+        }
+        // h·scale < 10^STEP_KEY_DIGITS < 2^52: adding and taking away 2^52 rounds it to an
+        // integer (ties to even) without a libm call.
+        const SHIFT: f64 = 4_503_599_627_370_496.0;
+        if self.below_one_digit {
+            ((h / self.scale + SHIFT) - SHIFT) * self.scale
+        } else {
+            ((h * self.scale + SHIFT) - SHIFT) / self.scale
+        }
+    }
+
+    #[inline(never)]
+    fn decade(&mut self, h: f64) {
+        let mut e = h.log10().floor() as i32;
+        // log10 may be an ulp off at powers of ten: settle the decade by comparison.
+        while 10f64.powi(e) > h {
+            e -= 1;
+        }
+        while 10f64.powi(e + 1) <= h {
+            e += 1;
+        }
+        let digits = STEP_KEY_DIGITS - 1 - e;
+        *self = StepKeys {
+            lo: 10f64.powi(e),
+            hi: 10f64.powi(e + 1),
+            scale: 10f64.powi(digits.abs()),
+            below_one_digit: digits < 0,
+        };
+    }
+}
+
+/// [`StepKeys::key`] without a cache.
 pub fn canonical_step(h: f64) -> f64 {
-    let half = 1u64 << (STEP_KEY_DROPPED_BITS - 1);
-    f64::from_bits((h.to_bits() + half) & !((1u64 << STEP_KEY_DROPPED_BITS) - 1))
+    StepKeys::default().key(h)
 }
 
 const N_PROP: usize = N_STATE * N_AUG;
@@ -595,4 +653,25 @@ pub fn integrate_adaptive(
         }
     }
     Some(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn step_keys_are_decimal_and_close() {
+        assert_eq!(canonical_step(1e-3), 1e-3);
+        assert_eq!(canonical_step(0.1), 0.1);
+        for k in 0..1_000_000u64 {
+            let h = (k + 1) as f64 * 1e-3 - k as f64 * 1e-3; // fmpy's time grid up to 1000 s
+            assert_eq!(canonical_step(h), 1e-3, "{h}");
+        }
+        let mut h = 1.234567e-7;
+        while h < 1e3 {
+            let key = canonical_step(h);
+            assert!((key - h).abs() <= 5e-10 * h, "{h} -> {key}");
+            h *= 1.37;
+        }
+    }
 }
