@@ -63,16 +63,18 @@ impl std::fmt::Display for StepFailure {
 /// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
 const MAX_ETD_LEVEL: u32 = 10;
 
-/// Spacing of the temperature lattice on which the mechanics reads its moduli, K.
+/// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
+/// and the outputs read the moduli, K.
 pub const MODULUS_TEMPERATURE_LATTICE: f64 = 1e-5;
 
-/// The mechanics evaluates the moduli at the PCL temperature rounded to a 10 µK lattice, so that a
-/// PCL drifting by micro-kelvins does not rebuild the cached matrix exponential every step. The
-/// moduli change by at most 23 %/K (E'' between 50 and 60 °C, Table 2's steepest segment), so the
-/// ≤ 5 µK rounding moves them by ≤ 1.2e-6 relative, and the link angle by < 1e-7 rad at the
-/// largest transmission deflection (~0.05 rad): an order below the 1e-6 rad accuracy the
-/// integrator is tested to. Depends on the state alone, so a
-/// restored state continues bit-identically.
+/// Where the Dormand–Prince path (backlash, or a fallback) and the outputs (transmitted torque,
+/// effective stiffness and damping) evaluate the moduli: the PCL temperature rounded to a 10 µK
+/// lattice, so a PCL drifting by micro-kelvins reuses one evaluation. The moduli change by at most
+/// 23 %/K (E'' between 50 and 60 °C, Table 2's steepest segment), so the ≤ 5 µK rounding moves
+/// them by ≤ 1.2e-6 relative, and the link angle by < 1e-7 rad at the largest transmission
+/// deflection (~0.05 rad). The exact linear step and the exponential Runge–Kutta step take the
+/// unrounded temperature (interpolated propagator tables, `mechanics::PropagatorTable`). Depends
+/// on the state alone, so a restored state continues bit-identically.
 fn on_temperature_lattice(t: f64) -> f64 {
     (t / MODULUS_TEMPERATURE_LATTICE).round() * MODULUS_TEMPERATURE_LATTICE
 }

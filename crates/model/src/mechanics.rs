@@ -7,8 +7,12 @@
 //!
 //! State x = [θm, θm', θl, θl', q]. With every effect linear the system is x' = A x + B u with u
 //! held over a step (FMI co-simulation inputs are), so the step is exact: x⁺ = e^{Ah} x + Γ u, with
-//! both blocks from one matrix exponential cached until a coefficient changes. Friction, backlash
-//! and gravity are nonlinear; then an adaptive Dormand–Prince 5(4) step with error control runs.
+//! both blocks from one matrix exponential. A depends on the PCL temperature, so the exponentials
+//! are tabulated on a 1/8 K lattice and interpolated ([`PropagatorTable`]): no exponential is
+//! rebuilt while the PCL heats or cools. Gravity and friction are smooth nonlinear link torques:
+//! an exponential Runge–Kutta step ([`EtdStep`]) keeps the linear part exact and treats them
+//! explicitly, with error control on dyadic sub-steps. Backlash switches the transmission on and
+//! off; there an adaptive Dormand–Prince 5(4) step with error control runs.
 
 use nalgebra::{SMatrix, SVector};
 
