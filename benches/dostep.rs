@@ -166,6 +166,7 @@ fn main() {
     println!("fmi2DoStep via the C API, h = 1 ms, set motor_torque + doStep + get link_angle; median of {runs} x {steps} steps");
     matvec(steps); // warm up
     let mut base = Vec::new();
+    let mut rows = Vec::new();
     for r in REGIMES.iter().filter(|r| r.label.contains(only.as_str())) {
         run(&fmu, r, steps.min(20_000)); // warm caches
                                          // Alternate the mat-vec with the FMU runs so both see the same load.
@@ -174,20 +175,21 @@ fn main() {
             base.push(matvec(steps));
             samples.push(run(&fmu, r, steps));
         }
-        let med = median(samples.clone());
-        let (min, max) = samples.iter().fold((f64::INFINITY, 0.0_f64), |(a, b), &x| (a.min(x), b.max(x)));
-        let mv = median(base.clone());
-        println!(
-            "  {:<28} median {med:>7.0} ns  (min {min:.0}, max {max:.0})  {:>5.1}x the 6x6 mat-vec",
-            r.label,
-            med / mv
-        );
+        rows.push((r.label, samples));
     }
     if base.is_empty() {
         println!("no regime matches DOSTEP_REGIME={only}");
         return;
     }
     let mv = median(base.clone());
+    for (label, samples) in rows {
+        let med = median(samples.clone());
+        let (min, max) = samples.iter().fold((f64::INFINITY, 0.0_f64), |(a, b), &x| (a.min(x), b.max(x)));
+        println!(
+            "  {label:<28} median {med:>7.0} ns  (min {min:.0}, max {max:.0})  {:>5.1}x the 6x6 mat-vec",
+            med / mv
+        );
+    }
     let (min, max) = base.iter().fold((f64::INFINITY, 0.0_f64), |(a, b), &x| (a.min(x), b.max(x)));
     println!(
         "  {:<28} median {mv:>7.1} ns  (min {min:.1}, max {max:.1}), timed between the runs above",
