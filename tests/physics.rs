@@ -278,6 +278,7 @@ fn every_regime_matches_fine_reference_over_20_s() {
     let gravity = Params { gravity_link_mass: 0.91, ..prescribed_motor.clone() };
     let friction = Params { coulomb_friction: 0.05, ..Params::default() };
     let backlash = Params { backlash_width: 0.01, ..prescribed_motor.clone() };
+    let smooth = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, ..prescribed_motor.clone() };
     let all = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, backlash_width: 0.01, ..prescribed_motor };
     // Steps off 1 ms by a few 1e-10 relative: beyond fmpy's jitter, past the propagator's step key.
     let skewed: Vec<f64> = (0..20_000).map(|k| 1e-3 * (1.0 + [3e-10, -4e-10, 1e-12, 0.0][k % 4])).collect();
@@ -307,6 +308,7 @@ fn every_regime_matches_fine_reference_over_20_s() {
             0.0,
         ),
         ("backlash 0.01 rad", sc(backlash, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())), 0.0),
+        ("gravity and friction while heating", sc(smooth, 22.0, 22.0, 8.0, exact_steps(20.0), Box::new(motion())), 5.0),
         ("all three while heating, fmpy's h", sc(all, 22.0, 22.0, 8.0, time_grid_steps(20.0), Box::new(motion())), 5.0),
     ];
     let mut failures = Vec::new();

@@ -455,14 +455,21 @@ fn node_celsius(n: usize) -> f64 {
     TABLE_TEMPERATURES_C[0] + n as f64 * PROPAGATOR_LATTICE
 }
 
-/// Node index of each material table row.
-fn row_nodes() -> [usize; 4] {
-    TABLE_TEMPERATURES_C.map(|t| ((t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE).round() as usize)
-}
+/// Node index of each material table row (exact: the rows are whole multiples of the lattice
+/// apart, checked by a test).
+const ROW_NODES: [usize; 4] = {
+    let mut r = [0; 4];
+    let mut i = 0;
+    while i < 4 {
+        r[i] = ((TABLE_TEMPERATURES_C[i] - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE) as usize;
+        i += 1;
+    }
+    r
+};
 
 impl<N: Tabulated> PropagatorTable<N> {
     pub fn new(h: f64) -> Self {
-        PropagatorTable { h, nodes: vec![None; row_nodes()[3] + 1] }
+        PropagatorTable { h, nodes: vec![None; ROW_NODES[3] + 1] }
     }
 
     pub fn step_length(&self) -> f64 {
@@ -477,7 +484,7 @@ impl<N: Tabulated> PropagatorTable<N> {
 
     /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
     pub fn at(&mut self, p: &Params, t_kelvin: f64, out: &mut N) {
-        let rows = row_nodes();
+        let rows = ROW_NODES;
         let t = t_kelvin - super::params::ZERO_CELSIUS;
         let x = (t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE;
         if x.is_nan() || x <= 0.0 {
@@ -662,6 +669,13 @@ pub fn integrate_adaptive(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn table_rows_fall_on_lattice_nodes() {
+        for (t, n) in TABLE_TEMPERATURES_C.iter().zip(ROW_NODES) {
+            assert_eq!(node_celsius(n), *t);
+        }
+    }
 
     #[test]
     fn step_keys_are_decimal_and_close() {
