@@ -3,6 +3,7 @@
 
 use thermovia_model::mechanics::{self, Coefficients, Drive, State};
 use thermovia_model::params::ZERO_CELSIUS;
+use thermovia_model::thermal::ThermalInputs;
 use thermovia_model::{Model, MotorDrive, Params};
 
 fn celsius(t: f64) -> f64 {
@@ -166,6 +167,175 @@ fn exact_step_matches_fine_reference_over_20_s_cold_and_hot() {
         assert!(amplitude > 0.1, "the run moves: {amplitude} rad");
         assert!(err < 1e-6, "{temp} °C: max |Δθl| = {err:e} rad");
     }
+}
+
+/// One accuracy scenario of issue 12: parameters, start temperature (PCL, housing and ambient
+/// unless `ambient_c` differs), heater power, the communication steps a master passes, and the
+/// input held over each step.
+struct Scenario<F: Fn(f64) -> StepInput> {
+    params: Params,
+    start_c: f64,
+    ambient_c: f64,
+    heater_power: f64,
+    steps: Vec<f64>,
+    input: F,
+}
+
+/// Steps of 1 ms over `seconds` as fmpy passes them: t(k+1) − t(k) with t(k) = k·1 ms.
+fn time_grid_steps(seconds: f64) -> Vec<f64> {
+    (0..(seconds * 1000.0).round() as usize).map(|k| (k + 1) as f64 * 1e-3 - k as f64 * 1e-3).collect()
+}
+
+fn exact_steps(seconds: f64) -> Vec<f64> {
+    vec![1e-3; (seconds * 1000.0).round() as usize]
+}
+
+/// Independent of the model's mechanics: the thermal network advanced by the model's own thermal
+/// step (not under test here), and over each communication step a fine fixed-step RK4 (100 sub-steps)
+/// (1000 with backlash) on the full right-hand side with the moduli at the PCL temperature interpolated linearly in
+/// time across the step (no lattice, no table, no frozen coefficients).
+fn reference_run<F: Fn(f64) -> StepInput>(s: &Scenario<F>) -> Vec<f64> {
+    let p = &s.params;
+    let mut m = at_temperature(p.clone(), s.start_c);
+    m.inputs.ambient_temperature = celsius(s.ambient_c);
+    m.inputs.heater_power = s.heater_power;
+    let thermal_inputs = ThermalInputs {
+        heater_power: s.heater_power,
+        ambient_temperature: celsius(s.ambient_c),
+        housing_temperature_command: celsius(s.start_c),
+    };
+    let mut thermal = m.thermal.clone();
+    let mut x = State::from([p.initial_motor_angle, 0.0, p.initial_link_angle, 0.0, 0.0]);
+    let mut t = 0.0;
+    let mut out = Vec::new();
+    for &h in &s.steps {
+        let i = (s.input)(t);
+        if p.motor_drive == MotorDrive::PrescribedAngle {
+            x[mechanics::MOTOR_ANGLE] = i.angle;
+            x[mechanics::MOTOR_SPEED] = i.speed;
+        }
+        let u = Drive::new(i.torque, 0.0);
+        let t0 = thermal.pcl_temperature;
+        thermal.advance(p, &thermal_inputs, h);
+        let t1 = thermal.pcl_temperature;
+        let c0 = Coefficients::at(p, t0);
+        let c = |frac: f64| if t1 == t0 { c0 } else { Coefficients::at(p, t0 + (t1 - t0) * frac) };
+        // Backlash switches the torque (its damper) on and off: RK4's error at each switch is
+        // O(dt²), so those runs take 1 µs sub-steps (100 sub-steps leave 6e-7 rad of it).
+        let n = if p.backlash_width > 0.0 { 1000 } else { 100 };
+        let dt = h / n as f64;
+        for j in 0..n {
+            let (ca, cm, cb) = (c(j as f64 / n as f64), c((j as f64 + 0.5) / n as f64), c((j + 1) as f64 / n as f64));
+            let k1 = mechanics::derivative(p, &ca, &x, &u);
+            let k2 = mechanics::derivative(p, &cm, &(x + k1 * (dt / 2.0)), &u);
+            let k3 = mechanics::derivative(p, &cm, &(x + k2 * (dt / 2.0)), &u);
+            let k4 = mechanics::derivative(p, &cb, &(x + k3 * dt), &u);
+            x += (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
+        }
+        t += h;
+        out.push(x[mechanics::LINK_ANGLE]);
+    }
+    out
+}
+
+/// The model as an FMU master drives it; also returns the PCL temperature's range, °C.
+fn model_run<F: Fn(f64) -> StepInput>(s: &Scenario<F>) -> (Vec<f64>, f64, f64) {
+    let mut m = at_temperature(s.params.clone(), s.start_c);
+    m.inputs.ambient_temperature = celsius(s.ambient_c);
+    m.inputs.heater_power = s.heater_power;
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let mut t = 0.0;
+    let angles = s
+        .steps
+        .iter()
+        .map(|&h| {
+            let i = (s.input)(t);
+            m.inputs.motor_torque = i.torque;
+            m.inputs.motor_angle_command = i.angle;
+            m.inputs.motor_speed_command = i.speed;
+            m.step(h).unwrap();
+            t += h;
+            lo = lo.min(m.thermal.pcl_temperature - ZERO_CELSIUS);
+            hi = hi.max(m.thermal.pcl_temperature - ZERO_CELSIUS);
+            m.link_angle()
+        })
+        .collect();
+    (angles, lo, hi)
+}
+
+type Input = Box<dyn Fn(f64) -> StepInput>;
+
+/// Issue 12's regimes, each 20 s against the fine reference: max |Δθl| < 1e-6 rad, the bound the
+/// cold and hot runs above hold.
+#[test]
+fn every_regime_matches_fine_reference_over_20_s() {
+    let w = 2.0 * std::f64::consts::PI * 0.5;
+    let drive = || torque(move |t| 2.0 * (w * t).sin());
+    let w1 = 2.0 * std::f64::consts::PI * 1.0;
+    let motion = || prescribed(move |t| 0.5 * (w1 * t).sin());
+    let prescribed_motor = Params { motor_drive: MotorDrive::PrescribedAngle, ..Params::default() };
+    // the paper's loaded link: 0.91 kg at 0.14 m (the default distance)
+    let gravity = Params { gravity_link_mass: 0.91, ..prescribed_motor.clone() };
+    let friction = Params { coulomb_friction: 0.05, ..Params::default() };
+    let backlash = Params { backlash_width: 0.01, ..prescribed_motor.clone() };
+    let smooth = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, ..prescribed_motor.clone() };
+    let all = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, backlash_width: 0.01, ..prescribed_motor };
+    // Steps off 1 ms by a few 1e-10 relative: beyond fmpy's jitter, past the propagator's step key.
+    let skewed: Vec<f64> = (0..20_000).map(|k| 1e-3 * (1.0 + [3e-10, -4e-10, 1e-12, 0.0][k % 4])).collect();
+    let scenarios: Vec<(&str, Scenario<Input>, f64)> = vec![
+        ("heating at 8 W", sc(Params::default(), 22.0, 22.0, 8.0, exact_steps(20.0), Box::new(drive())), 5.0),
+        (
+            "heating at 8 W from 38 °C (across 40 °C)",
+            sc(Params::default(), 38.0, 38.0, 8.0, exact_steps(20.0), Box::new(drive())),
+            2.0,
+        ),
+        ("cooling from 60 °C", sc(Params::default(), 60.0, 22.0, 0.0, exact_steps(20.0), Box::new(drive())), 0.2),
+        (
+            "h = t(k+1) − t(k), cold",
+            sc(Params::default(), 22.0, 22.0, 0.0, time_grid_steps(20.0), Box::new(drive())),
+            0.0,
+        ),
+        (
+            "h = t(k+1) − t(k), heating",
+            sc(Params::default(), 22.0, 22.0, 8.0, time_grid_steps(20.0), Box::new(drive())),
+            5.0,
+        ),
+        ("h off 1 ms by 4e-10, heating", sc(Params::default(), 22.0, 22.0, 8.0, skewed, Box::new(drive())), 5.0),
+        ("gravity 0.91 kg", sc(gravity, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())), 0.0),
+        (
+            "Coulomb friction 0.05 N·m",
+            sc(friction, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(torque(move |t| 1.5 * (w1 * t).sin()))),
+            0.0,
+        ),
+        ("backlash 0.01 rad", sc(backlash, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())), 0.0),
+        ("gravity and friction while heating", sc(smooth, 22.0, 22.0, 8.0, exact_steps(20.0), Box::new(motion())), 5.0),
+        ("all three while heating, fmpy's h", sc(all, 22.0, 22.0, 8.0, time_grid_steps(20.0), Box::new(motion())), 5.0),
+    ];
+    let mut failures = Vec::new();
+    for (label, s, min_rise) in &scenarios {
+        let reference = reference_run(s);
+        let (model, lo, hi) = model_run(s);
+        let err = max_abs_diff(&reference, &model);
+        let amplitude = reference.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
+        println!("{label:<42} max |Δθl| = {err:.2e} rad (amplitude {amplitude:.3} rad, PCL {lo:.2}–{hi:.2} °C)");
+        assert!(amplitude > 0.05, "{label}: the run moves ({amplitude} rad)");
+        assert!(hi - lo >= *min_rise, "{label}: the PCL temperature must move by {min_rise} K: {lo}–{hi} °C");
+        if err.is_nan() || err >= 1e-6 {
+            failures.push(format!("{label}: {err:e} rad"));
+        }
+    }
+    assert!(failures.is_empty(), "max |Δθl| ≥ 1e-6 rad: {failures:?}");
+}
+
+fn sc<F: Fn(f64) -> StepInput>(
+    params: Params,
+    start_c: f64,
+    ambient_c: f64,
+    heater_power: f64,
+    steps: Vec<f64>,
+    input: F,
+) -> Scenario<F> {
+    Scenario { params, start_c, ambient_c, heater_power, steps, input }
 }
 
 #[test]

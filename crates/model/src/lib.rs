@@ -8,7 +8,9 @@ pub mod mechanics;
 pub mod params;
 pub mod thermal;
 
-use mechanics::{Coefficients, Drive, Propagator, State};
+use std::sync::Arc;
+
+use mechanics::{Coefficients, Drive, EtdStep, LinearStep, PropagatorTable, State};
 pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
@@ -79,16 +81,21 @@ impl std::fmt::Display for StepFailure {
     }
 }
 
-/// Spacing of the temperature lattice on which the mechanics reads its moduli, K.
+/// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
+const MAX_ETD_LEVEL: u32 = 10;
+
+/// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
+/// and the outputs read the moduli, K.
 pub const MODULUS_TEMPERATURE_LATTICE: f64 = 1e-5;
 
-/// The mechanics evaluates the moduli at the PCL temperature rounded to a 10 µK lattice, so that a
-/// PCL drifting by micro-kelvins does not rebuild the cached matrix exponential every step. The
-/// moduli change by at most 23 %/K (E'' between 50 and 60 °C, Table 2's steepest segment), so the
-/// ≤ 5 µK rounding moves them by ≤ 1.2e-6 relative, and the link angle by < 1e-7 rad at the
-/// largest transmission deflection (~0.05 rad): an order below the 1e-6 rad accuracy the
-/// integrator is tested to. Depends on the state alone, so a
-/// restored state continues bit-identically.
+/// Where the Dormand–Prince path (backlash, or a fallback) and the outputs (transmitted torque,
+/// effective stiffness and damping) evaluate the moduli: the PCL temperature rounded to a 10 µK
+/// lattice, so a PCL drifting by micro-kelvins reuses one evaluation. The moduli change by at most
+/// 23 %/K (E'' between 50 and 60 °C, Table 2's steepest segment), so the ≤ 5 µK rounding moves
+/// them by ≤ 1.2e-6 relative, and the link angle by < 1e-7 rad at the largest transmission
+/// deflection (~0.05 rad). The exact linear step and the exponential Runge–Kutta step take the
+/// unrounded temperature (interpolated propagator tables, `mechanics::PropagatorTable`). Depends
+/// on the state alone, so a restored state continues bit-identically.
 fn on_temperature_lattice(t: f64) -> f64 {
     (t / MODULUS_TEMPERATURE_LATTICE).round() * MODULUS_TEMPERATURE_LATTICE
 }
@@ -104,7 +111,16 @@ pub struct Model {
     /// restored run continue bit-identically).
     pub adaptive_step: f64,
     coefficients: Option<(f64, Coefficients)>,
-    propagator: Option<Propagator>,
+    /// Propagator tables of the last two step lengths (shared with clones until one adds a node).
+    tables: Vec<Arc<PropagatorTable<LinearStep>>>,
+    /// Keys of step lengths ([`mechanics::StepKeys`]).
+    step_keys: mechanics::StepKeys,
+    /// The last linear step used: (PCL temperature, step key, step).
+    linear_step: Option<(f64, f64, LinearStep)>,
+    /// Exponential Runge–Kutta coefficient tables, one per sub-step length (key / 2^level).
+    etd_tables: Vec<Arc<PropagatorTable<EtdStep>>>,
+    /// The last coefficients used at each sub-step length: (PCL temperature, length, step).
+    etd_steps: Vec<(f64, f64, EtdStep)>,
 }
 
 impl PartialEq for Model {
@@ -132,7 +148,11 @@ impl Model {
             mechanics: State::zeros(),
             adaptive_step: 0.0,
             coefficients: None,
-            propagator: None,
+            tables: Vec::new(),
+            step_keys: mechanics::StepKeys::default(),
+            linear_step: None,
+            etd_tables: Vec::new(),
+            etd_steps: Vec::new(),
         };
         m.initialize();
         m
@@ -145,6 +165,10 @@ impl Model {
     /// Mutable parameters; cached coefficients are dropped so they are rebuilt from the new values.
     pub fn params_mut(&mut self) -> &mut Params {
         self.coefficients = None;
+        self.tables.clear();
+        self.linear_step = None;
+        self.etd_tables.clear();
+        self.etd_steps.clear();
         &mut self.params
     }
 
@@ -183,6 +207,96 @@ impl Model {
         }
     }
 
+    /// The exact linear step of length `key` with the moduli at PCL temperature `t` (interpolated
+    /// in the propagator table; reused while t and key stay).
+    fn prepare_linear_step(&mut self, t: f64, key: f64) {
+        if matches!(&self.linear_step, Some((t0, k0, _)) if *t0 == t && *k0 == key) {
+            return;
+        }
+        let i = match self.tables.iter().position(|tb| tb.step_length() == key) {
+            Some(i) => i,
+            None => {
+                self.tables.truncate(1);
+                self.tables.insert(0, Arc::new(PropagatorTable::new(key)));
+                0
+            }
+        };
+        let table = Arc::make_mut(&mut self.tables[i]);
+        match &mut self.linear_step {
+            Some((t0, k0, step)) => {
+                table.at(&self.params, t, step);
+                (*t0, *k0) = (t, key);
+            }
+            None => {
+                let mut step = LinearStep::ZERO;
+                table.at(&self.params, t, &mut step);
+                self.linear_step = Some((t, key, step));
+            }
+        }
+    }
+
+    /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of `len` at
+    /// PCL temperature `t`.
+    fn prepare_etd(&mut self, t: f64, len: f64) -> usize {
+        let i = match self.etd_steps.iter().position(|(_, l, _)| *l == len) {
+            Some(i) if self.etd_steps[i].0 == t => return i,
+            Some(i) => i,
+            None => {
+                self.etd_steps.push((f64::NAN, len, EtdStep::ZERO));
+                self.etd_steps.len() - 1
+            }
+        };
+        let k = match self.etd_tables.iter().position(|tb| tb.step_length() == len) {
+            Some(k) => k,
+            None => {
+                if self.etd_tables.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
+                    self.etd_tables.remove(0);
+                }
+                self.etd_tables.push(Arc::new(PropagatorTable::new(len)));
+                self.etd_tables.len() - 1
+            }
+        };
+        let entry = &mut self.etd_steps[i];
+        Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        entry.0 = t;
+        i
+    }
+
+    /// Advances the mechanics over one sub-step of length `key` by exponential Runge–Kutta
+    /// steps of key/2^level, the level adapted by the embedded error estimate (kept in
+    /// `adaptive_step` as the last accepted length). False (state unchanged) when even
+    /// key/2^MAX_ETD_LEVEL fails the tolerance.
+    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> bool {
+        let full: u64 = 1 << MAX_ETD_LEVEL;
+        let mut level = if self.adaptive_step > 0.0 {
+            ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
+        } else {
+            0
+        };
+        let mut x = self.mechanics;
+        let mut pos = 0u64;
+        while pos < full {
+            let len = key / (1u64 << level) as f64;
+            let i = self.prepare_etd(t, len);
+            let (x_new, err) = self.etd_steps[i].2.step(&self.params, &x, u);
+            if err <= 1.0 {
+                x = x_new;
+                pos += full >> level;
+                // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
+                if err < 1.0 / 32.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
+                    level -= 1;
+                }
+            } else if level == MAX_ETD_LEVEL {
+                return false;
+            } else {
+                level += 1;
+            }
+        }
+        self.mechanics = x;
+        self.adaptive_step = key / (1u64 << level) as f64;
+        true
+    }
+
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
         let needed = (h / self.params.max_internal_step).ceil();
@@ -214,15 +328,34 @@ impl Model {
             let t_start = self.thermal.pcl_temperature;
             self.thermal.advance(&self.params, &thermal_inputs, hs);
             let t_mid = 0.5 * (t_start + self.thermal.pcl_temperature);
-            let c = self.coefficients_at(on_temperature_lattice(t_mid));
             if linear {
-                let stale = !matches!(&self.propagator, Some(pr) if pr.matches(&self.params, &c, hs));
-                if stale {
-                    self.propagator = Some(Propagator::new(&self.params, &c, hs));
+                let key = self.step_keys.key(hs);
+                self.prepare_linear_step(t_mid, key);
+                let step = &self.linear_step.as_ref().expect("prepared").2;
+                let mut x = step.apply(&self.mechanics, &drive);
+                if hs != key {
+                    // The last ≤ 4.7e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).
+                    x += mechanics::linear_rate(&self.params, &step.coefficients(), &x, &drive) * (hs - key);
                 }
-                let pr = self.propagator.as_ref().expect("built above");
-                self.mechanics = pr.apply(&self.mechanics, &drive);
-            } else if mechanics::integrate_adaptive(
+                self.mechanics = x;
+                continue;
+            }
+            if self.params.backlash_width == 0.0 && self.params.transmission == Transmission::Compliant {
+                // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
+                // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below).
+                let key = self.step_keys.key(hs);
+                if self.advance_exponential(t_mid, key, &drive) {
+                    if hs != key {
+                        let i = self.etd_steps.iter().position(|(_, l, _)| *l == self.adaptive_step).unwrap_or(0);
+                        let c = self.etd_steps[i].2.coefficients();
+                        let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
+                        self.mechanics += rate * (hs - key);
+                    }
+                    continue;
+                }
+            }
+            let c = self.coefficients_at(on_temperature_lattice(t_mid));
+            if mechanics::integrate_adaptive(
                 &self.params,
                 &c,
                 &mut self.mechanics,
