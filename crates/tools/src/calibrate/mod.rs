@@ -255,9 +255,14 @@ fn calibrate_drive(
     let mut held_prob = if held.is_empty() {
         None
     } else {
-        let (hg, _) = group_runs(&held);
-        // held-out runs at a temperature not fitted use the first group's moduli
-        let hg = hg.into_iter().map(|g| g.min(temperatures.len() - 1)).collect();
+        // each held-out run takes the moduli of the fitted temperature group nearest its own
+        let (hg, htemps) = group_runs(&held);
+        let nearest = |t: f64| {
+            (0..temperatures.len())
+                .min_by(|&a, &b| (temperatures[a] - t).abs().total_cmp(&(temperatures[b] - t).abs()))
+                .unwrap_or(0)
+        };
+        let hg = hg.into_iter().map(|g| nearest(htemps[g])).collect();
         Some(drive::DriveProblem::new(&sim, &held, hg, temperatures.len()))
     };
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;
