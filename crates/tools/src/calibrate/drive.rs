@@ -1242,6 +1242,35 @@ pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(
     out
 }
 
+/// K_eff, its standard error, C_eff and its standard error of temperature group `g` (compliant
+/// runs only): read from the FMU's `effective_stiffness`, `effective_damping` and
+/// `spring_bank_stiffness` at the fitted modulus factors (K − K_s scales with E', C with E'').
+fn transmission_at(prob: &DriveProblem, fit: &DriveFit, g: usize) -> Option<(f64, f64, f64, f64)> {
+    let run = (0..prob.inputs.len()).find(|&r| prob.group[r] == g && !prob.inputs[r].rigid)?;
+    let m = prob.model(&fit.spec, &fit.p, run);
+    let inp = &prob.inputs[run];
+    let read = prob.sim.map(&[()], |inst, _| -> Result<[f64; 3], HarnessError> {
+        inst.reset()?;
+        inst.initialize(
+            inp.time[0],
+            None,
+            &[
+                ("thermal_drive", 1.0),
+                ("initial_housing_temperature", inp.housing_k[0]),
+                ("initial_pcl_temperature", inp.housing_k[0]),
+                ("excitation_frequency", inp.frequency_hz),
+                ("storage_modulus_scale", m.storage_scale),
+                ("loss_modulus_scale", m.loss_scale),
+            ],
+        )?;
+        Ok([inst.get("effective_stiffness")?, inst.get("effective_damping")?, inst.get("spring_bank_stiffness")?])
+    });
+    let [k, c, ks] = read.into_iter().next()?.ok()?;
+    let se = |q: Param| fit.value(q).map_or(0.0, |v| v.1);
+    // ln-scale standard errors: δK = (K − K_s) δ ln s', δC = C δ ln s''
+    Some((k, (k - ks) * se(Param::LnStorage(g)), c, c * se(Param::LnLoss(g))))
+}
+
 /// report.json for drive runs (interfaces.md keys, in the file's units).
 pub fn report_json(
     runs: &[Run],
@@ -1300,12 +1329,24 @@ pub fn report_json(
     let inertia_std = o.final_fit.value(Param::LnInertia).map(|(x, s)| x.exp() * s);
     let identified: Vec<Value> = temps
         .iter()
-        .map(|t| {
-            json!({"temperature_c": t, "stiffness": null, "stiffness_std": null, "damping": null, "damping_std": null,
+        .enumerate()
+        .map(|(g, t)| {
+            let mut e = json!({"temperature_c": t, "stiffness": null, "stiffness_std": null, "damping": null, "damping_std": null,
                    "inertia": inertia, "inertia_std": inertia_std, "inertia_declared": prob.inputs[0].inertia_declared.is_some(),
                    "natural_frequency_hz": null, "damping_ratio": null,
                    "viscous_damping": o.final_fit.value(Param::Viscous).map(|v| v.0),
-                   "note": if runs.iter().all(|r| r.rigid) { "rigid drive: one moving body, no transmission to identify" } else { "compliant transmission: see parameters (modulus factors)" }})
+                   "note": "rigid drive: one moving body, no transmission to identify"});
+            if let Some((k, ks, c, cs)) = transmission_at(prob, &o.final_fit, g) {
+                let j = inertia.unwrap_or(prob.inertia_start);
+                e["stiffness"] = json!(k);
+                e["stiffness_std"] = json!(ks);
+                e["damping"] = json!(c);
+                e["damping_std"] = json!(cs);
+                e["natural_frequency_hz"] = json!((k / j).sqrt() / (2.0 * std::f64::consts::PI));
+                e["damping_ratio"] = json!(c / (2.0 * (k * j).sqrt()));
+                e["note"] = json!("compliant transmission: K_eff and C_eff as the FMU reports them with the fitted modulus factors, at the run's excitation frequency; natural frequency and damping ratio of the link on the transmission");
+            }
+            e
         })
         .collect();
     let rounds: Vec<Value> = o
