@@ -315,6 +315,21 @@ fn bad_drive_metadata_names_file_line_and_what_was_wrong() {
 }
 
 #[test]
+fn a_bad_file_stops_the_command_with_file_line_and_reason() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("drive-bad");
+    let file = write(&dir, "bad.csv", "# axis=linear\n# drive=reference\n# transmission=rigid\n# controller_kp=-3\ntime_s,reference_position_m,motor_position_m\n0,0,0\n0.001,0,0\n0.002,0,0\n");
+    let out_dir = dir.join("out");
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_thermovia"))
+        .args(["calibrate", &file, "--out", out_dir.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let err = String::from_utf8(out.stderr).unwrap();
+    assert!(!out.status.success());
+    assert!(err.contains("bad.csv:4: metadata controller_kp=\"-3\" is not a positive number"), "{err}");
+    assert!(!out_dir.exists());
+}
+
+#[test]
 fn calibrate_help_teaches_the_drive_modes_with_examples() {
     let out =
         std::process::Command::new(env!("CARGO_BIN_EXE_thermovia")).args(["calibrate", "--help"]).output().unwrap();
