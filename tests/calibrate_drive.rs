@@ -345,3 +345,28 @@ fn calibrate_help_teaches_the_drive_modes_with_examples() {
         assert!(help.contains(needle), "{needle} missing from:\n{help}");
     }
 }
+
+/// Runs driven by the measured motor angle (the device loop) take a held-out set too: simulated
+/// with the fitted moduli of the nearest temperature, reported under "validation".
+#[test]
+fn device_runs_report_their_held_out_error() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("device-validate");
+    let fmu = common::fmu_path();
+    for (name, freq, seed) in [("est", "0.5", "1"), ("val", "1", "2")] {
+        let out = dir.join(name);
+        let status = std::process::Command::new(env!("CARGO_BIN_EXE_thermovia"))
+            .args(["synth", "--out", out.to_str().unwrap(), "--temperatures", "40", "--frequencies", freq])
+            .args(["--duration", "4", "--seed", seed, "--fmu", fmu.to_str().unwrap()])
+            .output()
+            .unwrap();
+        assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
+    }
+    let (est, val) = (dir.join("est"), dir.join("val"));
+    let j = run_calibrate(&[est.to_str().unwrap(), "--validate", val.to_str().unwrap()]);
+    let v = &j["validation"];
+    assert_eq!(v["runs"].as_array().unwrap().len(), 1);
+    // clean truth (0.8 E', 1.25 E'', noise 1e-4 rad + quantisation): the held-out error is near the noise
+    let rmse = f(&v["final"]["rmse_rad"]);
+    assert!(rmse < 1e-3, "held-out RMSE {rmse}");
+    assert!(f(&v["final"]["relerr_percent"]) > 0.0 && f(&j["final"]["relerr_percent"]) > 0.0);
+}
