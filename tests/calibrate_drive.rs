@@ -118,12 +118,12 @@ fn write(dir: &Path, name: &str, text: &str) -> String {
 
 /// A linear axis under a position controller with the EMPS velocity estimate, reference replayed.
 fn closed_loop_file(body: Body, seconds: f64, pulses: bool) -> String {
-    let (kp, kd, sat, t) = (2.0e5, 2.0e3, 300.0, 1e-3);
+    let (kp, kd, sat, t) = (2.0e5, 2.0e3, 40.0, 1e-3);
     let n = (seconds / t).round() as usize + 1;
     let reference = |tt: f64| 0.1 * (1.0 - (std::f64::consts::PI * tt).cos()) + 0.02 * (2.3 * tt).sin() * tt.min(1.0);
     let mut text = String::from(
         "# source=synthetic closed loop (tests/calibrate_drive.rs)\n# axis=linear\n# transmission=rigid\n# drive=reference\n\
-         # controller_kp=200000\n# controller_kd=2000\n# controller_saturation=300\n# controller_period_s=0.001\n",
+         # controller_kp=200000\n# controller_kd=2000\n# controller_saturation=40\n# controller_period_s=0.001\n",
     );
     text += if pulses {
         "time_s,reference_position_m,motor_position_m,motor_force_n,load_force_n\n"
@@ -159,6 +159,13 @@ fn reference_drive_on_a_linear_axis_finds_coulomb_friction_and_its_parameters() 
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("drive-reference");
     let est = write(&dir, "est.csv", &closed_loop_file(truth, 4.0, false));
     let val = write(&dir, "val.csv", &closed_loop_file(truth, 4.0, true));
+    // the controller saturates in the moves (40 N), so the master must reproduce the saturation
+    let saturated = std::fs::read_to_string(&est)
+        .unwrap()
+        .lines()
+        .filter(|l| l.split(',').nth(3).and_then(|u| u.parse::<f64>().ok()).is_some_and(|u| u.abs() == 40.0))
+        .count();
+    assert!(saturated > 20, "{saturated} saturated samples");
     let j = run_calibrate(&[&est, "--validate", &val]);
     eprintln!("reference: added {:?}, parameters {}", added(&j), j["parameters"]["final"]);
     assert_eq!(j["units"], serde_json::json!({"position": "m", "torque": "N", "inertia": "kg"}));

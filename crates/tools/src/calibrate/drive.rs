@@ -1100,13 +1100,31 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
         for c in &candidates {
             let mut spec = current.spec.clone();
             spec.extend_from_slice(c.effect.params());
+            // starts: the current fit with the score test's linearised values; for Coulomb friction also
+            // the inverse model's (M, Fv, L, Fc), because the baseline's viscous friction has absorbed the
+            // Coulomb level and, through a saturating controller, that start can lie in another valley
             let mut p = current.p.clone();
-            // a friction level starts from the inverse model when it has one, else the score test
-            let start: Vec<f64> = match (c.effect, &inverse) {
-                (DriveEffect::CoulombFriction, Some(iv)) if iv.coulomb > 0.0 => vec![iv.coulomb],
-                _ => c.start.clone(),
-            };
-            p.extend(start);
+            p.extend_from_slice(&c.start);
+            if let (DriveEffect::CoulombFriction, Some(iv)) = (c.effect, &inverse) {
+                let mut q = current.p.clone();
+                for (x, param) in q.iter_mut().zip(&current.spec) {
+                    match param {
+                        Param::LnInertia if iv.with_coulomb_inertia > 0.0 => *x = iv.with_coulomb_inertia.ln(),
+                        Param::Viscous => *x = iv.with_coulomb_viscous.max(0.0),
+                        Param::ConstantLoad => *x = iv.with_coulomb_load,
+                        _ => {}
+                    }
+                }
+                q.push(iv.coulomb.max(0.0));
+                let cost = |x: &[f64]| {
+                    prob.simulate_all(&spec, x)
+                        .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
+                        .unwrap_or(f64::INFINITY)
+                };
+                if cost(&q) < cost(&p) {
+                    p = q;
+                }
+            }
             let mut effects = current.effects.clone();
             effects.push(c.effect);
             let Ok(refit) = prob.fit(spec, effects, p, MAX_ITERATIONS) else { continue };
