@@ -113,6 +113,26 @@ pub struct DriveInput {
     pub declared_drive_gain: Option<f64>,
 }
 
+/// Model-free check of a load column's scale: the logged drive force minus the controller law on the
+/// measured positions, regressed on the column (reference drives that log their force). A column
+/// injected at the drive (a pulse command in volts) shows up there times the drive gain.
+pub fn force_log_gain(inp: &DriveInput) -> Option<(f64, f64)> {
+    let (Some(c), Some(r), Some(t), Some(l)) = (&inp.controller, &inp.reference, &inp.torque, &inp.load) else {
+        return None;
+    };
+    if inp.drive != DriveKind::Reference {
+        return None;
+    }
+    let mut est = VelocityEstimator::new(inp.motor[0], inp.speed0, c.period);
+    let (mut num, mut den) = (0.0, 0.0);
+    for k in 0..inp.time.len() {
+        let law = c.law(r[k], inp.motor[k], est.update(inp.motor[k]));
+        num += (t[k] - law) * l[k];
+        den += l[k] * l[k];
+    }
+    (den > 0.0).then_some((num, den))
+}
+
 /// Speed at the first sample: slope at t0 of a least-squares quadratic over the first samples.
 fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
     let m = t.len().min(11);
@@ -130,7 +150,7 @@ fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
 
 impl DriveInput {
     pub fn from_run(r: &Run) -> DriveInput {
-        DriveInput {
+        let mut d = DriveInput {
             name: r.name(),
             time: r.time.clone(),
             drive: r.drive,
@@ -148,7 +168,15 @@ impl DriveInput {
             link_speed0: initial_speed(&r.time, &r.link),
             load_gain: 1.0,
             declared_drive_gain: r.meta_f64("drive_gain_n_per_v").filter(|g| g.is_finite() && *g > 0.0),
+        };
+        // a load column the drive's own force log shows at the declared drive gain is in controller
+        // volts: it is applied times that gain (a column in newtons shows up at a gain of 1)
+        if let (Some(g), Some((num, den))) = (d.declared_drive_gain, force_log_gain(&d)) {
+            if (num / den / g - 1.0).abs() <= LOAD_GAIN_AGREEMENT {
+                d.load_gain = g;
+            }
         }
+        d
     }
 
     /// Measured positions the model predicts, stacked: motor, then link when measured.
@@ -1026,22 +1054,13 @@ pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadC
     }
     let declared = held.inputs.iter().find_map(|i| i.declared_drive_gain);
     let force_log_gain = {
-        let (mut num, mut den) = (0.0, 0.0);
-        for inp in held.inputs.iter().filter(|i| i.drive == DriveKind::Reference && i.torque.is_some()) {
-            let (Some(c), Some(r), Some(t), Some(l)) = (&inp.controller, &inp.reference, &inp.torque, &inp.load) else {
-                continue;
-            };
-            let mut est = VelocityEstimator::new(inp.motor[0], inp.speed0, c.period);
-            for k in 0..inp.time.len() {
-                let law = c.law(r[k], inp.motor[k], est.update(inp.motor[k]));
-                num += (t[k] - law) * l[k];
-                den += l[k] * l[k];
-            }
-        }
+        let (num, den) = held.inputs.iter().filter_map(force_log_gain).fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
         (den > 0.0).then(|| num / den)
     };
-    let applied = match declared {
-        Some(g) if ((k / g) - 1.0).abs() <= LOAD_GAIN_AGREEMENT => g,
+    // the drive's force log decides when it exists (model-free); else the held-out fit's gain
+    let applied = match (declared, force_log_gain) {
+        (Some(g), Some(fl)) if ((fl / g) - 1.0).abs() <= LOAD_GAIN_AGREEMENT => g,
+        (Some(g), None) if ((k / g) - 1.0).abs() <= LOAD_GAIN_AGREEMENT => g,
         _ => 1.0,
     };
     Some(LoadColumnDiagnosis {
@@ -1100,13 +1119,31 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
         for c in &candidates {
             let mut spec = current.spec.clone();
             spec.extend_from_slice(c.effect.params());
+            // starts: the current fit with the score test's linearised values; for Coulomb friction also
+            // the inverse model's (M, Fv, L, Fc), because the baseline's viscous friction has absorbed the
+            // Coulomb level and, through a saturating controller, that start can lie in another valley
             let mut p = current.p.clone();
-            // a friction level starts from the inverse model when it has one, else the score test
-            let start: Vec<f64> = match (c.effect, &inverse) {
-                (DriveEffect::CoulombFriction, Some(iv)) if iv.coulomb > 0.0 => vec![iv.coulomb],
-                _ => c.start.clone(),
-            };
-            p.extend(start);
+            p.extend_from_slice(&c.start);
+            if let (DriveEffect::CoulombFriction, Some(iv)) = (c.effect, &inverse) {
+                let mut q = current.p.clone();
+                for (x, param) in q.iter_mut().zip(&current.spec) {
+                    match param {
+                        Param::LnInertia if iv.with_coulomb_inertia > 0.0 => *x = iv.with_coulomb_inertia.ln(),
+                        Param::Viscous => *x = iv.with_coulomb_viscous.max(0.0),
+                        Param::ConstantLoad => *x = iv.with_coulomb_load,
+                        _ => {}
+                    }
+                }
+                q.push(iv.coulomb.max(0.0));
+                let cost = |x: &[f64]| {
+                    prob.simulate_all(&spec, x)
+                        .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
+                        .unwrap_or(f64::INFINITY)
+                };
+                if cost(&q) < cost(&p) {
+                    p = q;
+                }
+            }
             let mut effects = current.effects.clone();
             effects.push(c.effect);
             let Ok(refit) = prob.fit(spec, effects, p, MAX_ITERATIONS) else { continue };
@@ -1242,6 +1279,35 @@ pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(
     out
 }
 
+/// K_eff, its standard error, C_eff and its standard error of temperature group `g` (compliant
+/// runs only): read from the FMU's `effective_stiffness`, `effective_damping` and
+/// `spring_bank_stiffness` at the fitted modulus factors (K − K_s scales with E', C with E'').
+fn transmission_at(prob: &DriveProblem, fit: &DriveFit, g: usize) -> Option<(f64, f64, f64, f64)> {
+    let run = (0..prob.inputs.len()).find(|&r| prob.group[r] == g && !prob.inputs[r].rigid)?;
+    let m = prob.model(&fit.spec, &fit.p, run);
+    let inp = &prob.inputs[run];
+    let read = prob.sim.map(&[()], |inst, _| -> Result<[f64; 3], HarnessError> {
+        inst.reset()?;
+        inst.initialize(
+            inp.time[0],
+            None,
+            &[
+                ("thermal_drive", 1.0),
+                ("initial_housing_temperature", inp.housing_k[0]),
+                ("initial_pcl_temperature", inp.housing_k[0]),
+                ("excitation_frequency", inp.frequency_hz),
+                ("storage_modulus_scale", m.storage_scale),
+                ("loss_modulus_scale", m.loss_scale),
+            ],
+        )?;
+        Ok([inst.get("effective_stiffness")?, inst.get("effective_damping")?, inst.get("spring_bank_stiffness")?])
+    });
+    let [k, c, ks] = read.into_iter().next()?.ok()?;
+    let se = |q: Param| fit.value(q).map_or(0.0, |v| v.1);
+    // ln-scale standard errors: δK = (K − K_s) δ ln s', δC = C δ ln s''
+    Some((k, (k - ks) * se(Param::LnStorage(g)), c, c * se(Param::LnLoss(g))))
+}
+
 /// report.json for drive runs (interfaces.md keys, in the file's units).
 pub fn report_json(
     runs: &[Run],
@@ -1300,12 +1366,24 @@ pub fn report_json(
     let inertia_std = o.final_fit.value(Param::LnInertia).map(|(x, s)| x.exp() * s);
     let identified: Vec<Value> = temps
         .iter()
-        .map(|t| {
-            json!({"temperature_c": t, "stiffness": null, "stiffness_std": null, "damping": null, "damping_std": null,
+        .enumerate()
+        .map(|(g, t)| {
+            let mut e = json!({"temperature_c": t, "stiffness": null, "stiffness_std": null, "damping": null, "damping_std": null,
                    "inertia": inertia, "inertia_std": inertia_std, "inertia_declared": prob.inputs[0].inertia_declared.is_some(),
                    "natural_frequency_hz": null, "damping_ratio": null,
                    "viscous_damping": o.final_fit.value(Param::Viscous).map(|v| v.0),
-                   "note": if runs.iter().all(|r| r.rigid) { "rigid drive: one moving body, no transmission to identify" } else { "compliant transmission: see parameters (modulus factors)" }})
+                   "note": "rigid drive: one moving body, no transmission to identify"});
+            if let Some((k, ks, c, cs)) = transmission_at(prob, &o.final_fit, g) {
+                let j = inertia.unwrap_or(prob.inertia_start);
+                e["stiffness"] = json!(k);
+                e["stiffness_std"] = json!(ks);
+                e["damping"] = json!(c);
+                e["damping_std"] = json!(cs);
+                e["natural_frequency_hz"] = json!((k / j).sqrt() / (2.0 * std::f64::consts::PI));
+                e["damping_ratio"] = json!(c / (2.0 * (k * j).sqrt()));
+                e["note"] = json!("compliant transmission: K_eff and C_eff as the FMU reports them with the fitted modulus factors, at the run's excitation frequency; natural frequency and damping ratio of the link on the transmission");
+            }
+            e
         })
         .collect();
     let rounds: Vec<Value> = o
@@ -1341,6 +1419,19 @@ pub fn report_json(
         "seconds": seconds,
         "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
     });
+    let fitted_loads: Vec<Value> = prob
+        .inputs
+        .iter()
+        .filter(|i| i.load.is_some())
+        .map(|i| {
+            json!({"file": i.name, "force_log_gain": force_log_gain(i).map(|(n, d)| n / d),
+                   "declared_drive_gain": i.declared_drive_gain, "applied_gain": i.load_gain})
+        })
+        .collect();
+    if !fitted_loads.is_empty() {
+        j["load_columns"] = json!({"runs": fitted_loads,
+            "note": "a load column is applied × the declared drive gain when the drive's force log shows it at that gain within 10 % (model-free), else as recorded"});
+    }
     if let Some(iv) = &o.inverse {
         j["inverse_model"] = json!({
             "note": "IDIM-LS on the measured motion (Savitzky–Golay-smoothed position, central differences): the start of the output-error fit and evidence for the diagnosis",
@@ -1364,8 +1455,9 @@ pub fn report_json(
                     "applied_gain": d.applied_gain,
                     "force_log_gain": d.force_log_gain,
                     "note": if d.applied_gain != 1.0 {
-                        format!("the held-out positions are best explained with the load column × {:.3}, within {} % of the drive gain the file declares ({:.3} N/V){}: the column reads as the pulse command in controller volts, so the held-out set above uses it × the declared drive gain (no parameter is fitted on the held-out set); the figures with the column as recorded are under as_recorded", d.fitted_gain, 100.0 * LOAD_GAIN_AGREEMENT, d.declared_drive_gain.unwrap_or(f64::NAN),
-                            d.force_log_gain.map_or(String::new(), |g| format!(", and the logged drive force exceeds the controller law on the measured positions by {g:.3} × the column")))
+                        format!("{}the held-out positions are best explained with the column × {:.3}: within {} % of the drive gain the file declares ({:.3} N/V), the column reads as the pulse command in controller volts, so the held-out set above uses it × the declared drive gain (no parameter is fitted on the held-out set); the figures with the column as recorded are under as_recorded",
+                            d.force_log_gain.map_or(String::new(), |g| format!("the logged drive force exceeds the controller law on the measured positions by {g:.3} × the load column, and ")),
+                            d.fitted_gain, 100.0 * LOAD_GAIN_AGREEMENT, d.declared_drive_gain.unwrap_or(f64::NAN))
                     } else {
                         format!("the load column is used as recorded (best-fitting gain {:.3}; declared drive gain {:?})", d.fitted_gain, d.declared_drive_gain)
                     },

@@ -41,9 +41,9 @@ File format, metadata and report keys: docs/interfaces.md (\"Measured data\", \"
 pub struct CalibrateArgs {
     /// Run files (CSV, docs: interfaces.md) or folders of them.
     pub inputs: Vec<std::path::PathBuf>,
-    /// Held-out runs (a file or folder; repeat the option for more): simulated with the parameters fitted on INPUTS and
-    /// reported under "validation"; an effect is kept only if it lowers their position error
-    /// (drive runs: `# drive=motor_torque` or `reference`).
+    /// Held-out runs (a file or folder; repeat the option for more): simulated with the parameters
+    /// fitted on INPUTS and reported under "validation"; for drive runs (`# drive=motor_torque` or
+    /// `reference`) an effect is also kept only if it lowers their position error.
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE_OR_DIR"))]
     pub validate: Vec<std::path::PathBuf>,
     /// A published reference to compare with (JSON: {"parameters": {"inertia": …, "viscous_friction": …,
@@ -184,10 +184,15 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         )
         .into());
     }
-    if !args.validate.is_empty() {
-        return Err("--validate is supported for drive runs (`# drive=motor_torque` or `reference`); runs driven by \
-                    the measured motor angle report no held-out set yet"
-            .into());
+    let held = if args.validate.is_empty() { Vec::new() } else { data::read_inputs(&args.validate)? };
+    if let Some(r) = held.iter().find(|r| is_drive(r) || r.axis == data::Axis::Linear) {
+        return Err(format!(
+            "{}: a held-out drive run (drive={}, axis={}) cannot validate runs driven by the measured motor angle",
+            r.file.display(),
+            r.drive.name(),
+            r.axis.name()
+        )
+        .into());
     }
     let fmu = crate::open_fmu(args.fmu.as_deref())?;
     let sim = sim::Simulator::new(fmu, args.threads)?;
@@ -202,7 +207,36 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     };
     let outcome = search::calibrate(&prob)?;
     let seconds = t0.elapsed().as_secs_f64();
-    let report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
+    let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
+    if held.is_empty() {
+        report["held_out"] = serde_json::json!(
+            "no held-out set was given (--validate): effects were kept on BIC and the residual's structure, and the held-out error was not estimated"
+        );
+    } else {
+        // each held-out run takes the moduli of the nearest fitted temperature group
+        let (hg, htemps) = group_runs(&held);
+        let nearest = |t: f64| {
+            (0..temperatures.len())
+                .min_by(|&a, &b| (temperatures[a] - t).abs().total_cmp(&(temperatures[b] - t).abs()))
+                .unwrap_or(0)
+        };
+        let hprob = fit::Problem {
+            sim: &sim,
+            inputs: held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
+            measured: held.iter().map(|r| r.link.clone()).collect(),
+            group: hg.into_iter().map(|g| nearest(htemps[g])).collect(),
+            n_groups: temperatures.len(),
+            solver_tolerance: prob.solver_tolerance,
+        };
+        let sim_of = |f: &fit::Fit| hprob.outputs(&f.spec, &f.p).ok_or("the FMU could not simulate a held-out run");
+        let (b, f) = (sim_of(&outcome.baseline)?, sim_of(&outcome.final_fit)?);
+        report["validation"] = serde_json::json!({
+            "runs": held.iter().map(|r| serde_json::json!({"file": r.name(), "temperature_c": r.mean_temperature_c(),
+                "frequency_hz": r.frequency_hz, "samples": r.time.len()})).collect::<Vec<_>>(),
+            "baseline": report::held_out_metrics(&hprob.measured, &b),
+            "final": report::held_out_metrics(&hprob.measured, &f),
+        });
+    }
     let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
         ("report.md".to_string(), report::report_markdown(&report, &outcome).into_bytes()),
@@ -255,9 +289,14 @@ fn calibrate_drive(
     let mut held_prob = if held.is_empty() {
         None
     } else {
-        let (hg, _) = group_runs(&held);
-        // held-out runs at a temperature not fitted use the first group's moduli
-        let hg = hg.into_iter().map(|g| g.min(temperatures.len() - 1)).collect();
+        // each held-out run takes the moduli of the fitted temperature group nearest its own
+        let (hg, htemps) = group_runs(&held);
+        let nearest = |t: f64| {
+            (0..temperatures.len())
+                .min_by(|&a, &b| (temperatures[a] - t).abs().total_cmp(&(temperatures[b] - t).abs()))
+                .unwrap_or(0)
+        };
+        let hg = hg.into_iter().map(|g| nearest(htemps[g])).collect();
         Some(drive::DriveProblem::new(&sim, &held, hg, temperatures.len()))
     };
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;

@@ -16,7 +16,9 @@ pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
     let mean = y.iter().sum::<f64>() / n;
     let spread = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
     let err = fit.sse.sqrt();
+    let norm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
     json!({
+        "relerr_percent": 100.0 * err / norm,
         "rmse_rad": fit.rmse(),
         "nrmse": fit.rmse() / (spread / n.sqrt()),
         "fit_percent": 100.0 * (1.0 - err / spread),
@@ -182,6 +184,19 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
             m(k, "fit_percent"),
             m(k, "bic")
         );
+    }
+    if let Some(v) = j.get("validation") {
+        s += &format!(
+            "\nHeld-out runs ({}), simulated with the parameters fitted above (reported, not used to select effects): \
+             RMSE {:.3e} → {:.3e} rad, relerr {:.4} → {:.4} %.\n",
+            v["runs"].as_array().map_or(0, Vec::len),
+            v["baseline"]["rmse_rad"].as_f64().unwrap_or(f64::NAN),
+            v["final"]["rmse_rad"].as_f64().unwrap_or(f64::NAN),
+            v["baseline"]["relerr_percent"].as_f64().unwrap_or(f64::NAN),
+            v["final"]["relerr_percent"].as_f64().unwrap_or(f64::NAN)
+        );
+    } else if let Some(h) = j["held_out"].as_str() {
+        s += &format!("\n{h}.\n");
     }
     s += "\n## Chain of evidence\n\n";
     for (i, r) in o.rounds.iter().enumerate() {
@@ -355,4 +370,23 @@ pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output:
     }
     files.push(("plots/residual_spectrum.svg".into(), svg.into_bytes()));
     Ok(files)
+}
+
+/// Metrics of simulated held-out link angles against the measured ones (no BIC: nothing was fitted).
+pub fn held_out_metrics(measured: &[Vec<f64>], outputs: &[Vec<f64>]) -> Value {
+    let y: Vec<f64> = measured.iter().flatten().copied().collect();
+    let e: Vec<f64> = measured.iter().zip(outputs).flat_map(|(a, b)| a.iter().zip(b).map(|(x, z)| x - z)).collect();
+    let n = y.len() as f64;
+    let mean = y.iter().sum::<f64>() / n;
+    let spread = y.iter().map(|v| (v - mean).powi(2)).sum::<f64>().sqrt();
+    let norm = y.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let err = e.iter().map(|v| v * v).sum::<f64>().sqrt();
+    let rmse = err / n.sqrt();
+    json!({
+        "rmse_rad": rmse,
+        "nrmse": rmse / (spread / n.sqrt()),
+        "fit_percent": 100.0 * (1.0 - err / spread),
+        "relerr_percent": 100.0 * err / norm,
+        "samples": y.len(),
+    })
 }
