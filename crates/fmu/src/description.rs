@@ -183,9 +183,16 @@ fn render(guid: &str) -> String {
     put(Event::Start(BytesStart::new("ModelStructure")));
     let outputs: Vec<usize> =
         VARIABLES.iter().enumerate().filter(|(_, v)| v.causality == Causality::Output).map(|(i, _)| i + 1).collect();
-    for (section, with_dependencies) in [("Outputs", true), ("InitialUnknowns", false)] {
+    // InitialUnknowns: the outputs (initial calculated) and the calculated parameters, in index order.
+    let initial: Vec<usize> = VARIABLES
+        .iter()
+        .enumerate()
+        .filter(|(_, v)| matches!(v.causality, Causality::Output | Causality::CalculatedParameter))
+        .map(|(i, _)| i + 1)
+        .collect();
+    for (section, with_dependencies, unknowns) in [("Outputs", true, &outputs), ("InitialUnknowns", false, &initial)] {
         put(Event::Start(BytesStart::new(section)));
-        for i in &outputs {
+        for i in unknowns {
             let mut u = BytesStart::new("Unknown");
             u.push_attribute(("index", i.to_string().as_str()));
             if with_dependencies {
