@@ -395,3 +395,30 @@ fn caller_strings_in_log_messages_are_quoted_and_cut() {
     let log = last_log(raw);
     assert!(log.len() < 1_000 && log.contains("200000 characters"), "{} bytes", log.len());
 }
+
+/// A state pointer is trusted only while the instance that made it holds it: a freed, foreign or
+/// made-up pointer is refused without being read (the FMU keeps a registry, not a tag to read).
+#[test]
+fn freed_foreign_and_made_up_state_pointers_are_refused() {
+    let f = common::fmu();
+    let mut a = initialized(&f);
+    let mut b = initialized(&f);
+    let (ca, api) = a.raw_mut().raw();
+    let (cb, _) = b.raw_mut().raw();
+    let api = *api;
+    let mut p: Fmi2FmuState = ptr::null_mut();
+    unsafe {
+        assert_eq!((api.get_fmu_state)(ca, &mut p), FMI2_OK);
+        assert_eq!((api.set_fmu_state)(cb, p), FMI2_ERROR, "another instance's state");
+        let mut q = p;
+        assert_eq!((api.free_fmu_state)(ca, &mut q), FMI2_OK);
+        assert!(q.is_null());
+        assert_eq!((api.reset)(ca), FMI2_OK);
+        assert_eq!((api.set_fmu_state)(ca, p), FMI2_ERROR, "a freed state");
+        let mut again = p;
+        assert_eq!((api.free_fmu_state)(ca, &mut again), FMI2_ERROR, "a double free");
+        assert_eq!((api.reset)(ca), FMI2_OK);
+        let made_up = 0x10 as Fmi2FmuState;
+        assert_eq!((api.set_fmu_state)(ca, made_up), FMI2_ERROR, "a made-up pointer");
+    }
+}

@@ -4,7 +4,7 @@
 
 use crate::description::guid;
 use crate::variables::{by_reference, Access, BaseType, Causality, Variability, Variable, VARIABLES};
-use thermovia_model::Model;
+use thermovia_model::{Model, STATE_LEN};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[repr(i32)]
@@ -685,7 +685,6 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
 pub const STATE_FORMAT_VERSION: u32 = 1;
-const N_THERMAL: usize = 5;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;
@@ -700,7 +699,8 @@ fn fnv1a64(bytes: &[u8]) -> u64 {
 /// payload, FNV-1a 64 of everything before it. Little-endian throughout.
 /// Payload: phase (u8), terminated (u8), has-stop (u8), time, start, stop, last successful time
 /// (f64), then every parameter and input as (value reference u32, f64) in table order, then the
-/// mechanical state (5 f64), the thermal state (5 f64) and the adaptive step (f64).
+/// model's flat state vector (`Model::state`, `STATE_LEN` f64). The FMI layer knows nothing of what
+/// the vector holds.
 pub fn serialize(s: &Snapshot) -> Vec<u8> {
     let mut payload = Vec::new();
     payload.push(s.phase as u8);
@@ -718,16 +718,7 @@ pub fn serialize(s: &Snapshot) -> Vec<u8> {
         payload.extend_from_slice(&v.value_reference.to_le_bytes());
         payload.extend_from_slice(&x.to_le_bytes());
     }
-    let th = &s.model.thermal;
-    let states = s.model.mechanics.iter().copied().chain([
-        th.housing_temperature,
-        th.pcl_enthalpy,
-        th.pcl_temperature,
-        th.heater_energy,
-        th.heat_lost,
-        s.model.adaptive_step,
-    ]);
-    for x in states {
+    for x in s.model.state() {
         payload.extend_from_slice(&x.to_le_bytes());
     }
     let mut out = Vec::with_capacity(payload.len() + 96);
@@ -834,20 +825,11 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
             _ => return Err(format!("{} is not settable", v.name)),
         }
     }
-    for i in 0..model.mechanics.len() {
-        model.mechanics[i] = r.f64("mechanical state")?;
+    let mut state = [0.0; STATE_LEN];
+    for x in state.iter_mut() {
+        *x = r.f64("model state")?;
     }
-    let mut th = [0.0; N_THERMAL];
-    for x in th.iter_mut() {
-        *x = r.f64("thermal state")?;
-    }
-    let th_state = &mut model.thermal;
-    th_state.housing_temperature = th[0];
-    th_state.pcl_enthalpy = th[1];
-    th_state.pcl_temperature = th[2];
-    th_state.heater_energy = th[3];
-    th_state.heat_lost = th[4];
-    model.adaptive_step = r.f64("adaptive step")?;
+    model.set_state(&state);
     if r.at != sum_at {
         return Err(format!("{} unread bytes in the state payload", sum_at - r.at));
     }
@@ -946,8 +928,8 @@ mod tests {
             ("last successful time", forge(&bytes, |p| put(p, f64_at(3), 0.2))),
             ("terminated", forge(&bytes, |p| p[1] = 1)),
             ("state NaN", {
-                // the mechanical, thermal and adaptive-step states close the payload: 11 f64
-                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * 11;
+                // the model's state vector closes the payload
+                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
                 forge(&bytes, |p| put(p, states_at + 16, f64::NAN))
             }),
         ];

@@ -84,6 +84,9 @@ impl std::fmt::Display for StepFailure {
 /// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
 const MAX_ETD_LEVEL: u32 = 10;
 
+/// Length of [`Model::state`].
+pub const STATE_LEN: usize = mechanics::N_STATE + 6;
+
 /// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
 /// and the outputs read the moduli, K.
 pub const MODULUS_TEMPERATURE_LATTICE: f64 = 1e-5;
@@ -383,6 +386,38 @@ impl Model {
             return Err(StepFailure::NonFinite);
         }
         Ok(())
+    }
+
+    /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical
+    /// state [θm, θm', θl, θl', q], the thermal state [T_h, H_p, T_p, E_heater, E_lost] and the
+    /// adaptive solver's last step. Parameters and inputs are not in it.
+    pub fn state(&self) -> [f64; STATE_LEN] {
+        let m = &self.mechanics;
+        let th = &self.thermal;
+        [
+            m[0],
+            m[1],
+            m[2],
+            m[3],
+            m[4],
+            th.housing_temperature,
+            th.pcl_enthalpy,
+            th.pcl_temperature,
+            th.heater_energy,
+            th.heat_lost,
+            self.adaptive_step,
+        ]
+    }
+
+    /// Restores a vector from [`Model::state`].
+    pub fn set_state(&mut self, x: &[f64; STATE_LEN]) {
+        self.mechanics = State::from([x[0], x[1], x[2], x[3], x[4]]);
+        self.thermal.housing_temperature = x[5];
+        self.thermal.pcl_enthalpy = x[6];
+        self.thermal.pcl_temperature = x[7];
+        self.thermal.heater_energy = x[8];
+        self.thermal.heat_lost = x[9];
+        self.adaptive_step = x[10];
     }
 
     pub fn motor_angle(&self) -> f64 {
