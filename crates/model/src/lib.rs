@@ -233,9 +233,9 @@ impl Model {
 
     /// Advances the mechanics over one sub-step of length `key` by exponential Runge–Kutta
     /// steps of key/2^level, the level adapted by the embedded error estimate (kept in
-    /// `adaptive_step` as the last accepted length). False (state unchanged) when even
-    /// key/2^MAX_ETD_LEVEL fails the tolerance.
-    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> bool {
+    /// `adaptive_step` as the last accepted length); returns the transmission coefficients at `t`.
+    /// None (state unchanged) when even key/2^MAX_ETD_LEVEL fails the tolerance.
+    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> Option<Coefficients> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
         let mut level = if self.adaptive_step > 0.0 {
             ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
@@ -244,9 +244,11 @@ impl Model {
         };
         let mut x = self.mechanics;
         let mut pos = 0u64;
+        let mut coefficients = Coefficients::ZERO;
         while pos < full {
             let len = key / (1u64 << level) as f64;
             let i = self.prepare_etd(t, len);
+            coefficients = self.etd_steps[i].2.coefficients();
             let (x_new, err) = self.etd_steps[i].2.step(&self.params, &x, u);
             if err <= 1.0 {
                 x = x_new;
@@ -256,14 +258,14 @@ impl Model {
                     level -= 1;
                 }
             } else if level == MAX_ETD_LEVEL {
-                return false;
+                return None;
             } else {
                 level += 1;
             }
         }
         self.mechanics = x;
         self.adaptive_step = key / (1u64 << level) as f64;
-        true
+        Some(coefficients)
     }
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
@@ -304,10 +306,8 @@ impl Model {
             if self.params.backlash_width == 0.0 {
                 // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part.
                 let key = self.step_keys.key(hs);
-                if self.advance_exponential(t_mid, key, &drive) {
+                if let Some(c) = self.advance_exponential(t_mid, key, &drive) {
                     if hs != key {
-                        let i = self.etd_steps.iter().position(|(_, l, _)| *l == self.adaptive_step).unwrap_or(0);
-                        let c = self.etd_steps[i].2.coefficients();
                         let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
                         self.mechanics += rate * (hs - key);
                     }
