@@ -211,6 +211,10 @@ impl Model {
             Some(i) if self.etd_steps[i].0 == t => return i,
             Some(i) => i,
             None => {
+                // Bounded like the tables: a master varying h would otherwise grow it without end.
+                if self.etd_steps.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
+                    self.etd_steps.remove(0);
+                }
                 self.etd_steps.push((f64::NAN, len, EtdStep::ZERO));
                 self.etd_steps.len() - 1
             }
@@ -297,7 +301,7 @@ impl Model {
                 let step = &self.linear_step.as_ref().expect("prepared").2;
                 let mut x = step.apply(&self.mechanics, &drive);
                 if hs != key {
-                    // The last ≤ 4.7e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).
+                    // The last ≤ 5e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).
                     x += mechanics::linear_rate(&self.params, &step.coefficients(), &x, &drive) * (hs - key);
                 }
                 self.mechanics = x;
