@@ -245,6 +245,10 @@ impl Model {
             Some(i) if self.etd_steps[i].0 == t => return i,
             Some(i) => i,
             None => {
+                // Bounded like the tables: a master varying h would otherwise grow it without end.
+                if self.etd_steps.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
+                    self.etd_steps.remove(0);
+                }
                 self.etd_steps.push((f64::NAN, len, EtdStep::ZERO));
                 self.etd_steps.len() - 1
             }
@@ -267,9 +271,9 @@ impl Model {
 
     /// Advances the mechanics over one sub-step of length `key` by exponential Runge–Kutta
     /// steps of key/2^level, the level adapted by the embedded error estimate (kept in
-    /// `adaptive_step` as the last accepted length). False (state unchanged) when even
-    /// key/2^MAX_ETD_LEVEL fails the tolerance.
-    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> bool {
+    /// `adaptive_step` as the last accepted length); returns the transmission coefficients at `t`.
+    /// None (state unchanged) when even key/2^MAX_ETD_LEVEL fails the tolerance.
+    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> Option<Coefficients> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
         let mut level = if self.adaptive_step > 0.0 {
             ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
@@ -278,9 +282,11 @@ impl Model {
         };
         let mut x = self.mechanics;
         let mut pos = 0u64;
+        let mut coefficients = Coefficients::ZERO;
         while pos < full {
             let len = key / (1u64 << level) as f64;
             let i = self.prepare_etd(t, len);
+            coefficients = self.etd_steps[i].2.coefficients();
             let (x_new, err) = self.etd_steps[i].2.step(&self.params, &x, u);
             if err <= 1.0 {
                 x = x_new;
@@ -290,14 +296,14 @@ impl Model {
                     level -= 1;
                 }
             } else if level == MAX_ETD_LEVEL {
-                return false;
+                return None;
             } else {
                 level += 1;
             }
         }
         self.mechanics = x;
         self.adaptive_step = key / (1u64 << level) as f64;
-        true
+        Some(coefficients)
     }
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
@@ -337,7 +343,7 @@ impl Model {
                 let step = &self.linear_step.as_ref().expect("prepared").2;
                 let mut x = step.apply(&self.mechanics, &drive);
                 if hs != key {
-                    // The last ≤ 4.7e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).
+                    // The last ≤ 5e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).
                     x += mechanics::linear_rate(&self.params, &step.coefficients(), &x, &drive) * (hs - key);
                 }
                 self.mechanics = x;
@@ -347,10 +353,8 @@ impl Model {
                 // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
                 // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below).
                 let key = self.step_keys.key(hs);
-                if self.advance_exponential(t_mid, key, &drive) {
+                if let Some(c) = self.advance_exponential(t_mid, key, &drive) {
                     if hs != key {
-                        let i = self.etd_steps.iter().position(|(_, l, _)| *l == self.adaptive_step).unwrap_or(0);
-                        let c = self.etd_steps[i].2.coefficients();
                         let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
                         self.mechanics += rate * (hs - key);
                     }
