@@ -56,7 +56,8 @@ impl Signatures {
     }
 }
 
-fn corr(a: &[f64], b: &[f64]) -> f64 {
+/// Pearson correlation of two equally long series (0 when either is constant).
+pub(crate) fn corr(a: &[f64], b: &[f64]) -> f64 {
     let n = a.len() as f64;
     let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
     let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);

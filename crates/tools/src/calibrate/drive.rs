@@ -20,6 +20,7 @@ use serde_json::{json, Map, Value};
 use thermovia_importer::{HarnessError, Instance};
 
 use super::data::{Axis, DriveKind, Run};
+use super::diagnose::corr;
 use super::sim::Simulator;
 
 /// Fitted quantities.
@@ -784,22 +785,6 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
         with_coulomb_load: b4[2],
         asymmetric,
     })
-}
-
-fn corr(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
-    let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma).powi(2);
-        sbb += (y - mb).powi(2);
-    }
-    if saa <= 0.0 || sbb <= 0.0 {
-        0.0
-    } else {
-        sab / (saa * sbb).sqrt()
-    }
 }
 
 /// One candidate's score test.
