@@ -473,3 +473,25 @@ fn caches_do_not_change_the_trajectory() {
         }
     }
 }
+
+/// The work budget covers the exponential Runge–Kutta path too (found by the fuzzer after the
+/// speed work: 4.8 kN·m of smoothed friction at 0.1 µs sub-steps made every sub-step take 1,024
+/// exponential steps, 1e8 in one doStep). The step must end with the budget's failure, state unchanged.
+#[test]
+fn steep_friction_at_tiny_sub_steps_runs_out_of_budget_instead_of_hanging() {
+    let p = Params {
+        coulomb_friction: 4773.8,
+        max_internal_step: 1e-7,
+        material_table: thermovia_model::material::MaterialTable::PrintedExperimental,
+        ..Params::default()
+    };
+    let mut m = Model::new(p);
+    m.initialize();
+    m.inputs.motor_torque = 1.0;
+    let before = m.link_angle();
+    match m.step(1e-2) {
+        Err(thermovia_model::StepFailure::SolverBudget { .. }) => {}
+        other => panic!("expected the solver budget to end the step, got {other:?}"),
+    }
+    assert_eq!(m.link_angle(), before, "a failed step changes nothing");
+}

@@ -380,6 +380,10 @@ impl<'a> Driver<'a> {
             if group.is_empty() {
                 continue;
             }
+            if self.trace {
+                let shown: Vec<String> = group.iter().map(|(v, x)| format!("{} = {x:e}", v.name)).collect();
+                eprintln!("         {}", shown.join(", "));
+            }
             let before = self.probe_reals("before a set")?;
             let vrs: Vec<u32> = group.iter().map(|(v, _)| v.vr).collect();
             let s = if real {

@@ -57,7 +57,7 @@ pub enum StepFailure {
 /// a 2020s core in the worst case measured; see the README's reliability section): at most this many
 /// internal sub-steps...
 pub const MAX_SUBSTEPS_PER_STEP: f64 = 100_000.0;
-/// ...and at most this many attempted Dormand–Prince steps over all sub-steps.
+/// ...and at most this many attempted exponential Runge–Kutta and Dormand–Prince steps over all sub-steps.
 pub const MAX_SOLVER_ATTEMPTS_PER_STEP: u64 = 1_000_000;
 
 impl std::fmt::Display for StepFailure {
@@ -273,7 +273,9 @@ impl Model {
     /// steps of key/2^level, the level adapted by the embedded error estimate (kept in
     /// `adaptive_step` as the last accepted length); returns the transmission coefficients at `t`.
     /// None (state unchanged) when even key/2^MAX_ETD_LEVEL fails the tolerance.
-    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive) -> Option<Coefficients> {
+    /// Every attempted step costs one of `attempts_left` (the step's work budget, shared with
+    /// Dormand–Prince); None when the budget or the finest level runs out.
+    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive, attempts_left: &mut u64) -> Option<Coefficients> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
         let mut level = if self.adaptive_step > 0.0 {
             ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
@@ -284,6 +286,10 @@ impl Model {
         let mut pos = 0u64;
         let mut coefficients = Coefficients::ZERO;
         while pos < full {
+            if *attempts_left == 0 {
+                return None;
+            }
+            *attempts_left -= 1;
             let len = key / (1u64 << level) as f64;
             let i = self.prepare_etd(t, len);
             coefficients = self.etd_steps[i].2.coefficients();
@@ -353,7 +359,7 @@ impl Model {
                 // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
                 // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below).
                 let key = self.step_keys.key(hs);
-                if let Some(c) = self.advance_exponential(t_mid, key, &drive) {
+                if let Some(c) = self.advance_exponential(t_mid, key, &drive, &mut attempts_left) {
                     if hs != key {
                         let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
                         self.mechanics += rate * (hs - key);
