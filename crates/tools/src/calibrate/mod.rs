@@ -237,6 +237,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
             "final": report::held_out_metrics(&hprob.measured, &f),
         });
     }
+    report["warnings"] = serde_json::json!(device_warnings(&runs, &report));
     let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
         ("report.md".to_string(), report::report_markdown(&report, &outcome).into_bytes()),
@@ -245,6 +246,40 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         files.extend(report::plots(&runs, &prob, &outcome)?);
     }
     Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
+}
+
+/// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default
+/// rather than declared, and material factors stopped at their bounds. Never silent: report.json
+/// `warnings`, report.md and the console.
+fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let undeclared: Vec<String> = runs.iter().filter(|r| r.link_inertia.is_none()).map(|r| r.name()).collect();
+    if !undeclared.is_empty() {
+        warnings.push(format!(
+            "link_inertia_kgm2 is not declared in {} of {} runs ({}): the FMU's default link_inertia is used, so the \
+             fitted stiffness and damping are known only relative to it (K/J and C/J); declare the inertia for \
+             physical values",
+            undeclared.len(),
+            runs.len(),
+            undeclared.join(", ")
+        ));
+    }
+    for stage in ["baseline", "final"] {
+        for g in report["moduli"][stage].as_array().into_iter().flatten() {
+            if g["at_bound"].as_bool() == Some(true) {
+                warnings.push(format!(
+                    "{stage} fit at {} °C: a material factor stopped at its bound (E' ×{:.3}, E'' ×{:.3}; the fit keeps \
+                     them within ×{:.0}^±1 of the table): the structure cannot reach what these data want, and \
+                     what the loop adds next may be filling that gap",
+                    g["temperature_c"].as_f64().unwrap_or(f64::NAN),
+                    g["storage_modulus_scale"].as_f64().unwrap_or(f64::NAN),
+                    g["loss_modulus_scale"].as_f64().unwrap_or(f64::NAN),
+                    fit::MODULUS_SCALE_LIMIT.exp()
+                ));
+            }
+        }
+    }
+    warnings
 }
 
 /// The drive loop (drive.rs) on runs driven by torque or by a reference, rigid or linear.
@@ -358,6 +393,9 @@ pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
         return Ok(());
     }
     let outcome = c.outcome.as_ref().expect("device loop");
+    for w in c.report["warnings"].as_array().into_iter().flatten() {
+        eprintln!("thermovia: warning: {}", w.as_str().unwrap_or_default());
+    }
     let m = |k: &str| c.report[k]["rmse_rad"].as_f64().unwrap_or(f64::NAN);
     let added: Vec<&str> = outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect();
     println!(

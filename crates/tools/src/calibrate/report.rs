@@ -175,6 +175,13 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         o.baseline.n,
         j["noise_floor_rad"].as_f64().unwrap_or(0.0)
     );
+    if let Some(w) = j["warnings"].as_array().filter(|w| !w.is_empty()) {
+        s += "## Warnings\n\n";
+        for line in w {
+            s += &format!("- {}\n", line.as_str().unwrap_or_default());
+        }
+        s += "\n";
+    }
     s += "| model | RMSE (rad) | NRMSE | fit % | BIC |\n|---|---|---|---|---|\n";
     for k in ["baseline", "final"] {
         s += &format!(
