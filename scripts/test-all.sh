@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
-# Every test: formatting and lints, the Rust tests through the packaged FMU, then the Python
-# importers' checks (fmpy, fmu-manipulation-toolbox, libcosimpy, ecospy). Installs what it needs
-# (Debian's libclang-dev and libtbb12, the pinned venv); fails, never skips, when an importer is
-# missing.
+# Every test: formatting and lints, the Rust tests through the packaged FMU (the fuzzer's CI
+# campaign and valgrind among them), then the Python checks (fmpy, fmu-manipulation-toolbox,
+# libcosimpy, ecospy, the Dask campaign). Installs what it needs (Debian's libclang-dev, libtbb12
+# and valgrind, the pinned venv); fails, never skips, when an importer is missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 scripts/setup-system.sh
