@@ -21,6 +21,7 @@ use thermovia_importer::{HarnessError, Instance};
 
 use super::data::{Axis, DriveKind, Run};
 use super::diagnose::corr;
+use super::fit::spd_inverse;
 use super::sim::Simulator;
 
 /// Fitted quantities.
@@ -525,51 +526,19 @@ impl<'a> DriveProblem<'a> {
                 }
             }
         };
-        let mut p = p0;
-        clamp(&mut p);
-        let mut sims = self.simulate_all(&spec, &p).ok_or("the FMU could not simulate the starting model")?;
-        let mut r = self.residual(&sims);
-        let mut cost: f64 = r.iter().map(|x| x * x).sum();
-        let mut mu = 1e-3;
-        let mut jac = DMatrix::zeros(0, 0);
-        let mut iterations = 0;
-        for it in 0..max_iter {
-            iterations = it + 1;
-            jac = self.jacobian(&spec, &p, &sims).ok_or("the FMU could not simulate a difference step")?;
-            let a = jac.transpose() * &jac;
-            let g = jac.transpose() * DVector::from_column_slice(&r);
-            let mut improved = false;
-            let mut converged = false;
-            for _ in 0..8 {
-                let delta = lm_solve(&a, &g, mu);
-                let mut q: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
-                clamp(&mut q);
-                let small = q
-                    .iter()
-                    .zip(&p)
-                    .zip(&spec)
-                    .all(|((a, b), s)| (a - b).abs() <= 1e-7 * self.typical(*s).max(b.abs()));
-                if let Some(out) = self.simulate_all(&spec, &q) {
-                    let rq = self.residual(&out);
-                    let cq: f64 = rq.iter().map(|x| x * x).sum();
-                    if cq < cost {
-                        converged = small || (cost - cq) / cost < 1e-8;
-                        (p, sims, r, cost) = (q, out, rq, cq);
-                        mu = (mu / 3.0).max(1e-9);
-                        improved = true;
-                        break;
-                    }
-                }
-                if small {
-                    converged = true;
-                    break;
-                }
-                mu *= 5.0;
-            }
-            if !improved || converged {
-                break;
-            }
-        }
+        let m = super::fit::minimize(
+            &super::fit::LeastSquares {
+                simulate: &|p| self.simulate_all(&spec, p),
+                residual: &|sims| self.residual(sims),
+                jacobian: &|p, sims| self.jacobian(&spec, p, sims),
+                clamp: &clamp,
+                negligible: &|j, old, new| (new - old).abs() <= 1e-7 * self.typical(spec[j]).max(old.abs()),
+                relative_tolerance: 1e-8,
+            },
+            p0,
+            max_iter,
+        )?;
+        let (p, sims, r, cost, jac, iterations) = (m.p, m.simulated, m.residual, m.cost, m.jacobian, m.iterations);
         let covariance = self.sandwich(&jac, &r);
         Ok(DriveFit { spec, effects, p, sims, residual: r, sse: cost, jacobian: jac, covariance, iterations })
     }
@@ -602,26 +571,6 @@ impl<'a> DriveProblem<'a> {
         let scale = blocks as f64 / (blocks.saturating_sub(np).max(1)) as f64;
         &ainv * meat * &ainv * scale
     }
-}
-
-/// Pseudo-inverse of a symmetric positive semi-definite matrix with diagonal scaling.
-fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
-    super::fit::spd_inverse(a)
-}
-
-fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
-    let n = a.nrows();
-    let d: Vec<f64> = (0..n).map(|i| a[(i, i)].max(1e-300).sqrt()).collect();
-    let mut s = DMatrix::from_fn(n, n, |i, j| a[(i, j)] / (d[i] * d[j]));
-    for i in 0..n {
-        s[(i, i)] += mu;
-    }
-    let rhs = DVector::from_iterator(n, (0..n).map(|i| g[i] / d[i]));
-    let x = match s.clone().cholesky() {
-        Some(c) => c.solve(&rhs),
-        None => s.svd(true, true).solve(&rhs, 1e-12).unwrap_or_else(|_| DVector::zeros(n)),
-    };
-    DVector::from_iterator(n, (0..n).map(|i| x[i] / d[i]))
 }
 
 /// Error metrics of simulated runs against their measurements, positions stacked.

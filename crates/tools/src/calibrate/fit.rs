@@ -298,10 +298,89 @@ pub fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
 }
 
 /// Levenberg–Marquardt from `p0`.
+/// ∂ŷ/∂p at p, given the model's evaluation there (None when a difference step fails).
+pub type JacobianFn<'f, S> = dyn Fn(&[f64], &S) -> Option<DMatrix<f64>> + 'f;
+
+/// What Levenberg–Marquardt needs of a least-squares problem whose model is simulated: `S` is
+/// one evaluation's simulation output (shared by the device and the drive loops).
+pub struct LeastSquares<'f, S> {
+    /// The model at p (None when a simulation fails: the step is rejected).
+    pub simulate: &'f dyn Fn(&[f64]) -> Option<S>,
+    /// y − ŷ of an evaluation, flattened.
+    pub residual: &'f dyn Fn(&S) -> Vec<f64>,
+    /// ∂ŷ/∂p at p, given the evaluation there.
+    pub jacobian: &'f JacobianFn<'f, S>,
+    /// Projects p onto the parameters' bounds.
+    pub clamp: &'f dyn Fn(&mut [f64]),
+    /// Whether a move of parameter j from `old` to `new` is negligible.
+    pub negligible: &'f dyn Fn(usize, f64, f64) -> bool,
+    /// Converged when an accepted step lowers the cost by less than this fraction.
+    pub relative_tolerance: f64,
+}
+
+/// The optimum Levenberg–Marquardt reached, with the Jacobian there (for the covariance).
+pub struct Minimum<S> {
+    pub p: Vec<f64>,
+    pub simulated: S,
+    pub residual: Vec<f64>,
+    pub cost: f64,
+    pub jacobian: DMatrix<f64>,
+    pub iterations: usize,
+}
+
+/// Levenberg–Marquardt with a diagonally scaled damping μ (÷3 after a success, ×5 after a
+/// failure, 8 tries per iteration): stops when no try lowers the cost, or an accepted step is
+/// negligible in every parameter or in the cost.
+pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Result<Minimum<S>, String> {
+    let mut p = p0;
+    (ls.clamp)(&mut p);
+    let mut simulated = (ls.simulate)(&p).ok_or("the FMU could not simulate the starting model")?;
+    let mut r = (ls.residual)(&simulated);
+    let mut cost = sse(&r);
+    let mut mu = 1e-3;
+    let mut jac = DMatrix::zeros(0, 0);
+    let mut iterations = 0;
+    for it in 0..max_iter {
+        iterations = it + 1;
+        jac = (ls.jacobian)(&p, &simulated).ok_or("the FMU could not simulate a difference step")?;
+        let a = jac.transpose() * &jac;
+        let g = jac.transpose() * DVector::from_column_slice(&r);
+        let mut improved = false;
+        let mut converged = false;
+        for _ in 0..8 {
+            let delta = lm_solve(&a, &g, mu);
+            let mut q: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
+            (ls.clamp)(&mut q);
+            let small = q.iter().zip(&p).enumerate().all(|(j, (new, old))| (ls.negligible)(j, *old, *new));
+            if let Some(out) = (ls.simulate)(&q) {
+                let rq = (ls.residual)(&out);
+                let cq = sse(&rq);
+                if cq < cost {
+                    converged = small || (cost - cq) / cost < ls.relative_tolerance;
+                    (p, simulated, r, cost) = (q, out, rq, cq);
+                    mu = (mu / 3.0).max(1e-9);
+                    improved = true;
+                    break;
+                }
+            }
+            if small {
+                converged = true;
+                break;
+            }
+            mu *= 5.0;
+        }
+        if !improved || converged {
+            break;
+        }
+    }
+    Ok(Minimum { p, simulated, residual: r, cost, jacobian: jac, iterations })
+}
+
 pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_iter: usize) -> Result<Fit, String> {
     let lower = spec.lower(prob.n_groups);
     let upper = spec.upper(prob.n_groups);
-    let clamp = |p: &mut Vec<f64>| {
+    let typical = spec.typical(prob.n_groups);
+    let clamp = |p: &mut [f64]| {
         for ((x, lo), hi) in p.iter_mut().zip(&lower).zip(&upper) {
             if let Some(b) = lo {
                 *x = x.max(*b);
@@ -311,54 +390,31 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
             }
         }
     };
-    let mut p = p0;
-    clamp(&mut p);
-    let mut outputs = prob.outputs(&spec, &p).ok_or("the FMU could not simulate the starting model")?;
-    let mut r = prob.residual(&outputs);
-    let mut cost = sse(&r);
-    let mut mu = 1e-3;
-    let mut jac = DMatrix::zeros(0, 0);
-    let mut iterations = 0;
-    for it in 0..max_iter {
-        iterations = it + 1;
-        jac = prob.jacobian(&spec, &p, &outputs).ok_or("the FMU could not simulate a difference step")?;
-        let a = jac.transpose() * &jac;
-        let g = jac.transpose() * DVector::from_column_slice(&r);
-        let mut improved = false;
-        let mut small_step = false;
-        for _ in 0..8 {
-            let delta = lm_solve(&a, &g, mu);
-            let mut q: Vec<f64> = p.iter().zip(delta.iter()).map(|(a, b)| a + b).collect();
-            clamp(&mut q);
-            let typical = spec.typical(prob.n_groups);
-            small_step = q.iter().zip(&p).zip(&typical).all(|((a, b), t)| (a - b).abs() <= 1e-6 * t.max(b.abs()));
-            if let Some(out) = prob.outputs(&spec, &q) {
-                let rq = prob.residual(&out);
-                let cq = sse(&rq);
-                if cq < cost {
-                    let rel = (cost - cq) / cost;
-                    p = q;
-                    outputs = out;
-                    r = rq;
-                    cost = cq;
-                    mu = (mu / 3.0).max(1e-9);
-                    improved = true;
-                    small_step |= rel < 1e-7;
-                    break;
-                }
-            }
-            if small_step {
-                break;
-            }
-            mu *= 5.0;
-        }
-        if !improved || small_step {
-            break;
-        }
-    }
-    let n = r.len();
-    let a = jac.transpose() * &jac;
-    let sigma2 = cost / (n.saturating_sub(p.len()).max(1)) as f64;
+    let m = minimize(
+        &LeastSquares {
+            simulate: &|p| prob.outputs(&spec, p),
+            residual: &|out| prob.residual(out),
+            jacobian: &|p, out| prob.jacobian(&spec, p, out),
+            clamp: &clamp,
+            negligible: &|j, old, new| (new - old).abs() <= 1e-6 * typical[j].max(old.abs()),
+            relative_tolerance: 1e-7,
+        },
+        p0,
+        max_iter,
+    )?;
+    let n = m.residual.len();
+    let a = m.jacobian.transpose() * &m.jacobian;
+    let sigma2 = m.cost / (n.saturating_sub(m.p.len()).max(1)) as f64;
     let covariance = spd_inverse(&a) * sigma2;
-    Ok(Fit { spec, p, outputs, residual: r, sse: cost, n, jacobian: jac, covariance, iterations })
+    Ok(Fit {
+        spec,
+        p: m.p,
+        outputs: m.simulated,
+        residual: m.residual,
+        sse: m.cost,
+        n,
+        jacobian: m.jacobian,
+        covariance,
+        iterations: m.iterations,
+    })
 }
