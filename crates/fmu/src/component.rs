@@ -864,12 +864,12 @@ mod tests {
         assert!(resource_path_from_uri("file:///a%2").is_err());
     }
 
-    #[test]
-    fn serialized_state_round_trips_and_refuses_damage() {
+    /// A state after 0.25 s with the heaters at `heater_power`, stop time 3 s.
+    fn stepped(heater_power: f64) -> Snapshot {
         let mut m = Model::default();
-        m.inputs.heater_power = 7.5;
+        m.inputs.heater_power = heater_power;
         m.step(0.25).unwrap();
-        let s = Snapshot {
+        Snapshot {
             model: m,
             phase: Phase::StepComplete,
             time: 0.25,
@@ -877,7 +877,12 @@ mod tests {
             stop_time: Some(3.0),
             last_successful_time: 0.25,
             terminated: false,
-        };
+        }
+    }
+
+    #[test]
+    fn serialized_state_round_trips_and_refuses_damage() {
+        let s = stepped(7.5);
         let bytes = serialize(&s);
         assert_eq!(deserialize(&bytes).unwrap(), s);
         assert!(deserialize(&bytes[..bytes.len() - 1]).unwrap_err().contains("length"));
@@ -905,17 +910,7 @@ mod tests {
 
     #[test]
     fn forged_states_with_a_valid_checksum_are_refused_by_meaning() {
-        let mut m = Model::default();
-        m.step(0.25).unwrap();
-        let s = Snapshot {
-            model: m,
-            phase: Phase::StepComplete,
-            time: 0.25,
-            start_time: 0.0,
-            stop_time: Some(3.0),
-            last_successful_time: 0.25,
-            terminated: false,
-        };
+        let s = stepped(0.0);
         let bytes = serialize(&s);
         assert_eq!(deserialize(&forge(&bytes, |_| {})).unwrap(), s, "an untouched forge is the state itself");
         let f64_at = |k: usize| 3 + 8 * k; // time, start, stop, last successful time
