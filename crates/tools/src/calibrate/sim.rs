@@ -188,27 +188,6 @@ impl Simulator {
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
     /// absurd trial parameter) is returned as an error for that job only.
     pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<JobResult> {
-        let next = AtomicUsize::new(0);
-        let results: Vec<Mutex<Option<JobResult>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
-        let workers = self.instances.len().min(jobs.len()).max(1);
-        std::thread::scope(|s| {
-            for w in 0..workers {
-                let (next, results, inst) = (&next, &results, &self.instances[w]);
-                s.spawn(move || {
-                    let mut inst = inst.lock().unwrap_or_else(|p| p.into_inner());
-                    loop {
-                        let j = next.fetch_add(1, Ordering::Relaxed);
-                        if j >= jobs.len() {
-                            break;
-                        }
-                        let (run, model) = &jobs[j];
-                        let r = simulate(&mut inst, &inputs[*run], model).map_err(|e| e.to_string());
-                        *results[j].lock().unwrap() = Some(r);
-                    }
-                });
-            }
-        });
-        self.simulations.fetch_add(jobs.len(), Ordering::Relaxed);
-        results.into_iter().map(|m| m.into_inner().unwrap().expect("every job ran")).collect()
+        self.map(jobs, |inst, (run, model)| simulate(inst, &inputs[*run], model).map_err(|e| e.to_string()))
     }
 }
