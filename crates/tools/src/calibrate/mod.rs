@@ -89,6 +89,18 @@ impl CalibrateArgs {
     }
 }
 
+/// The fitted temperature group each held-out run uses: the one nearest its own temperature
+/// (held-out runs take the moduli fitted there; nothing is fitted on them).
+fn held_out_groups(held: &[data::Run], fitted_temperatures: &[f64]) -> Vec<usize> {
+    let (group, temperatures) = group_runs(held);
+    let nearest = |t: f64| {
+        (0..fitted_temperatures.len())
+            .min_by(|&a, &b| (fitted_temperatures[a] - t).abs().total_cmp(&(fitted_temperatures[b] - t).abs()))
+            .unwrap_or(0)
+    };
+    group.into_iter().map(|g| nearest(temperatures[g])).collect()
+}
+
 /// Temperature groups: runs at one nominal temperature share E' and E''. The nominal temperature is
 /// the declared `temperature_c` metadata, else the thermocouple mean, to 0.5 °C.
 pub fn group_runs(runs: &[data::Run]) -> (Vec<usize>, Vec<f64>) {
@@ -213,18 +225,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
             "no held-out set was given (--validate): effects were kept on BIC and the residual's structure, and the held-out error was not estimated"
         );
     } else {
-        // each held-out run takes the moduli of the nearest fitted temperature group
-        let (hg, htemps) = group_runs(&held);
-        let nearest = |t: f64| {
-            (0..temperatures.len())
-                .min_by(|&a, &b| (temperatures[a] - t).abs().total_cmp(&(temperatures[b] - t).abs()))
-                .unwrap_or(0)
-        };
         let hprob = fit::Problem {
             sim: &sim,
             inputs: held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
             measured: held.iter().map(|r| r.link.clone()).collect(),
-            group: hg.into_iter().map(|g| nearest(htemps[g])).collect(),
+            group: held_out_groups(&held, &temperatures),
             n_groups: temperatures.len(),
             solver_tolerance: prob.solver_tolerance,
         };
@@ -324,15 +329,7 @@ fn calibrate_drive(
     let mut held_prob = if held.is_empty() {
         None
     } else {
-        // each held-out run takes the moduli of the fitted temperature group nearest its own
-        let (hg, htemps) = group_runs(&held);
-        let nearest = |t: f64| {
-            (0..temperatures.len())
-                .min_by(|&a, &b| (temperatures[a] - t).abs().total_cmp(&(temperatures[b] - t).abs()))
-                .unwrap_or(0)
-        };
-        let hg = hg.into_iter().map(|g| nearest(htemps[g])).collect();
-        Some(drive::DriveProblem::new(&sim, &held, hg, temperatures.len()))
+        Some(drive::DriveProblem::new(&sim, &held, held_out_groups(&held, &temperatures), temperatures.len()))
     };
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;
     let seconds = t0.elapsed().as_secs_f64();
