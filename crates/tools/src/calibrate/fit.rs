@@ -4,7 +4,7 @@
 
 use nalgebra::{DMatrix, DVector};
 
-use super::sim::{EffectValues, RunModel, SimInput, Simulator};
+use super::sim::{EffectValues, RunModel, SimInput, Simulator, TransmissionTable};
 
 /// The effect library (names as in interfaces.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -84,22 +84,52 @@ impl Effect {
     }
 }
 
-/// |ln| of the modulus factors: the fit keeps E', E'' within a factor 20 of the table. Beyond that
-/// the sensitivity of a log-parameter vanishes and a fit that wanders there cannot come back.
-pub const MODULUS_SCALE_LIMIT: f64 = 3.0;
+/// Range of the fitted transmission stiffness, N·m/rad: from a soft elastomer coupling to a stiff
+/// gear train (real rigs span about 0.1 to 1e7; issue 10), with a decade of margin each side.
+pub const STIFFNESS_RANGE: (f64, f64) = (1e-2, 1e8);
+/// Range of the fitted transmission damping at the group's reference frequency, N·m·s/rad: down to
+/// a lightly damped metal link (ζ ≈ 1e-3 on 1e-4 kg·m²) and up to a rigid-looking viscous coupling.
+pub const DAMPING_RANGE: (f64, f64) = (1e-7, 1e6);
+
+/// How the transmission's damping depends on the excitation (issue 10, item 2), chosen by evidence
+/// in `mod.rs`: both are fitted when some temperature has runs at two frequencies.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DampingLaw {
+    /// C constant in frequency: a viscous damper between motor and link.
+    Viscous,
+    /// C = K''/ω with K'' constant (the PCL's loss modulus as the paper reads it): defined only
+    /// for single-frequency sinusoidal runs, since it needs "the excitation frequency".
+    Hysteretic,
+}
+
+impl DampingLaw {
+    pub fn name(self) -> &'static str {
+        match self {
+            DampingLaw::Viscous => "viscous",
+            DampingLaw::Hysteretic => "hysteretic",
+        }
+    }
+}
 
 /// The data as the fit sees it.
 pub struct Problem<'a> {
     pub sim: &'a Simulator,
     pub inputs: Vec<SimInput>,
     pub measured: Vec<Vec<f64>>,
-    /// Temperature group of each run (its own E', E'').
+    /// Temperature group of each run (its own stiffness and damping).
     pub group: Vec<usize>,
     pub n_groups: usize,
     pub solver_tolerance: f64,
+    /// The FMU's transmission with the table's moduli at each group's temperature and reference
+    /// frequency: the fitted K and C scale its springs, E' and E'' (so a heating run keeps the
+    /// table's shape in temperature).
+    pub tables: Vec<TransmissionTable>,
+    pub law: DampingLaw,
 }
 
-/// Parameter vector: [ln s'_g, ln s''_g for each group] ++ effect parameters in `effects` order.
+/// Parameter vector: [ln K_g, ln C_g for each temperature group] (the transmission's stiffness,
+/// N·m/rad, and damping at the group's reference frequency, N·m·s/rad) ++ effect parameters in
+/// `effects` order.
 #[derive(Clone, Debug)]
 pub struct ModelSpec {
     pub effects: Vec<Effect>,
@@ -129,14 +159,20 @@ impl ModelSpec {
         t
     }
     pub fn lower(&self, n_groups: usize) -> Vec<Option<f64>> {
-        let mut t = vec![Some(-MODULUS_SCALE_LIMIT); 2 * n_groups];
+        let mut t = Vec::new();
+        for _ in 0..n_groups {
+            t.extend([Some(STIFFNESS_RANGE.0.ln()), Some(DAMPING_RANGE.0.ln())]);
+        }
         for e in &self.effects {
             t.extend(e.params().iter().map(|p| p.2));
         }
         t
     }
     pub fn upper(&self, n_groups: usize) -> Vec<Option<f64>> {
-        let mut t = vec![Some(MODULUS_SCALE_LIMIT); 2 * n_groups];
+        let mut t = Vec::new();
+        for _ in 0..n_groups {
+            t.extend([Some(STIFFNESS_RANGE.1.ln()), Some(DAMPING_RANGE.1.ln())]);
+        }
         for e in &self.effects {
             t.extend(e.params().iter().map(|p| if p.0 == "ln_relaxation_time" { Some(10f64.ln()) } else { None }));
         }
@@ -145,8 +181,8 @@ impl ModelSpec {
     pub fn names(&self, group_names: &[String]) -> Vec<String> {
         let mut v = Vec::new();
         for g in group_names {
-            v.push(format!("ln_storage_scale[{g}]"));
-            v.push(format!("ln_loss_scale[{g}]"));
+            v.push(format!("ln_stiffness[{g}]"));
+            v.push(format!("ln_damping[{g}]"));
         }
         for e in &self.effects {
             v.extend(e.params().iter().map(|p| format!("{}.{}", e.name(), p.0)));
@@ -155,7 +191,135 @@ impl ModelSpec {
     }
 }
 
+/// Least-squares sinusoid x ≈ c + a cos ωt + b sin ωt over the samples from `from` on: (c, a, b,
+/// share of the variance it explains).
+pub fn sinusoid(t: &[f64], x: &[f64], frequency_hz: f64, from: usize) -> (f64, f64, f64, f64) {
+    let w = 2.0 * std::f64::consts::PI * frequency_hz;
+    let n = t.len() - from;
+    let m = DMatrix::from_fn(n, 3, |i, j| match j {
+        0 => 1.0,
+        1 => (w * t[from + i]).cos(),
+        _ => (w * t[from + i]).sin(),
+    });
+    let y = DVector::from_column_slice(&x[from..]);
+    let beta = spd_inverse(&(m.transpose() * &m)) * (m.transpose() * &y);
+    let mean = y.mean();
+    let total: f64 = y.iter().map(|v| (v - mean).powi(2)).sum();
+    let left: f64 = (&y - &m * &beta).iter().map(|v| v * v).sum();
+    (beta[0], beta[1], beta[2], if total > 0.0 { 1.0 - left / total } else { 0.0 })
+}
+
+/// A motor angle this close to one sinusoid (share of variance) is a single-frequency run.
+pub const SINUSOID_SHARE: f64 = 0.98;
+
 impl<'a> Problem<'a> {
+    /// The problem for `inputs` grouped by temperature: reads the FMU's table transmission at each
+    /// group's temperature and reference frequency (the lowest run frequency of its sinusoidal runs,
+    /// else 1 Hz).
+    pub fn new(
+        sim: &'a Simulator,
+        inputs: Vec<SimInput>,
+        measured: Vec<Vec<f64>>,
+        group: Vec<usize>,
+        temperatures_c: &[f64],
+        law: DampingLaw,
+    ) -> Result<Self, String> {
+        let mut tables = Vec::new();
+        for (g, t) in temperatures_c.iter().enumerate() {
+            let f = (0..inputs.len())
+                .filter(|&r| group[r] == g && is_sinusoidal(&inputs[r]))
+                .map(|r| inputs[r].frequency_hz)
+                .fold(f64::INFINITY, f64::min);
+            let f = if f.is_finite() { f } else { 1.0 };
+            tables.push(
+                sim.transmission_table(t + crate::report::ZERO_CELSIUS, f)
+                    .map_err(|e| format!("the FMU's transmission at {t} °C: {e}"))?,
+            );
+        }
+        Ok(Problem { sim, inputs, measured, group, n_groups: temperatures_c.len(), solver_tolerance: 1e-8, tables, law })
+    }
+
+    /// The same data under another damping law.
+    pub fn with_law(&self, law: DampingLaw) -> Problem<'a> {
+        Problem {
+            sim: self.sim,
+            inputs: self.inputs.clone(),
+            measured: self.measured.clone(),
+            group: self.group.clone(),
+            n_groups: self.n_groups,
+            solver_tolerance: self.solver_tolerance,
+            tables: self.tables.clone(),
+            law,
+        }
+    }
+
+    /// Held-out runs judged with this problem's fitted groups (nothing is fitted on them).
+    pub fn held_out(&self, inputs: Vec<SimInput>, measured: Vec<Vec<f64>>, group: Vec<usize>) -> Problem<'a> {
+        Problem {
+            sim: self.sim,
+            inputs,
+            measured,
+            group,
+            n_groups: self.n_groups,
+            solver_tolerance: self.solver_tolerance,
+            tables: self.tables.clone(),
+            law: self.law,
+        }
+    }
+
+    /// Inertia the simulation of run `r` uses: declared, else the FMU's default.
+    pub fn inertia(&self, r: usize) -> f64 {
+        self.inputs[r].link_inertia.unwrap_or(self.tables[self.group[r]].link_inertia)
+    }
+
+    /// The table's transmission as a starting point: [ln K, ln C] per group.
+    pub fn table_start(&self) -> Vec<f64> {
+        self.tables.iter().flat_map(|t| [t.stiffness.ln(), t.damping.ln()]).collect()
+    }
+
+    /// Closed-form transmission per group (issue 10, item 3), [ln K, ln C]: for a sinusoidal run the
+    /// frequency response at its frequency, K* = J ω² H/(H − 1) with H the link's complex amplitude
+    /// over the motor's; otherwise equation error, J θl'' = K φ + C φ' + b by least squares on
+    /// smoothed derivatives. Runs are combined by geometric means; a group without a physical
+    /// estimate keeps the table's values.
+    pub fn closed_form_start(&self) -> Vec<f64> {
+        let mut acc = vec![(0.0, 0.0, 0usize); self.n_groups];
+        for (r, inp) in self.inputs.iter().enumerate() {
+            let g = self.group[r];
+            let j = self.inertia(r);
+            let estimate = if is_sinusoidal(inp) {
+                frequency_response(inp, &self.measured[r], j)
+            } else {
+                equation_error(inp, &self.measured[r], j)
+            };
+            let Some((k, c)) = estimate.filter(|(k, c)| *k > 0.0 && *c > 0.0) else { continue };
+            // the group's parameter is the damping at its reference frequency
+            let c = match self.law {
+                DampingLaw::Hysteretic if is_sinusoidal(inp) => c * inp.frequency_hz / self.tables[g].frequency_hz,
+                _ => c,
+            };
+            acc[g].0 += k.clamp(STIFFNESS_RANGE.0, STIFFNESS_RANGE.1).ln();
+            acc[g].1 += c.clamp(DAMPING_RANGE.0, DAMPING_RANGE.1).ln();
+            acc[g].2 += 1;
+        }
+        let table = self.table_start();
+        (0..self.n_groups)
+            .flat_map(|g| {
+                let (k, c, n) = acc[g];
+                if n == 0 {
+                    [table[2 * g], table[2 * g + 1]]
+                } else {
+                    [k / n as f64, c / n as f64]
+                }
+            })
+            .collect()
+    }
+
+    /// Sample counts of the runs, in order.
+    pub fn lengths(&self) -> Vec<usize> {
+        self.measured.iter().map(Vec::len).collect()
+    }
+
     pub fn n_samples(&self) -> usize {
         self.measured.iter().map(|m| m.len()).sum()
     }
@@ -166,9 +330,16 @@ impl<'a> Problem<'a> {
         for (o, eff) in spec.offsets(self.n_groups) {
             eff.apply(&p[o..o + eff.params().len()], &mut e);
         }
+        let t = &self.tables[g];
+        let scale = p[2 * g].exp() / t.stiffness;
         RunModel {
-            storage_scale: p[2 * g].exp(),
-            loss_scale: p[2 * g + 1].exp(),
+            storage_scale: scale,
+            spring_stiffness: Some(t.spring_stiffness * scale),
+            loss_scale: p[2 * g + 1].exp() / t.damping,
+            excitation_frequency: match self.law {
+                DampingLaw::Viscous => Some(t.frequency_hz),
+                DampingLaw::Hysteretic => None,
+            },
             effects: e,
             solver_tolerance: self.solver_tolerance,
         }
@@ -297,7 +468,39 @@ pub fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
     DMatrix::from_fn(n, n, |i, j| inv[(i, j)] / (d[i] * d[j]))
 }
 
-/// Levenberg–Marquardt from `p0`.
+/// Contiguous blocks per run for the sandwich covariance: residual correlation inside a block is
+/// kept whole, blocks are taken as independent.
+pub const COVARIANCE_BLOCKS: usize = 20;
+
+/// (JᵀJ)⁻¹ (Σ_b s_b s_bᵀ) (JᵀJ)⁻¹ with s_b = Σ_{t∈b} J_tᵀ e_t over `COVARIANCE_BLOCKS` contiguous
+/// blocks of each run (`lengths` samples each, in order), scaled by B/(B − p): standard errors
+/// that hold up when residuals are correlated within a block (σ²(JᵀJ)⁻¹ assumes white residuals
+/// and shrinks with every extra correlated sample).
+pub fn block_sandwich(jac: &DMatrix<f64>, r: &[f64], lengths: &[usize]) -> DMatrix<f64> {
+    let np = jac.ncols();
+    let ainv = spd_inverse(&(jac.transpose() * jac));
+    let mut meat = DMatrix::<f64>::zeros(np, np);
+    let mut offset = 0;
+    let mut blocks = 0usize;
+    for &len in lengths {
+        let b = COVARIANCE_BLOCKS.min(len);
+        for i in 0..b {
+            let (lo, hi) = (offset + i * len / b, offset + (i + 1) * len / b);
+            let mut s = DVector::<f64>::zeros(np);
+            for t in lo..hi {
+                for j in 0..np {
+                    s[j] += jac[(t, j)] * r[t];
+                }
+            }
+            meat += &s * s.transpose();
+            blocks += 1;
+        }
+        offset += len;
+    }
+    let scale = blocks as f64 / (blocks.saturating_sub(np).max(1)) as f64;
+    &ainv * meat * &ainv * scale
+}
+
 /// ∂ŷ/∂p at p, given the model's evaluation there (None when a difference step fails).
 pub type JacobianFn<'f, S> = dyn Fn(&[f64], &S) -> Option<DMatrix<f64>> + 'f;
 
@@ -403,9 +606,7 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
         max_iter,
     )?;
     let n = m.residual.len();
-    let a = m.jacobian.transpose() * &m.jacobian;
-    let sigma2 = m.cost / (n.saturating_sub(m.p.len()).max(1)) as f64;
-    let covariance = spd_inverse(&a) * sigma2;
+    let covariance = block_sandwich(&m.jacobian, &m.residual, &prob.lengths());
     Ok(Fit {
         spec,
         p: m.p,
@@ -417,4 +618,69 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
         covariance,
         iterations: m.iterations,
     })
+}
+
+/// Whether a run's motor angle is one sinusoid at its frequency (the hysteretic law and the
+/// frequency-response start need it).
+pub fn is_sinusoidal(inp: &SimInput) -> bool {
+    inp.frequency_hz > 0.0 && sinusoid(&inp.time, &inp.motor, inp.frequency_hz, 0).3 >= SINUSOID_SHARE
+}
+
+/// K and C from the frequency response at the run's frequency: H = L/M from least-squares
+/// sinusoids over the run after its first tenth (the start-up transient), K* = J ω² H/(H − 1).
+fn frequency_response(inp: &SimInput, link: &[f64], inertia: f64) -> Option<(f64, f64)> {
+    let n = inp.time.len();
+    let from = n / 10;
+    let (_, ma, mb, _) = sinusoid(&inp.time, &inp.motor, inp.frequency_hz, from);
+    let (_, la, lb, _) = sinusoid(&inp.time, link, inp.frequency_hz, from);
+    // complex amplitudes of e^{iωt}: x = a cos + b sin → a − i b
+    let (mr, mi, lr, li) = (ma, -mb, la, -lb);
+    let den = mr * mr + mi * mi;
+    if den <= 0.0 {
+        return None;
+    }
+    let (hr, hi) = ((lr * mr + li * mi) / den, (li * mr - lr * mi) / den);
+    // H/(H − 1)
+    let (dr, di) = (hr - 1.0, hi);
+    let dd = dr * dr + di * di;
+    if dd <= 0.0 {
+        return None;
+    }
+    let (qr, qi) = ((hr * dr + hi * di) / dd, (hi * dr - hr * di) / dd);
+    let w = 2.0 * std::f64::consts::PI * inp.frequency_hz;
+    let scale = inertia * w * w;
+    Some((scale * qr, scale * qi / w))
+}
+
+/// K and C by equation error: J θl'' = K (θm − θl) + C (θm' − θl') + b, least squares over the run,
+/// with derivatives by central differences of Savitzky–Golay-smoothed angles (a window of 2 % of
+/// the run, at least 5 samples each side, against encoder steps).
+fn equation_error(inp: &SimInput, link: &[f64], inertia: f64) -> Option<(f64, f64)> {
+    let n = inp.time.len();
+    if n < 20 {
+        return None;
+    }
+    let half = (n / 100).max(5);
+    let l = super::savitzky_golay(link, half);
+    let m = super::savitzky_golay(&inp.motor, half);
+    let t = &inp.time;
+    let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
+    let rows: Vec<usize> = (half + 2..n - half - 2).collect();
+    let a = DMatrix::from_fn(rows.len(), 3, |i, j| {
+        let k = rows[i];
+        match j {
+            0 => m[k] - l[k],
+            1 => d(&m, k) - d(&l, k),
+            _ => 1.0,
+        }
+    });
+    let y = DVector::from_iterator(
+        rows.len(),
+        rows.iter().map(|&k| {
+            let (v1, v0) = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]), (l[k] - l[k - 1]) / (t[k] - t[k - 1]));
+            inertia * (v1 - v0) / (0.5 * (t[k + 1] - t[k - 1]))
+        }),
+    );
+    let beta = spd_inverse(&(a.transpose() * &a)) * (a.transpose() * y);
+    Some((beta[0], beta[1]))
 }

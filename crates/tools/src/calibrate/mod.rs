@@ -165,6 +165,28 @@ pub fn sim_input(r: &data::Run, smoothing_half_width: usize) -> sim::SimInput {
         link_inertia: r.link_inertia,
         link0: r.link[0],
         com_distance: r.meta_f64("link_length_m").unwrap_or(0.14),
+        initial_link_speed: initial_speed(&r.time, &r.link),
+    }
+}
+
+/// Speed at the first sample when the data show one (a run need not start at rest): the slope of a
+/// least-squares quadratic over the first 20 ms (at least 10 samples), kept only when it stands
+/// out of its own standard error by 3 (at rest, encoder noise alone must not set the link moving).
+pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
+    let n = t.iter().take_while(|&&ti| ti - t[0] <= 0.02).count().max(10).min(t.len());
+    if n < 4 {
+        return 0.0;
+    }
+    let a = nalgebra::DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
+    let y = nalgebra::DVector::from_column_slice(&x[..n]);
+    let ainv = fit::spd_inverse(&(a.transpose() * &a));
+    let beta = &ainv * (a.transpose() * &y);
+    let sigma2 = (&y - &a * &beta).norm_squared() / (n - 3).max(1) as f64;
+    let (v, se) = (beta[1], (sigma2 * ainv[(1, 1)]).max(0.0).sqrt());
+    if v.abs() > 3.0 * se {
+        v
+    } else {
+        0.0
     }
 }
 
@@ -209,30 +231,24 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let fmu = crate::open_fmu(args.fmu.as_deref())?;
     let sim = sim::Simulator::new(fmu, args.threads)?;
     let (group, temperatures) = group_runs(&runs);
-    let prob = fit::Problem {
-        sim: &sim,
-        inputs: runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
-        measured: runs.iter().map(|r| r.link.clone()).collect(),
-        group,
-        n_groups: temperatures.len(),
-        solver_tolerance: 1e-8,
-    };
-    let outcome = search::calibrate(&prob)?;
+    let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
+    let measured = runs.iter().map(|r| r.link.clone()).collect();
+    let viscous = fit::Problem::new(&sim, inputs, measured, group, &temperatures, fit::DampingLaw::Viscous)?;
+    let (prob, baseline, law_report) = choose_damping_law(viscous)?;
+    let outcome = search::search(&prob, baseline)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
+    report["damping_law"] = law_report;
     if held.is_empty() {
         report["held_out"] = serde_json::json!(
             "no held-out set was given (--validate): effects were kept on BIC and the residual's structure, and the held-out error was not estimated"
         );
     } else {
-        let hprob = fit::Problem {
-            sim: &sim,
-            inputs: held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
-            measured: held.iter().map(|r| r.link.clone()).collect(),
-            group: held_out_groups(&held, &temperatures),
-            n_groups: temperatures.len(),
-            solver_tolerance: prob.solver_tolerance,
-        };
+        let hprob = prob.held_out(
+            held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
+            held.iter().map(|r| r.link.clone()).collect(),
+            held_out_groups(&held, &temperatures),
+        );
         let sim_of = |f: &fit::Fit| hprob.outputs(&f.spec, &f.p).ok_or("the FMU could not simulate a held-out run");
         let (b, f) = (sim_of(&outcome.baseline)?, sim_of(&outcome.final_fit)?);
         report["validation"] = serde_json::json!({
@@ -253,6 +269,52 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
 }
 
+/// Frequencies closer than this (relative) are one frequency.
+const SAME_FREQUENCY: f64 = 0.05;
+
+/// The damping law by evidence (issue 10, item 2). Runs that are not single sinusoids have no
+/// "excitation frequency": viscous only. Sinusoidal runs at two or more frequencies within one
+/// temperature tell the laws apart: both baselines are fitted and the lower BIC (equal parameter
+/// counts: the lower error) wins. At one frequency per temperature they predict the same runs;
+/// viscous is kept and the report says the data cannot tell.
+fn choose_damping_law(
+    viscous: fit::Problem<'_>,
+) -> Result<(fit::Problem<'_>, fit::Fit, serde_json::Value), Box<dyn std::error::Error>> {
+    let sinusoidal = viscous.inputs.iter().all(fit::is_sinusoidal);
+    let two_frequencies = (0..viscous.n_groups).any(|g| {
+        let f: Vec<f64> =
+            (0..viscous.inputs.len()).filter(|&r| viscous.group[r] == g).map(|r| viscous.inputs[r].frequency_hz).collect();
+        f.iter().any(|a| f.iter().any(|b| (a - b).abs() > SAME_FREQUENCY * a.max(*b)))
+    });
+    let (fit_v, start_v) = search::baseline(&viscous)?;
+    let row = |law: fit::DampingLaw, f: &fit::Fit, start: &str| {
+        serde_json::json!({"law": law.name(), "rmse_rad": f.rmse(), "bic": f.bic(), "start": start})
+    };
+    let mut candidates = vec![row(fit::DampingLaw::Viscous, &fit_v, start_v)];
+    let reason;
+    let mut chosen = (viscous, fit_v);
+    if !sinusoidal {
+        reason = "some runs are not single sinusoids, so no law that needs the excitation frequency applies".to_string();
+    } else if !two_frequencies {
+        reason = "every temperature has runs at one frequency only: viscous and hysteretic damping predict the same \
+                  runs and cannot be told apart (the damping is reported at that frequency)"
+            .to_string();
+    } else {
+        let hysteretic = chosen.0.with_law(fit::DampingLaw::Hysteretic);
+        let (fit_h, start_h) = search::baseline(&hysteretic)?;
+        candidates.push(row(fit::DampingLaw::Hysteretic, &fit_h, start_h));
+        let (bv, bh) = (chosen.1.bic(), fit_h.bic());
+        reason = format!(
+            "runs at two or more frequencies per temperature: baseline BIC viscous {bv:.0}, hysteretic {bh:.0}; the lower wins"
+        );
+        if bh < bv {
+            chosen = (hysteretic, fit_h);
+        }
+    }
+    let law = serde_json::json!({"chosen": chosen.0.law.name(), "candidates": candidates, "reason": reason});
+    Ok((chosen.0, chosen.1, law))
+}
+
 /// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default
 /// rather than declared, and material factors stopped at their bounds. Never silent: report.json
 /// `warnings`, report.md and the console.
@@ -269,19 +331,20 @@ fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String
             undeclared.join(", ")
         ));
     }
-    for stage in ["baseline", "final"] {
-        for g in report["moduli"][stage].as_array().into_iter().flatten() {
-            if g["at_bound"].as_bool() == Some(true) {
-                warnings.push(format!(
-                    "{stage} fit at {} °C: a material factor stopped at its bound (E' ×{:.3}, E'' ×{:.3}; the fit keeps \
-                     them within ×{:.0}^±1 of the table): the structure cannot reach what these data want, and \
-                     what the loop adds next may be filling that gap",
-                    g["temperature_c"].as_f64().unwrap_or(f64::NAN),
-                    g["storage_modulus_scale"].as_f64().unwrap_or(f64::NAN),
-                    g["loss_modulus_scale"].as_f64().unwrap_or(f64::NAN),
-                    fit::MODULUS_SCALE_LIMIT.exp()
-                ));
-            }
+    for g in report["identified"].as_array().into_iter().flatten() {
+        if g["at_bound"].as_bool() == Some(true) {
+            warnings.push(format!(
+                "at {} °C the fitted transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.0e}, C = {:.4e} \
+                 N·m·s/rad within {:.0e}–{:.0e}): the structure cannot reach what these data want, and what the loop \
+                 adds next may be filling that gap",
+                g["temperature_c"].as_f64().unwrap_or(f64::NAN),
+                g["stiffness"].as_f64().unwrap_or(f64::NAN),
+                fit::STIFFNESS_RANGE.0,
+                fit::STIFFNESS_RANGE.1,
+                g["damping"].as_f64().unwrap_or(f64::NAN),
+                fit::DAMPING_RANGE.0,
+                fit::DAMPING_RANGE.1,
+            ));
         }
     }
     warnings

@@ -62,6 +62,7 @@ pub fn summarise(sim: &Simulator, effects: EffectValues, temps: &[f64], freqs: &
             let time: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
             let w = 2.0 * std::f64::consts::PI * f;
             inputs.push(SimInput {
+                initial_link_speed: 0.0,
                 motor: time.iter().map(|t| AMPLITUDE * (w * t).sin()).collect(),
                 housing_k: vec![tc + crate::report::ZERO_CELSIUS; n],
                 time,

@@ -59,18 +59,69 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
     }
 }
 
+/// Whether a log-parameter sits on a bound of `range`.
+fn at_bound(ln_value: f64, range: (f64, f64)) -> bool {
+    ln_value <= range.0.ln() + 1e-9 || ln_value >= range.1.ln() - 1e-9
+}
+
+/// The paper's quantities per temperature (interfaces.md `identified`): the transmission's
+/// stiffness and damping (± block-sandwich standard errors through the log), the inertia used,
+/// natural frequency and damping ratio of the link on the transmission, and damping to ground.
+pub fn identified(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
+    let ground = fit
+        .spec
+        .effects
+        .contains(&Effect::LinkDamping)
+        .then(|| effect_parameters(fit, Effect::LinkDamping)[0])
+        .map_or((0.0, 0.0), |(_, v, s)| (v, s));
+    Value::Array(
+        (0..prob.n_groups)
+            .map(|g| {
+                let runs: Vec<usize> = (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).collect();
+                let inertia = runs.iter().map(|&r| prob.inertia(r)).sum::<f64>() / runs.len().max(1) as f64;
+                let declared = runs.iter().all(|&r| prob.inputs[r].link_inertia.is_some());
+                let (lk, lc) = (fit.p[2 * g], fit.p[2 * g + 1]);
+                let (k, c) = (lk.exp(), lc.exp());
+                let t = &prob.tables[g];
+                json!({
+                    "temperature_c": temps[g],
+                    "stiffness": k,
+                    "stiffness_std": k * fit.std_err(2 * g),
+                    "damping": c,
+                    "damping_std": c * fit.std_err(2 * g + 1),
+                    "damping_law": prob.law.name(),
+                    "damping_reference_frequency_hz": t.frequency_hz,
+                    "loss_stiffness": c * 2.0 * std::f64::consts::PI * t.frequency_hz,
+                    "inertia": inertia,
+                    "inertia_declared": declared,
+                    "natural_frequency_hz": (k / inertia).sqrt() / (2.0 * std::f64::consts::PI),
+                    "damping_ratio": c / (2.0 * (k * inertia).sqrt()),
+                    "viscous_damping": ground.0,
+                    "viscous_damping_std": ground.1,
+                    "identified_as": if declared { "physical values (inertia declared)" } else { "K/J and C/J only: the inertia is the FMU's default, not declared; natural frequency and damping ratio are identified, K and C scale with the true inertia" },
+                    "at_bound": at_bound(lk, super::fit::STIFFNESS_RANGE) || at_bound(lc, super::fit::DAMPING_RANGE),
+                    "table_stiffness": t.stiffness,
+                    "table_damping": t.damping,
+                })
+            })
+            .collect(),
+    )
+}
+
+/// The same fit as factors on the FMU's material table (springs and E' scaled together).
 fn moduli(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
     Value::Array(
         (0..prob.n_groups)
             .map(|g| {
-                let (s1, s2) = (fit.p[2 * g], fit.p[2 * g + 1]);
+                let t = &prob.tables[g];
+                let (s1, s2) = (fit.p[2 * g].exp() / t.stiffness, fit.p[2 * g + 1].exp() / t.damping);
                 json!({
                     "temperature_c": temps[g],
-                    "storage_modulus_scale": s1.exp(),
-                    "storage_modulus_scale_std": s1.exp() * fit.std_err(2 * g),
-                    "loss_modulus_scale": s2.exp(),
-                    "loss_modulus_scale_std": s2.exp() * fit.std_err(2 * g + 1),
-                    "at_bound": s1.abs() >= super::fit::MODULUS_SCALE_LIMIT - 1e-9 || s2.abs() >= super::fit::MODULUS_SCALE_LIMIT - 1e-9,
+                    "storage_modulus_scale": s1,
+                    "storage_modulus_scale_std": s1 * fit.std_err(2 * g),
+                    "spring_stiffness_scale": s1,
+                    "loss_modulus_scale": s2,
+                    "loss_modulus_scale_std": s2 * fit.std_err(2 * g + 1),
                 })
             })
             .collect(),
@@ -151,10 +202,13 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
         "moduli": {"baseline": moduli(prob, &o.baseline, temps), "final": moduli(prob, &o.final_fit, temps)},
+        "identified": identified(prob, &o.final_fit, temps),
+        "identified_baseline": identified(prob, &o.baseline, temps),
         "rounds": rounds,
         "signatures": {"baseline": signature_json(&o.baseline_signatures), "final": signature_json(&o.final_signatures)},
         "method": {
-            "fit": "Levenberg–Marquardt on every sample, FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians; covariance σ²(JᵀJ)⁻¹ (σ² = SSE/(N−p); optimistic when the residual is correlated)",
+            "fit": "per temperature the transmission's stiffness K and damping C (log-parameters; springs and PCL scaled together), plus the effects' parameters; the baseline starts from the best of a closed form (frequency response K* = Jω²H/(H−1) for sinusoidal runs, equation error otherwise), the material table and a mix, then Levenberg–Marquardt on every sample, the FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians",
+            "standard_errors": format!("block sandwich: (JᵀJ)⁻¹ Σ_b s_b s_bᵀ (JᵀJ)⁻¹ over {} contiguous blocks per run, so residuals correlated within a block do not shrink them", super::fit::COVARIANCE_BLOCKS),
             "acceptance": format!("ΔBIC < −{} and at least {:.0}% of the residual's low-frequency structure over white noise removed; stop when the residual is white (structure ratio < {})", super::search::BIC_MARGIN, 100.0 * super::search::STRUCTURE_DROP, super::diagnose::STRUCTURE_LIMIT),
             "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
             "seconds": seconds,
@@ -243,25 +297,46 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     for &e in &o.final_fit.spec.effects {
         s += &format!("- **{}**: {}\n", e.name(), fmt_params(&o.final_fit, e));
     }
-    s += "\n## Moduli (factors on the material table, ± standard error)\n\n| T (°C) | E' factor | E'' factor |\n|---|---|---|\n";
-    if let Some(a) = j["moduli"]["final"].as_array() {
-        for g in a {
-            s += &format!(
-                "| {} | {:.4} ± {:.1e} | {:.4} ± {:.1e} |\n",
-                g["temperature_c"],
-                g["storage_modulus_scale"].as_f64().unwrap_or(0.0),
-                g["storage_modulus_scale_std"].as_f64().unwrap_or(0.0),
-                g["loss_modulus_scale"].as_f64().unwrap_or(0.0),
-                g["loss_modulus_scale_std"].as_f64().unwrap_or(0.0)
-            );
-        }
-    }
+    s += &identified_markdown(j);
     s += &format!(
         "\n## Residual\n\n{}\n\nunexplained: **{}**\n\n",
         remaining_structure(&o.final_signatures),
         o.unexplained
     );
     s += "Plots: `plots/fit_*.svg` (measured vs model before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
+    s
+}
+
+/// The `identified` table (the paper's quantities) and the damping law's evidence.
+fn identified_markdown(j: &Value) -> String {
+    let mut s = String::from(
+        "\n## Identified transmission (final fit; ± block-sandwich standard error)\n\n\
+         | T (°C) | K (N·m/rad) | C (N·m·s/rad) | J (kg·m²) | f_n (Hz) | ζ | to ground (N·m·s/rad) |\n|---|---|---|---|---|---|---|\n",
+    );
+    let f = |g: &Value, k: &str| g[k].as_f64().unwrap_or(f64::NAN);
+    for g in j["identified"].as_array().into_iter().flatten() {
+        s += &format!(
+            "| {} | {:.4} ± {:.2e} | {:.4e} ± {:.2e} | {:.4e}{} | {:.3} | {:.4} | {:.3e} |\n",
+            g["temperature_c"],
+            f(g, "stiffness"),
+            f(g, "stiffness_std"),
+            f(g, "damping"),
+            f(g, "damping_std"),
+            f(g, "inertia"),
+            if g["inertia_declared"].as_bool() == Some(true) { "" } else { " (default, not declared)" },
+            f(g, "natural_frequency_hz"),
+            f(g, "damping_ratio"),
+            f(g, "viscous_damping"),
+        );
+    }
+    if let Some(law) = j["damping_law"].as_object() {
+        s += &format!(
+            "\nDamping law: **{}** ({}). Damping is given at {} Hz.\n",
+            law["chosen"].as_str().unwrap_or("?"),
+            law["reason"].as_str().unwrap_or(""),
+            j["identified"][0]["damping_reference_frequency_hz"]
+        );
+    }
     s
 }
 

@@ -22,6 +22,8 @@ pub struct SimInput {
     pub link0: f64,
     /// Centre-of-mass distance used to turn m·g·d into the FMU's `gravity_link_mass`, m.
     pub com_distance: f64,
+    /// θl' at the first sample (a run need not start at rest), rad/s.
+    pub initial_link_speed: f64,
 }
 
 /// Values of the effect library, in the FMU's own terms except gravity, which is held as
@@ -52,14 +54,43 @@ impl EffectValues {
 pub struct RunModel {
     pub storage_scale: f64,
     pub loss_scale: f64,
+    /// Stiffness of each spring, N/m; None = the FMU's default. The fit scales springs and PCL
+    /// storage together, so the transmission's stiffness can go wherever real rigs go while the
+    /// table keeps its shape in temperature.
+    pub spring_stiffness: Option<f64>,
+    /// The frequency at which the PCL's loss modulus becomes a damping C = K''/ω; None = the run's
+    /// own (hysteretic law). A fixed one makes the damping viscous, the same at every frequency.
+    pub excitation_frequency: Option<f64>,
     pub effects: EffectValues,
     pub solver_tolerance: f64,
 }
 
 impl Default for RunModel {
     fn default() -> Self {
-        RunModel { storage_scale: 1.0, loss_scale: 1.0, effects: EffectValues::default(), solver_tolerance: 1e-8 }
+        RunModel {
+            storage_scale: 1.0,
+            loss_scale: 1.0,
+            spring_stiffness: None,
+            excitation_frequency: None,
+            effects: EffectValues::default(),
+            solver_tolerance: 1e-8,
+        }
     }
+}
+
+/// The FMU's transmission at one temperature and frequency with the table's moduli (factors 1):
+/// what the fitted stiffness and damping are scaled against.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TransmissionTable {
+    /// K_eff = spring bank + E'κ, N·m/rad.
+    pub stiffness: f64,
+    /// C_eff = E''κ/ω at `frequency_hz`, N·m·s/rad.
+    pub damping: f64,
+    pub frequency_hz: f64,
+    /// The FMU's default stiffness of one spring, N/m (scaled by `RunModel::spring_scale`).
+    pub spring_stiffness: f64,
+    /// The FMU's default link inertia, kg·m² (used when a run declares none).
+    pub link_inertia: f64,
 }
 
 /// Samples closer than this relative amount to the nominal step use the nominal step, so the FMU's
@@ -96,7 +127,7 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
         ("initial_link_angle", input.link0),
         ("initial_housing_temperature", input.housing_k[0]),
         ("initial_pcl_temperature", input.housing_k[0]),
-        ("excitation_frequency", input.frequency_hz),
+        ("excitation_frequency", m.excitation_frequency.unwrap_or(input.frequency_hz)),
         ("storage_modulus_scale", m.storage_scale),
         ("loss_modulus_scale", m.loss_scale),
         ("coulomb_friction", e.coulomb_friction.max(0.0)),
@@ -108,6 +139,12 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
     ];
     if e.maxwell_time > 0.0 {
         params.push(("maxwell_relaxation_time", e.maxwell_time));
+    }
+    if let Some(k) = m.spring_stiffness {
+        params.push(("spring_stiffness", k));
+    }
+    if input.initial_link_speed != 0.0 {
+        params.push(("initial_link_speed", input.initial_link_speed));
     }
     if mgl > 0.0 {
         params.push(("gravity_com_distance", input.com_distance));
@@ -183,6 +220,30 @@ impl Simulator {
         });
         self.simulations.fetch_add(jobs.len(), Ordering::Relaxed);
         results.into_iter().map(|m| m.into_inner().unwrap_or_else(|p| p.into_inner()).expect("every job ran")).collect()
+    }
+
+    /// The FMU's transmission with the table's moduli at a housing (and PCL) temperature and an
+    /// excitation frequency, read from its `effective_stiffness` and `effective_damping` outputs.
+    pub fn transmission_table(&self, temperature_k: f64, frequency_hz: f64) -> Result<TransmissionTable, HarnessError> {
+        let mut inst = self.instances[0].lock().unwrap_or_else(|p| p.into_inner());
+        inst.reset()?;
+        inst.initialize(
+            0.0,
+            None,
+            &[
+                ("thermal_drive", 1.0),
+                ("initial_housing_temperature", temperature_k),
+                ("initial_pcl_temperature", temperature_k),
+                ("excitation_frequency", frequency_hz),
+            ],
+        )?;
+        Ok(TransmissionTable {
+            stiffness: inst.get("effective_stiffness")?,
+            damping: inst.get("effective_damping")?,
+            frequency_hz,
+            spring_stiffness: inst.get("spring_stiffness")?,
+            link_inertia: inst.get("link_inertia")?,
+        })
     }
 
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an

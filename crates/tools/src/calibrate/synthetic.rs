@@ -192,6 +192,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
         loss_scale: args.loss_scale,
         effects: args.truth_effects(),
         solver_tolerance: 1e-10,
+        ..RunModel::default()
     };
     let mut rng = SplitMix::new(args.seed);
     let mut files = Vec::new();
@@ -204,6 +205,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
             let temp_c: Vec<f64> =
                 time.iter().map(|t| temp - args.heating_k * (-3.0 * t / args.duration).exp()).collect();
             let input = SimInput {
+                initial_link_speed: 0.0,
                 housing_k: temp_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
                 time: time.clone(),
                 motor: motor.clone(),
