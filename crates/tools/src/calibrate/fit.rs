@@ -124,7 +124,6 @@ pub struct Problem<'a> {
     /// frequency: the fitted K and C scale its springs, E' and E'' (so a heating run keeps the
     /// table's shape in temperature).
     pub tables: Vec<TransmissionTable>,
-    pub law: DampingLaw,
 }
 
 /// Parameter vector: [ln K_g, ln C_g for each temperature group] (the transmission's stiffness,
@@ -133,6 +132,7 @@ pub struct Problem<'a> {
 #[derive(Clone, Debug)]
 pub struct ModelSpec {
     pub effects: Vec<Effect>,
+    pub law: DampingLaw,
 }
 
 impl ModelSpec {
@@ -222,7 +222,6 @@ impl<'a> Problem<'a> {
         measured: Vec<Vec<f64>>,
         group: Vec<usize>,
         temperatures_c: &[f64],
-        law: DampingLaw,
     ) -> Result<Self, String> {
         let mut tables = Vec::new();
         for (g, t) in temperatures_c.iter().enumerate() {
@@ -236,21 +235,7 @@ impl<'a> Problem<'a> {
                     .map_err(|e| format!("the FMU's transmission at {t} °C: {e}"))?,
             );
         }
-        Ok(Problem { sim, inputs, measured, group, n_groups: temperatures_c.len(), solver_tolerance: 1e-8, tables, law })
-    }
-
-    /// The same data under another damping law.
-    pub fn with_law(&self, law: DampingLaw) -> Problem<'a> {
-        Problem {
-            sim: self.sim,
-            inputs: self.inputs.clone(),
-            measured: self.measured.clone(),
-            group: self.group.clone(),
-            n_groups: self.n_groups,
-            solver_tolerance: self.solver_tolerance,
-            tables: self.tables.clone(),
-            law,
-        }
+        Ok(Problem { sim, inputs, measured, group, n_groups: temperatures_c.len(), solver_tolerance: 1e-8, tables })
     }
 
     /// Held-out runs judged with this problem's fitted groups (nothing is fitted on them).
@@ -263,7 +248,6 @@ impl<'a> Problem<'a> {
             n_groups: self.n_groups,
             solver_tolerance: self.solver_tolerance,
             tables: self.tables.clone(),
-            law: self.law,
         }
     }
 
@@ -282,19 +266,18 @@ impl<'a> Problem<'a> {
     /// over the motor's; otherwise equation error, J θl'' = K φ + C φ' + b by least squares on
     /// smoothed derivatives. Runs are combined by geometric means; a group without a physical
     /// estimate keeps the table's values.
-    pub fn closed_form_start(&self) -> Vec<f64> {
+    pub fn closed_form_start(&self, law: DampingLaw) -> Vec<f64> {
         let mut acc = vec![(0.0, 0.0, 0usize); self.n_groups];
         for (r, inp) in self.inputs.iter().enumerate() {
             let g = self.group[r];
             let j = self.inertia(r);
-            let estimate = if is_sinusoidal(inp) {
-                frequency_response(inp, &self.measured[r], j)
-            } else {
-                equation_error(inp, &self.measured[r], j)
-            };
+            if !is_sinusoidal(inp) {
+                continue;
+            }
+            let estimate = frequency_response(inp, &self.measured[r], j);
             let Some((k, c)) = estimate.filter(|(k, c)| *k > 0.0 && *c > 0.0) else { continue };
             // the group's parameter is the damping at its reference frequency
-            let c = match self.law {
+            let c = match law {
                 DampingLaw::Hysteretic if is_sinusoidal(inp) => c * inp.frequency_hz / self.tables[g].frequency_hz,
                 _ => c,
             };
@@ -302,17 +285,85 @@ impl<'a> Problem<'a> {
             acc[g].1 += c.clamp(DAMPING_RANGE.0, DAMPING_RANGE.1).ln();
             acc[g].2 += 1;
         }
-        let table = self.table_start();
+        let fallback = self.equation_error_start(law, None).unwrap_or_else(|| self.table_start());
         (0..self.n_groups)
             .flat_map(|g| {
                 let (k, c, n) = acc[g];
                 if n == 0 {
-                    [table[2 * g], table[2 * g + 1]]
+                    [fallback[2 * g], fallback[2 * g + 1]]
                 } else {
                     [k / n as f64, c / n as f64]
                 }
             })
             .collect()
+    }
+
+    /// Equation error over every run at once: J θl'' = K_g φ + C_g w φ' + Σ θ_i x_i, with φ = θm − θl,
+    /// w = f_ref/f_run under the hysteretic law (else 1), and x_i the torque regressors of `effect`
+    /// (gravity −sin θl and cos θl, Coulomb −sign θl', link damping −θl'; effects that are not
+    /// linear in their parameters have none). Derivatives are central differences of
+    /// Savitzky–Golay-smoothed angles (a window of 2 % of the run, at least 5 samples each side).
+    /// Returns [ln K, ln C per group] ++ the effect's parameters, or None when a group's K or C
+    /// comes out unphysical. Cheap (no simulation): a start for Levenberg–Marquardt, not a fit.
+    pub fn equation_error_start(&self, law: DampingLaw, effect: Option<Effect>) -> Option<Vec<f64>> {
+        let n_eff = match effect {
+            None => 0,
+            Some(Effect::Gravity) => 2,
+            Some(Effect::CoulombFriction | Effect::LinkDamping) => 1,
+            Some(_) => return None,
+        };
+        let cols = 2 * self.n_groups + n_eff;
+        let mut ata = DMatrix::<f64>::zeros(cols, cols);
+        let mut atb = DVector::<f64>::zeros(cols);
+        for (r, inp) in self.inputs.iter().enumerate() {
+            let n = inp.time.len();
+            if n < 40 {
+                continue;
+            }
+            let g = self.group[r];
+            let j = self.inertia(r);
+            let w = match law {
+                DampingLaw::Hysteretic if is_sinusoidal(inp) => self.tables[g].frequency_hz / inp.frequency_hz,
+                _ => 1.0,
+            };
+            let half = (n / 100).max(5);
+            let l = super::savitzky_golay(&self.measured[r], half);
+            let m = super::savitzky_golay(&inp.motor, half);
+            let t = &inp.time;
+            let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
+            let mut row = DVector::<f64>::zeros(cols);
+            for k in half + 2..n - half - 2 {
+                let v = d(&l, k);
+                let acc = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]) - (l[k] - l[k - 1]) / (t[k] - t[k - 1]))
+                    / (0.5 * (t[k + 1] - t[k - 1]));
+                row.fill(0.0);
+                row[2 * g] = m[k] - l[k];
+                row[2 * g + 1] = w * (d(&m, k) - v);
+                match effect {
+                    Some(Effect::Gravity) => {
+                        row[2 * self.n_groups] = -l[k].sin();
+                        row[2 * self.n_groups + 1] = l[k].cos();
+                    }
+                    Some(Effect::CoulombFriction) => row[2 * self.n_groups] = -(v / 1e-3).tanh(),
+                    Some(Effect::LinkDamping) => row[2 * self.n_groups] = -v,
+                    _ => {}
+                }
+                ata += &row * row.transpose();
+                atb += &row * (j * acc);
+            }
+        }
+        let beta = spd_inverse(&ata) * atb;
+        let mut out = Vec::with_capacity(cols);
+        for g in 0..self.n_groups {
+            let (k, c) = (beta[2 * g], beta[2 * g + 1]);
+            if !(k > 0.0 && c > 0.0) {
+                return None;
+            }
+            out.push(k.clamp(STIFFNESS_RANGE.0, STIFFNESS_RANGE.1).ln());
+            out.push(c.clamp(DAMPING_RANGE.0, DAMPING_RANGE.1).ln());
+        }
+        out.extend((0..n_eff).map(|i| beta[2 * self.n_groups + i]));
+        Some(out)
     }
 
     /// Sample counts of the runs, in order.
@@ -336,7 +387,7 @@ impl<'a> Problem<'a> {
             storage_scale: scale,
             spring_stiffness: Some(t.spring_stiffness * scale),
             loss_scale: p[2 * g + 1].exp() / t.damping,
-            excitation_frequency: match self.law {
+            excitation_frequency: match spec.law {
                 DampingLaw::Viscous => Some(t.frequency_hz),
                 DampingLaw::Hysteretic => None,
             },
@@ -652,35 +703,3 @@ fn frequency_response(inp: &SimInput, link: &[f64], inertia: f64) -> Option<(f64
     Some((scale * qr, scale * qi / w))
 }
 
-/// K and C by equation error: J θl'' = K (θm − θl) + C (θm' − θl') + b, least squares over the run,
-/// with derivatives by central differences of Savitzky–Golay-smoothed angles (a window of 2 % of
-/// the run, at least 5 samples each side, against encoder steps).
-fn equation_error(inp: &SimInput, link: &[f64], inertia: f64) -> Option<(f64, f64)> {
-    let n = inp.time.len();
-    if n < 20 {
-        return None;
-    }
-    let half = (n / 100).max(5);
-    let l = super::savitzky_golay(link, half);
-    let m = super::savitzky_golay(&inp.motor, half);
-    let t = &inp.time;
-    let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
-    let rows: Vec<usize> = (half + 2..n - half - 2).collect();
-    let a = DMatrix::from_fn(rows.len(), 3, |i, j| {
-        let k = rows[i];
-        match j {
-            0 => m[k] - l[k],
-            1 => d(&m, k) - d(&l, k),
-            _ => 1.0,
-        }
-    });
-    let y = DVector::from_iterator(
-        rows.len(),
-        rows.iter().map(|&k| {
-            let (v1, v0) = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]), (l[k] - l[k - 1]) / (t[k] - t[k - 1]));
-            inertia * (v1 - v0) / (0.5 * (t[k + 1] - t[k - 1]))
-        }),
-    );
-    let beta = spd_inverse(&(a.transpose() * &a)) * (a.transpose() * y);
-    Some((beta[0], beta[1]))
-}

@@ -233,12 +233,10 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let (group, temperatures) = group_runs(&runs);
     let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
-    let viscous = fit::Problem::new(&sim, inputs, measured, group, &temperatures, fit::DampingLaw::Viscous)?;
-    let (prob, baseline, law_report) = choose_damping_law(viscous)?;
-    let outcome = search::search(&prob, baseline)?;
+    let prob = fit::Problem::new(&sim, inputs, measured, group, &temperatures)?;
+    let outcome = search::calibrate(&prob, &damping_laws(&prob))?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
-    report["damping_law"] = law_report;
     if held.is_empty() {
         report["held_out"] = serde_json::json!(
             "no held-out set was given (--validate): effects were kept on BIC and the residual's structure, and the held-out error was not estimated"
@@ -272,47 +270,35 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
 /// Frequencies closer than this (relative) are one frequency.
 const SAME_FREQUENCY: f64 = 0.05;
 
-/// The damping law by evidence (issue 10, item 2). Runs that are not single sinusoids have no
+/// The damping laws the data allow (issue 10, item 2). Runs that are not single sinusoids have no
 /// "excitation frequency": viscous only. Sinusoidal runs at two or more frequencies within one
-/// temperature tell the laws apart: both baselines are fitted and the lower BIC (equal parameter
-/// counts: the lower error) wins. At one frequency per temperature they predict the same runs;
-/// viscous is kept and the report says the data cannot tell.
-fn choose_damping_law(
-    viscous: fit::Problem<'_>,
-) -> Result<(fit::Problem<'_>, fit::Fit, serde_json::Value), Box<dyn std::error::Error>> {
-    let sinusoidal = viscous.inputs.iter().all(fit::is_sinusoidal);
-    let two_frequencies = (0..viscous.n_groups).any(|g| {
+/// temperature tell the laws apart: both are fitted (baseline and after each added effect) and the
+/// lower BIC wins. At one frequency per temperature they predict the same runs: viscous is kept
+/// and the report says the data cannot tell.
+fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
+    use fit::DampingLaw::{Hysteretic, Viscous};
+    let sinusoidal = prob.inputs.iter().all(fit::is_sinusoidal);
+    let two_frequencies = (0..prob.n_groups).any(|g| {
         let f: Vec<f64> =
-            (0..viscous.inputs.len()).filter(|&r| viscous.group[r] == g).map(|r| viscous.inputs[r].frequency_hz).collect();
+            (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).map(|r| prob.inputs[r].frequency_hz).collect();
         f.iter().any(|a| f.iter().any(|b| (a - b).abs() > SAME_FREQUENCY * a.max(*b)))
     });
-    let (fit_v, start_v) = search::baseline(&viscous)?;
-    let row = |law: fit::DampingLaw, f: &fit::Fit, start: &str| {
-        serde_json::json!({"law": law.name(), "rmse_rad": f.rmse(), "bic": f.bic(), "start": start})
-    };
-    let mut candidates = vec![row(fit::DampingLaw::Viscous, &fit_v, start_v)];
-    let reason;
-    let mut chosen = (viscous, fit_v);
-    if !sinusoidal {
-        reason = "some runs are not single sinusoids, so no law that needs the excitation frequency applies".to_string();
+    let (allowed, reason) = if !sinusoidal {
+        (vec![Viscous], "some runs are not single sinusoids, so no law that needs the excitation frequency applies")
     } else if !two_frequencies {
-        reason = "every temperature has runs at one frequency only: viscous and hysteretic damping predict the same \
-                  runs and cannot be told apart (the damping is reported at that frequency)"
-            .to_string();
+        (
+            vec![Viscous],
+            "every temperature has runs at one frequency only: viscous and hysteretic damping predict the same runs \
+             and cannot be told apart (the damping is reported at that frequency)",
+        )
     } else {
-        let hysteretic = chosen.0.with_law(fit::DampingLaw::Hysteretic);
-        let (fit_h, start_h) = search::baseline(&hysteretic)?;
-        candidates.push(row(fit::DampingLaw::Hysteretic, &fit_h, start_h));
-        let (bv, bh) = (chosen.1.bic(), fit_h.bic());
-        reason = format!(
-            "runs at two or more frequencies per temperature: baseline BIC viscous {bv:.0}, hysteretic {bh:.0}; the lower wins"
-        );
-        if bh < bv {
-            chosen = (hysteretic, fit_h);
-        }
-    }
-    let law = serde_json::json!({"chosen": chosen.0.law.name(), "candidates": candidates, "reason": reason});
-    Ok((chosen.0, chosen.1, law))
+        (
+            vec![Viscous, Hysteretic],
+            "runs at two or more frequencies per temperature: both laws fitted, the lower BIC kept (baseline and after \
+             each added effect)",
+        )
+    };
+    search::LawChoice { allowed, reason: reason.to_string() }
 }
 
 /// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default

@@ -2,7 +2,7 @@
 //! keep it only if it earns its place, repeat until nothing in the library helps.
 
 use super::diagnose::{rank, signatures, Candidate, Signatures};
-use super::fit::{levenberg_marquardt, Effect, Fit, ModelSpec, Problem};
+use super::fit::{levenberg_marquardt, DampingLaw, Effect, Fit, ModelSpec, Problem};
 
 /// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
 /// on the Kass & Raftery (1995) scale (ΔBIC > 10).
@@ -35,43 +35,92 @@ pub struct Outcome {
     /// Effects removed again by the backward check: (effect, BIC with it, BIC without).
     pub pruned: Vec<(Effect, f64, f64)>,
     pub unexplained: bool,
+    /// Damping laws compared (baseline and after each added effect).
+    pub laws: Vec<LawRow>,
+    pub law_reason: String,
 }
 
 /// Starting points of the baseline, cheapest first: the closed-form transmission (frequency
 /// response or equation error), the FMU's table, and the closed-form stiffness with the table's
 /// damping (a closed form's damping is the least reliable number in it).
-pub fn baseline_starts(prob: &Problem) -> Vec<(&'static str, Vec<f64>)> {
-    let closed = prob.closed_form_start();
+pub fn baseline_starts(prob: &Problem, law: DampingLaw) -> Vec<(&'static str, Vec<f64>)> {
+    let closed = prob.closed_form_start(law);
     let table = prob.table_start();
     let mut mixed = closed.clone();
     for g in 0..prob.n_groups {
         mixed[2 * g + 1] = table[2 * g + 1];
     }
-    vec![("closed form", closed), ("material table", table), ("closed-form stiffness, table damping", mixed)]
+    let mut starts =
+        vec![("closed form", closed), ("material table", table), ("closed-form stiffness, table damping", mixed)];
+    if let Some(e) = prob.equation_error_start(law, None) {
+        starts.push(("equation error", e));
+    }
+    starts
 }
 
-/// The nominal model at its optimum (issue 10, item 3): every start is simulated once, and
-/// Levenberg–Marquardt runs from the best one.
-pub fn baseline(prob: &Problem) -> Result<(Fit, &'static str), String> {
-    let spec = ModelSpec { effects: vec![] };
-    let cost = |q: &[f64]| {
-        prob.outputs(&spec, q).map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>()).unwrap_or(f64::INFINITY)
-    };
-    let (name, p0) = baseline_starts(prob)
+/// Sum of squared residuals at `p` (infinite when the FMU cannot simulate it).
+fn cost(prob: &Problem, spec: &ModelSpec, p: &[f64]) -> f64 {
+    prob.outputs(spec, p).map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>()).unwrap_or(f64::INFINITY)
+}
+
+/// Levenberg–Marquardt from the cheapest of several starts (each simulated once).
+fn fit_from_best(prob: &Problem, spec: ModelSpec, starts: Vec<Vec<f64>>, max_iter: usize) -> Result<Fit, String> {
+    let p0 = starts
         .into_iter()
-        .map(|(n, p)| (cost(&p), n, p))
+        .map(|p| (cost(prob, &spec, &p), p))
         .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, n, p)| (n, p))
-        .expect("three starts");
-    Ok((levenberg_marquardt(prob, spec, p0, MAX_ITERATIONS)?, name))
+        .map(|(_, p)| p)
+        .ok_or("no start")?;
+    levenberg_marquardt(prob, spec, p0, max_iter)
 }
 
-pub fn calibrate(prob: &Problem) -> Result<Outcome, String> {
-    search(prob, baseline(prob)?.0)
+/// The nominal model at its optimum under one damping law (issue 10, item 3): every start is
+/// simulated once, and Levenberg–Marquardt runs from the best one.
+pub fn baseline(prob: &Problem, law: DampingLaw) -> Result<Fit, String> {
+    let starts = baseline_starts(prob, law).into_iter().map(|s| s.1).collect();
+    fit_from_best(prob, ModelSpec { effects: vec![], law }, starts, MAX_ITERATIONS)
 }
 
-/// The search from a fitted baseline.
-pub fn search(prob: &Problem, baseline: Fit) -> Result<Outcome, String> {
+/// The damping laws the data allow, and the baseline and law comparison of each.
+pub struct LawChoice {
+    pub allowed: Vec<DampingLaw>,
+    pub reason: String,
+}
+
+/// The same effects under the other allowed laws, refitted from `fit`'s values: the better law by
+/// BIC (equal parameter counts: the lower error). Rows (stage, law, rmse, bic) for the report.
+fn best_law(prob: &Problem, fit: Fit, laws: &[DampingLaw], stage: &str, rows: &mut Vec<LawRow>) -> Fit {
+    let mut best = fit;
+    rows.push(LawRow { stage: stage.into(), law: best.spec.law, rmse: best.rmse(), bic: best.bic() });
+    let first = best.spec.law;
+    for &law in laws.iter().filter(|&&l| l != first) {
+        let spec = ModelSpec { effects: best.spec.effects.clone(), law };
+        let mut starts = vec![best.p.clone()];
+        if best.spec.effects.is_empty() {
+            starts.extend(baseline_starts(prob, law).into_iter().map(|s| s.1));
+        }
+        let Ok(other) = fit_from_best(prob, spec, starts, MAX_ITERATIONS) else { continue };
+        rows.push(LawRow { stage: stage.into(), law, rmse: other.rmse(), bic: other.bic() });
+        if other.bic() < best.bic() {
+            best = other;
+        }
+    }
+    best
+}
+
+/// One comparison of damping laws.
+#[derive(Clone, Debug)]
+pub struct LawRow {
+    pub stage: String,
+    pub law: DampingLaw,
+    pub rmse: f64,
+    pub bic: f64,
+}
+
+pub fn calibrate(prob: &Problem, laws: &LawChoice) -> Result<Outcome, String> {
+    let mut rows = Vec::new();
+    let first = baseline(prob, laws.allowed[0])?;
+    let baseline = best_law(prob, first, &laws.allowed, "baseline", &mut rows);
     let baseline_signatures = signatures(prob, &baseline);
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
@@ -93,21 +142,36 @@ pub fn search(prob: &Problem, baseline: Fit) -> Result<Outcome, String> {
         for c in candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(shortlist) {
             let mut spec = current.spec.clone();
             spec.effects.push(c.effect);
-            let mut p = current.p.clone();
-            p.extend_from_slice(&c.start);
-            // The transmission fitted without the effect may have absorbed it (friction mimicked
-            // by a softer, more damped link): also try the closed-form transmission as the start
-            // and keep the better one.
-            let mut p_table = p.clone();
-            p_table[..2 * prob.n_groups].copy_from_slice(&prob.closed_form_start());
-            let cost = |q: &[f64]| {
-                prob.outputs(&spec, q)
-                    .map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>())
-                    .unwrap_or(f64::INFINITY)
-            };
-            if cost(&p_table) < cost(&p) {
-                p = p_table;
+            // Starts: the current transmission and the closed-form one (the transmission fitted
+            // without the effect may have absorbed it: friction mimicked by a softer, more damped
+            // link; gravity by a rigid one), each with the linearised effect value and with the
+            // effect's typical size (a linearisation at a rigid or bounded fit can be absurd).
+            let typical: Vec<f64> = c.effect.params().iter().map(|p| p.1).collect();
+            let closed = prob.closed_form_start(spec.law);
+            let n_t = 2 * prob.n_groups;
+            let mut starts = Vec::new();
+            for transmission in [&current.p[..n_t], &closed[..]] {
+                for effect in [&c.start, &typical] {
+                    let mut q = transmission.to_vec();
+                    q.extend_from_slice(&current.p[n_t..]);
+                    q.extend_from_slice(effect);
+                    starts.push(q);
+                }
             }
+            // equation error with the effect's torque as a regressor (transmission and effect
+            // estimated together, so neither absorbs the other)
+            if let Some(e) = prob.equation_error_start(spec.law, Some(c.effect)) {
+                let mut q = e[..n_t].to_vec();
+                q.extend_from_slice(&current.p[n_t..]);
+                q.extend_from_slice(&e[n_t..]);
+                starts.push(q);
+            }
+            let p = starts
+                .into_iter()
+                .map(|q| (cost(prob, &spec, &q), q))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .map(|(_, q)| q)
+                .expect("four starts");
             let t = std::time::Instant::now();
             let Ok(refit) = levenberg_marquardt(prob, spec, p, SCREEN_ITERATIONS) else { continue };
             if std::env::var_os("THERMOVIA_DEBUG").is_some() {
@@ -151,8 +215,11 @@ pub fn search(prob: &Problem, baseline: Fit) -> Result<Outcome, String> {
         rounds.push(round);
         match accepted {
             Some((f, s)) => {
-                current = f;
-                sig = s;
+                // an effect can change which damping law the data favour (friction read as
+                // frequency-dependent loss before it was in)
+                let law = f.spec.law;
+                current = best_law(prob, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
+                sig = if current.spec.law == law { s } else { signatures(prob, &current) };
             }
             None => break,
         }
@@ -164,7 +231,10 @@ pub fn search(prob: &Problem, baseline: Fit) -> Result<Outcome, String> {
     while changed {
         changed = false;
         for &e in current.spec.effects.clone().iter() {
-            let spec = ModelSpec { effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect() };
+            let spec = ModelSpec {
+                effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect(),
+                law: current.spec.law,
+            };
             let mut p = current.p[..2 * prob.n_groups].to_vec();
             for (o, x) in current.spec.offsets(prob.n_groups) {
                 if x != e {
@@ -190,5 +260,7 @@ pub fn search(prob: &Problem, baseline: Fit) -> Result<Outcome, String> {
         rounds,
         pruned,
         unexplained,
+        laws: rows,
+        law_reason: laws.reason.clone(),
     })
 }
