@@ -43,6 +43,13 @@
 //! (shared A and B, per-run offset and initial state). [`arx_grouped`] splits further by a caller's
 //! label: ThermoVIA's transmission changes with temperature, so grouping by temperature gives the
 //! black box the same freedom the physical model has (its moduli per temperature).
+//!
+//! **Measured** (tests/truth/truth_model.py, 4 temperatures × 2 sine frequencies × 10 s at 1 kHz, noise
+//! 1e-4 rad and encoder quantum; rmse over the floor √(σ² + q²/12); max_order 6, ~1.5 s per call on one
+//! core): clean, moduli ×5: link = motor 16.3, [`arx`] 11.6 (one model cannot follow four
+//! temperatures), [`arx_grouped`] by temperature 1.08 with (2, 2), against the loop's final 2.44: the
+//! model leaves 11 % of the structure. Backlash 0.02 rad: 110, 42.8, 24.7 (a linear box cannot explain
+//! a dead zone). Hardening spring α = 100 rad⁻²: 63, 29.6, 7.6.
 
 use nalgebra::{Complex, DMatrix, DVector, Schur};
 
