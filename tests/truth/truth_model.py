@@ -9,14 +9,27 @@ defines them:
   τ = K(φ − b) + C φ' for φ > b, clipped at ≥ 0 (and symmetric for φ < −b), τ = 0 inside the play.
 - Coulomb friction: BearingFriction with a smooth sign, τ_f = Fc tanh(θl'/v_s) (v_s small);
 - Stribeck friction: τ_f = (Fc + Fs exp(−(θl'/v_st)²)) tanh(θl'/v_s);
+- asymmetric friction (no Modelica element: defined here): τ_f = Fc± tanh(θl'/v_s) + Bv± θl', with Fc+, Bv+
+  for θl' > 0 and Fc−, Bv− for θl' < 0 (continuous at rest: both terms vanish there);
 - gravity: τ_g = −mgl sin(θl − offset);
-- link damping to ground: τ = −B θl'; constant load: τ = τ_0.
+- link damping to ground: τ = −B θl'; constant load: τ = τ_0;
+- hardening spring (outside the calibration's effect library): the spring part of the transmission is
+  K φ (1 + α φ²) (secant stiffness K(1 + α φ²)), on the excess beyond the play when there is backlash.
+
+Excitation of the motor angle (`--excitation`): `sine` (one run per temperature and frequency, the
+default), `multisine` (a few sines 0.2–3 Hz, random phases, amplitudes ∝ 1/√f scaled to the sine's rms),
+`steps` (random levels within ±amplitude, random dwell 0.8–2.5 s, each step smoothed by tanh over
+0.05 s). The motor angle and its speed are analytic. `--initial-speed V`: the link starts at the motor's
+angle with speed V and the motor starts mid-swing (sine phase 45°, the first step centred on t = 0;
+a multisine's random phases already start it mid-swing); otherwise the link starts at rest at the
+motor's initial angle.
 
 Integration: classical RK4 at a fine fixed step (default 1e-4 s), with the motor angle and speed
 given analytically. Measurements: Gaussian noise, then encoder quantisation, then (optionally)
 timestamp jitter. Files follow docs/interfaces.md (one CSV per run, `# key=value` metadata).
 
   .venv/bin/python tests/truth/truth_model.py --out out/truth --effect backlash=0.02 --stiffness-scale 5
+  .venv/bin/python tests/truth/truth_model.py --out out/truth --excitation multisine --effect stribeck=0.03,0.05
 """
 import argparse
 import json
@@ -32,21 +45,29 @@ def link_torque(phi, dphi, v, p):
     """Torque on the link from the transmission and the effects (v = link speed)."""
     k, c = p["stiffness"], p["damping"]
     b = 0.5 * p.get("backlash", 0.0)
+    alpha = p.get("hardening_alpha", 0.0)
     if b > 0.0:
         if phi > b:
-            tau = max(k * (phi - b) + c * dphi, 0.0)
+            x = phi - b
+            tau = max(k * x * (1.0 + alpha * x * x) + c * dphi, 0.0)
         elif phi < -b:
-            tau = min(k * (phi + b) + c * dphi, 0.0)
+            x = phi + b
+            tau = min(k * x * (1.0 + alpha * x * x) + c * dphi, 0.0)
         else:
             tau = 0.0
     else:
-        tau = k * phi + c * dphi
+        tau = k * phi * (1.0 + alpha * phi * phi) + c * dphi
     vs = p.get("friction_smoothing", 1e-3)
     fc = p.get("coulomb_friction", 0.0)
     fs = p.get("stribeck_friction", 0.0)
     if fc > 0.0 or fs > 0.0:
         vst = p.get("stribeck_velocity", 0.05)
         tau -= (fc + fs * math.exp(-(v / vst) ** 2)) * math.tanh(v / vs)
+    if "asym_coulomb_positive" in p:
+        if v > 0.0:
+            tau -= p["asym_coulomb_positive"] * math.tanh(v / vs) + p["asym_viscous_positive"] * v
+        else:
+            tau -= p["asym_coulomb_negative"] * math.tanh(v / vs) + p["asym_viscous_negative"] * v
     if p.get("gravity_mgl", 0.0) > 0.0:
         tau -= p["gravity_mgl"] * math.sin(p["theta_l"] - p.get("gravity_offset", 0.0))
     tau -= p.get("link_damping", 0.0) * v
@@ -58,7 +79,7 @@ def simulate(p, t_end, dt, motor):
     """RK4 of θl, θl' with the motor angle motor(t) -> (angle, speed). Returns the fine time grid
     and the link angle on it. Plain floats: numpy per step would cost more than the arithmetic."""
     n = int(round(t_end / dt))
-    th, v = p.get("initial_link_angle", 0.0), 0.0
+    th, v = p.get("initial_link_angle", 0.0), p.get("initial_link_speed", 0.0)
     out = np.empty(n + 1)
     out[0] = th
     j = p["inertia"]
@@ -89,11 +110,119 @@ def write_run(path, meta, columns):
             fh.write(",".join(repr(float(x)) for x in row) + "\n")
 
 
+# One-value effect options: the key of the parameter dict they set.
+FLAT_EFFECTS = ("backlash", "coulomb_friction", "stribeck_friction", "stribeck_velocity", "gravity_mgl",
+                "gravity_offset", "link_damping", "constant_load", "friction_smoothing")
+# Several-value effect options: the keys they set, in order.
+COMPOUND_EFFECTS = {
+    "stribeck": ("stribeck_friction", "stribeck_velocity"),
+    "asymmetric_friction": ("asym_coulomb_positive", "asym_coulomb_negative", "asym_viscous_positive",
+                            "asym_viscous_negative"),
+    "hardening": ("hardening_alpha",),
+}
+MULTISINE_FREQUENCIES = (0.2, 0.4, 0.8, 1.6, 3.0)  # multiples of 0.2 Hz: 5 s hold whole cycles of each
+STEP_SMOOTHING = 0.05  # s, tanh time scale of each step
+STEP_DWELL = (0.8, 2.5)  # s
+
+
+def parse_effects(items):
+    """`NAME=V[,V...]` options → the flat parameter dict link_torque reads. Raises ValueError."""
+    flat = {}
+    for e in items:
+        name, _, value = e.partition("=")
+        try:
+            values = [float(x) for x in value.split(",")]
+        except ValueError:
+            raise ValueError(f"--effect {e}: values must be numbers") from None
+        if name in FLAT_EFFECTS and len(values) == 1:
+            flat[name] = values[0]
+        elif name in COMPOUND_EFFECTS and len(values) == len(COMPOUND_EFFECTS[name]):
+            flat.update(zip(COMPOUND_EFFECTS[name], values))
+        else:
+            known = [f"{n}=V" for n in FLAT_EFFECTS] + [f"{n}=" + ",".join("V" * len(k)) for n, k in COMPOUND_EFFECTS.items()]
+            raise ValueError(f"--effect {e}: unknown or wrong number of values (known: {', '.join(known)})")
+    return flat
+
+
+def effects_json(flat):
+    """The flat parameters → effects named as in docs/interfaces.md, with their parameters."""
+    out = {}
+    if flat.get("coulomb_friction", 0.0) > 0.0:
+        out["coulomb_friction"] = {"torque_nm": flat["coulomb_friction"]}
+    if flat.get("stribeck_friction", 0.0) > 0.0:
+        out["stribeck_friction"] = {"torque_nm": flat["stribeck_friction"], "velocity": flat.get("stribeck_velocity", 0.05)}
+    if "asym_coulomb_positive" in flat:
+        out["asymmetric_friction"] = {k: flat["asym_" + k] for k in
+                                      ("coulomb_positive", "coulomb_negative", "viscous_positive", "viscous_negative")}
+    if flat.get("constant_load", 0.0) != 0.0:
+        out["constant_load"] = {"torque_nm": flat["constant_load"]}
+    if flat.get("backlash", 0.0) > 0.0:
+        out["backlash"] = {"width_rad": flat["backlash"]}
+    if flat.get("gravity_mgl", 0.0) > 0.0:
+        out["gravity"] = {"mgl_nm": flat["gravity_mgl"], "offset_rad": flat.get("gravity_offset", 0.0)}
+    if flat.get("link_damping", 0.0) > 0.0:
+        out["link_damping"] = {"damping_nms": flat["link_damping"]}
+    if flat.get("hardening_alpha", 0.0) != 0.0:
+        out["hardening_spring"] = {"alpha_per_rad2": flat["hardening_alpha"], "out_of_library": True}
+    return out
+
+
+def excitation(kind, amplitude, frequency, duration, rng, moving=False):
+    """The motor angle: (motor(t) -> (angle, speed), description for truth.json)."""
+    if kind == "sine":
+        w, ph = 2 * math.pi * frequency, (math.pi / 4 if moving else 0.0)
+        return (lambda t: (amplitude * math.sin(w * t + ph), amplitude * w * math.cos(w * t + ph))), \
+            {"kind": "sine", "frequency_hz": frequency, "amplitude_rad": amplitude, "phase_rad": ph}
+    if kind == "multisine":
+        fs = np.array(MULTISINE_FREQUENCIES)
+        amps = fs ** -0.5
+        amps *= amplitude / math.sqrt(np.sum(amps ** 2))  # rms of the sum = the sine's, amplitude/√2
+        phases = rng.uniform(0.0, 2 * math.pi, fs.size)
+        parts = [(float(a), 2 * math.pi * float(f), float(p)) for a, f, p in zip(amps, fs, phases)]
+
+        def motor(t):
+            x = v = 0.0
+            for a, w, p in parts:
+                x += a * math.sin(w * t + p)
+                v += a * w * math.cos(w * t + p)
+            return x, v
+        return motor, {"kind": "multisine", "frequencies_hz": fs.tolist(), "amplitudes_rad": amps.tolist(),
+                       "phases_rad": phases.tolist()}
+    if kind == "steps":
+        times, levels, t, level = [], [], (0.0 if moving else rng.uniform(0.3, 0.8)), 0.0
+        while t < duration:
+            new = float(rng.uniform(-amplitude, amplitude))
+            times.append(t)
+            levels.append(new - level)
+            level = new
+            t += rng.uniform(*STEP_DWELL)
+        tau = STEP_SMOOTHING
+        steps = list(zip(times, levels))
+
+        def motor(t):
+            x = v = 0.0
+            for ti, d in steps:
+                z = (t - ti) / tau
+                if z > 20.0:
+                    x += d
+                elif z > -20.0:
+                    th = math.tanh(z)
+                    x += 0.5 * d * (1.0 + th)
+                    v += 0.5 * d * (1.0 - th * th) / tau
+            return x, v
+        return motor, {"kind": "steps", "times_s": times, "increments_rad": levels, "smoothing_s": tau}
+    raise ValueError(f"unknown excitation {kind!r}")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", required=True, type=Path, help="folder for the run files and truth.json")
     ap.add_argument("--temperatures", default="22,40,50,60", help="run temperatures, °C (comma-separated)")
-    ap.add_argument("--frequencies", default="0.5,1", help="motor frequencies, Hz (comma-separated)")
+    ap.add_argument("--frequencies", default="0.5,1",
+                    help="motor frequencies, Hz (comma-separated); for multisine and steps only their count "
+                         "matters: that many runs per temperature, each with its own random phases or steps")
+    ap.add_argument("--excitation", choices=("sine", "multisine", "steps"), default="sine",
+                    help="motor angle: one sine per run, a multisine 0.2–3 Hz, or smoothed random steps")
     ap.add_argument("--stiffness", default="34,20,12,5",
                     help="transmission stiffness per temperature, N·m/rad (comma-separated, one per temperature)")
     ap.add_argument("--damping", default="0.4,0.3,0.2,0.1", help="transmission damping per temperature, N·m·s/rad")
@@ -102,14 +231,20 @@ def main(argv=None):
     ap.add_argument("--declare-inertia", action="store_true", help="write link_inertia_kgm2 into the files")
     ap.add_argument("--amplitude", type=float, default=0.3, help="motor amplitude, rad")
     ap.add_argument("--duration", type=float, default=20.0, help="run length, s")
+    ap.add_argument("--initial-speed", type=float, default=None, metavar="RAD_PER_S",
+                    help="the run starts moving: the link's initial speed, the motor mid-swing")
     ap.add_argument("--rate", type=float, default=1000.0, help="sampling rate, Hz")
     ap.add_argument("--dt", type=float, default=1e-4, help="integration step, s (a divisor of the sample period)")
     ap.add_argument("--noise", type=float, default=1e-4, help="sensor noise std before quantisation, rad")
     ap.add_argument("--quantum", type=float, default=ENCODER_QUANTUM, help="encoder step, rad (0: none)")
-    ap.add_argument("--jitter", type=float, default=0.0, help="timestamp jitter, fraction of a sample period")
-    ap.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE",
-                    help="backlash=WIDTH, coulomb_friction=FC, stribeck_friction=FS, gravity_mgl=MGL, "
-                         "gravity_offset=RAD, link_damping=B, constant_load=TAU (repeatable)")
+    ap.add_argument("--jitter", type=float, default=0.0,
+                    help="timestamp jitter: each logged time is off by up to ± this fraction of a sample period "
+                         "(uniform; the samples themselves stay on the uniform grid); below 0.5")
+    ap.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE[,VALUE...]",
+                    help="backlash=WIDTH, coulomb_friction=FC, stribeck_friction=FS, stribeck_velocity=VST, "
+                         "stribeck=FS,VST, asymmetric_friction=FCP,FCN,BVP,BVN, gravity_mgl=MGL, gravity_offset=RAD, "
+                         "link_damping=B, constant_load=TAU, hardening=ALPHA (spring K φ(1 + α φ²), outside the "
+                         "calibration's library), friction_smoothing=VS (repeatable)")
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args(argv)
     temps = [float(x) for x in a.temperatures.split(",")]
@@ -118,33 +253,42 @@ def main(argv=None):
     cs = [float(x) for x in a.damping.split(",")]
     if not (len(ks) == len(cs) == len(temps)):
         ap.error("--stiffness and --damping need one value per temperature")
-    effects = {}
-    for e in a.effect:
-        name, _, value = e.partition("=")
-        effects[name] = float(value)
+    if not 0.0 <= a.jitter < 0.5:
+        ap.error("--jitter must be in [0, 0.5): the logged times must stay increasing")
+    try:
+        effects = parse_effects(a.effect)
+    except ValueError as err:
+        ap.error(str(err))
     rng = np.random.default_rng(a.seed)
     a.out.mkdir(parents=True, exist_ok=True)
     stride = int(round(1.0 / (a.rate * a.dt)))
-    truth = {"inertia": a.inertia, "effects": effects, "noise": a.noise, "quantum": a.quantum, "runs": []}
+    truth = {"inertia": a.inertia, "effects": effects_json(effects), "effect_options": a.effect, "noise": a.noise,
+             "quantum": a.quantum, "jitter": a.jitter, "rate_hz": a.rate, "excitation": a.excitation,
+             "initial_link_speed": a.initial_speed, "seed": a.seed, "runs": []}
+    moving = a.initial_speed is not None
     for temp, k, c in zip(temps, ks, cs):
-        for f in freqs:
-            w = 2 * math.pi * f
-            p = {"stiffness": k, "damping": c, "inertia": a.inertia, **effects}
-            t, link = simulate(p, a.duration, a.dt, lambda t: (a.amplitude * math.sin(w * t), a.amplitude * w * math.cos(w * t)))
+        for i, f in enumerate(freqs):
+            motor, described = excitation(a.excitation, a.amplitude, f, a.duration, rng, moving)
+            p = {"stiffness": k, "damping": c, "inertia": a.inertia, **effects,
+                 "initial_link_angle": motor(0.0)[0], "initial_link_speed": a.initial_speed or 0.0}
+            t, link = simulate(p, a.duration, a.dt, motor)
             ts, ls = t[::stride], link[::stride]
-            ms = a.amplitude * np.sin(w * ts)
+            ms = np.array([motor(x)[0] for x in ts])
 
             def measure(x):
                 y = x + rng.normal(0.0, a.noise, x.shape) if a.noise > 0 else x.copy()
                 return np.round(y / a.quantum) * a.quantum if a.quantum > 0 else y
 
             tm = ts + (rng.uniform(-a.jitter, a.jitter, ts.shape) / a.rate if a.jitter > 0 else 0.0)
-            name = f"run_{temp:g}C_{f:g}Hz.csv"
+            name = f"run_{temp:g}C_{f:g}Hz.csv" if a.excitation == "sine" else f"run_{temp:g}C_{a.excitation}{i + 1}.csv"
             meta = {"temperature_c": temp, "source": "tests/truth/truth_model.py"}
             if a.declare_inertia:
                 meta["link_inertia_kgm2"] = a.inertia
             write_run(a.out / name, meta, {"time_s": tm, "motor_angle_rad": measure(ms), "link_angle_rad": measure(ls)})
-            truth["runs"].append({"file": name, "temperature_c": temp, "frequency_hz": f, "stiffness": k, "damping": c})
+            run = {"file": name, "temperature_c": temp, "stiffness": k, "damping": c, "excitation": described}
+            if a.excitation == "sine":
+                run["frequency_hz"] = f
+            truth["runs"].append(run)
     (a.out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
 
 

@@ -11,6 +11,7 @@ pub mod diagnose;
 pub mod drive;
 pub mod fit;
 pub mod paper;
+pub mod reference;
 pub mod report;
 pub mod search;
 pub mod sim;
