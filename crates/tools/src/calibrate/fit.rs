@@ -111,6 +111,26 @@ impl DampingLaw {
     }
 }
 
+/// How a fitted stiffness is shared between the spring bank and the PCL, which matters only when
+/// the temperature moves within a run (the PCL's E'(T) moves, the springs do not).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SpringBank {
+    /// Springs and PCL scaled together (the table's share at the group's temperature): reaches any
+    /// stiffness, below the nominal springs too.
+    Scaled,
+    /// The nominal springs stay; the PCL carries the rest (the paper's device, K above the springs).
+    Nominal,
+}
+
+impl SpringBank {
+    pub fn name(self) -> &'static str {
+        match self {
+            SpringBank::Scaled => "scaled_with_pcl",
+            SpringBank::Nominal => "nominal",
+        }
+    }
+}
+
 /// The data as the fit sees it.
 pub struct Problem<'a> {
     pub sim: &'a Simulator,
@@ -133,6 +153,7 @@ pub struct Problem<'a> {
 pub struct ModelSpec {
     pub effects: Vec<Effect>,
     pub law: DampingLaw,
+    pub springs: SpringBank,
 }
 
 impl ModelSpec {
@@ -382,10 +403,15 @@ impl<'a> Problem<'a> {
             eff.apply(&p[o..o + eff.params().len()], &mut e);
         }
         let t = &self.tables[g];
-        let scale = p[2 * g].exp() / t.stiffness;
+        let k = p[2 * g].exp();
+        let (storage_scale, spring_stiffness) = match spec.springs {
+            SpringBank::Scaled => (k / t.stiffness, Some(t.spring_stiffness * k / t.stiffness)),
+            // below the springs the PCL cannot go negative: the model stays at the springs there
+            SpringBank::Nominal => (((k - t.spring_bank) / (t.stiffness - t.spring_bank)).max(1e-12), None),
+        };
         RunModel {
-            storage_scale: scale,
-            spring_stiffness: Some(t.spring_stiffness * scale),
+            storage_scale,
+            spring_stiffness,
             loss_scale: p[2 * g + 1].exp() / t.damping,
             excitation_frequency: match spec.law {
                 DampingLaw::Viscous => Some(t.frequency_hz),
@@ -702,4 +728,3 @@ fn frequency_response(inp: &SimInput, link: &[f64], inertia: f64) -> Option<(f64
     let scale = inertia * w * w;
     Some((scale * qr, scale * qi / w))
 }
-

@@ -173,6 +173,8 @@ pub fn sim_input(r: &data::Run, smoothing_half_width: usize) -> sim::SimInput {
 /// Speed at the first sample when the data show one (a run need not start at rest): the slope of a
 /// least-squares quadratic over the first 20 ms (at least 10 samples), kept only when it stands
 /// out of its own standard error by 3 (at rest, encoder noise alone must not set the link moving).
+/// A link that starts at rest and catches up with the motor within a millisecond looks the same
+/// over 20 ms, so `search::resolve_initial_speeds` lets the baseline fit decide.
 pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
     let n = t.iter().take_while(|&&ti| ti - t[0] <= 0.02).count().max(10).min(t.len());
     if n < 4 {
@@ -234,8 +236,9 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let (group, temperatures) = group_runs(&runs);
     let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
-    let prob = fit::Problem::new(&sim, inputs, measured, group, &temperatures)?;
-    let outcome = search::calibrate(&prob, &damping_laws(&prob))?;
+    let mut prob = fit::Problem::new(&sim, inputs, measured, group, &temperatures)?;
+    let laws = damping_laws(&prob);
+    let outcome = search::calibrate(&mut prob, &laws)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
     if held.is_empty() {
@@ -278,13 +281,14 @@ const SAME_FREQUENCY: f64 = 0.05;
 /// and the report says the data cannot tell.
 fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
     use fit::DampingLaw::{Hysteretic, Viscous};
+    use fit::SpringBank::{Nominal, Scaled};
     let sinusoidal = prob.inputs.iter().all(fit::is_sinusoidal);
     let two_frequencies = (0..prob.n_groups).any(|g| {
         let f: Vec<f64> =
             (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).map(|r| prob.inputs[r].frequency_hz).collect();
         f.iter().any(|a| f.iter().any(|b| (a - b).abs() > SAME_FREQUENCY * a.max(*b)))
     });
-    let (allowed, reason) = if !sinusoidal {
+    let (laws, reason) = if !sinusoidal {
         (vec![Viscous], "some runs are not single sinusoids, so no law that needs the excitation frequency applies")
     } else if !two_frequencies {
         (
@@ -299,7 +303,19 @@ fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
              each added effect)",
         )
     };
-    search::LawChoice { allowed, reason: reason.to_string() }
+    let mut reason = reason.to_string();
+    // the split of K between springs and PCL shows only while the temperature moves in a run
+    let banks = if diagnose::thermocouple_varies(prob) {
+        reason += "; the thermocouple moves within runs, so the spring bank is fitted two ways (scaled with the PCL, \
+                   or nominal with the PCL carrying the rest) and the lower BIC kept";
+        vec![Scaled, Nominal]
+    } else {
+        reason += "; the thermocouple is steady within runs, so the split of K between springs and PCL cannot show \
+                   (springs scaled with the PCL)";
+        vec![Scaled]
+    };
+    let allowed = laws.iter().flat_map(|&l| banks.iter().map(move |&b| (l, b))).collect();
+    search::LawChoice { allowed, reason }
 }
 
 /// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default
@@ -318,12 +334,13 @@ fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String
             undeclared.join(", ")
         ));
     }
-    for g in report["identified"].as_array().into_iter().flatten() {
-        if g["at_bound"].as_bool() == Some(true) {
-            warnings.push(format!(
-                "at {} °C the fitted transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.0e}, C = {:.4e} \
+    for (stage, key) in [("baseline", "identified_baseline"), ("final", "identified")] {
+        for g in report[key].as_array().into_iter().flatten() {
+            if g["at_bound"].as_bool() == Some(true) {
+                warnings.push(format!(
+                "{stage} fit at {} °C: the transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.0e}, C = {:.4e} \
                  N·m·s/rad within {:.0e}–{:.0e}): the structure cannot reach what these data want, and what the loop \
-                 adds next may be filling that gap",
+                 adds may be filling that gap",
                 g["temperature_c"].as_f64().unwrap_or(f64::NAN),
                 g["stiffness"].as_f64().unwrap_or(f64::NAN),
                 fit::STIFFNESS_RANGE.0,
@@ -332,6 +349,7 @@ fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String
                 fit::DAMPING_RANGE.0,
                 fit::DAMPING_RANGE.1,
             ));
+            }
         }
     }
     warnings

@@ -90,6 +90,8 @@ pub fn identified(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
                     "damping": c,
                     "damping_std": c * fit.std_err(2 * g + 1),
                     "damping_law": fit.spec.law.name(),
+                    "spring_bank": fit.spec.springs.name(),
+                    "nominal_spring_bank_stiffness": t.spring_bank,
                     "damping_reference_frequency_hz": t.frequency_hz,
                     "loss_stiffness": c * 2.0 * std::f64::consts::PI * t.frequency_hz,
                     "inertia": inertia,
@@ -206,7 +208,8 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "damping_law": {
             "chosen": o.final_fit.spec.law.name(),
             "reason": o.law_reason,
-            "compared": o.laws.iter().map(|r| json!({"stage": r.stage, "law": r.law.name(), "rmse_rad": r.rmse, "bic": r.bic})).collect::<Vec<_>>(),
+            "spring_bank": o.final_fit.spec.springs.name(),
+            "compared": o.laws.iter().map(|r| json!({"stage": r.stage, "law": r.structure.0.name(), "spring_bank": r.structure.1.name(), "rmse_rad": r.rmse, "bic": r.bic})).collect::<Vec<_>>(),
         },
         "identified_baseline": identified(prob, &o.baseline, temps),
         "rounds": rounds,

@@ -2,7 +2,7 @@
 //! keep it only if it earns its place, repeat until nothing in the library helps.
 
 use super::diagnose::{rank, signatures, Candidate, Signatures};
-use super::fit::{levenberg_marquardt, DampingLaw, Effect, Fit, ModelSpec, Problem};
+use super::fit::{levenberg_marquardt, DampingLaw, Effect, Fit, ModelSpec, Problem, SpringBank};
 
 /// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
 /// on the Kass & Raftery (1995) scale (ΔBIC > 10).
@@ -76,31 +76,34 @@ fn fit_from_best(prob: &Problem, spec: ModelSpec, starts: Vec<Vec<f64>>, max_ite
 
 /// The nominal model at its optimum under one damping law (issue 10, item 3): every start is
 /// simulated once, and Levenberg–Marquardt runs from the best one.
-pub fn baseline(prob: &Problem, law: DampingLaw) -> Result<Fit, String> {
+pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String> {
     let starts = baseline_starts(prob, law).into_iter().map(|s| s.1).collect();
-    fit_from_best(prob, ModelSpec { effects: vec![], law }, starts, MAX_ITERATIONS)
+    fit_from_best(prob, ModelSpec { effects: vec![], law, springs }, starts, MAX_ITERATIONS)
 }
 
-/// The damping laws the data allow, and the baseline and law comparison of each.
+/// A damping law and a spring-bank share: the structure choices the data decide between.
+pub type Structure = (DampingLaw, SpringBank);
+
+/// The structures the data allow (the first is the default), and why.
 pub struct LawChoice {
-    pub allowed: Vec<DampingLaw>,
+    pub allowed: Vec<Structure>,
     pub reason: String,
 }
 
 /// The same effects under the other allowed laws, refitted from `fit`'s values: the better law by
 /// BIC (equal parameter counts: the lower error). Rows (stage, law, rmse, bic) for the report.
-fn best_law(prob: &Problem, fit: Fit, laws: &[DampingLaw], stage: &str, rows: &mut Vec<LawRow>) -> Fit {
+fn best_law(prob: &Problem, fit: Fit, laws: &[Structure], stage: &str, rows: &mut Vec<LawRow>) -> Fit {
     let mut best = fit;
-    rows.push(LawRow { stage: stage.into(), law: best.spec.law, rmse: best.rmse(), bic: best.bic() });
-    let first = best.spec.law;
-    for &law in laws.iter().filter(|&&l| l != first) {
-        let spec = ModelSpec { effects: best.spec.effects.clone(), law };
+    let first = (best.spec.law, best.spec.springs);
+    rows.push(LawRow { stage: stage.into(), structure: first, rmse: best.rmse(), bic: best.bic() });
+    for &(law, springs) in laws.iter().filter(|&&l| l != first) {
+        let spec = ModelSpec { effects: best.spec.effects.clone(), law, springs };
         let mut starts = vec![best.p.clone()];
         if best.spec.effects.is_empty() {
             starts.extend(baseline_starts(prob, law).into_iter().map(|s| s.1));
         }
         let Ok(other) = fit_from_best(prob, spec, starts, MAX_ITERATIONS) else { continue };
-        rows.push(LawRow { stage: stage.into(), law, rmse: other.rmse(), bic: other.bic() });
+        rows.push(LawRow { stage: stage.into(), structure: (law, springs), rmse: other.rmse(), bic: other.bic() });
         if other.bic() < best.bic() {
             best = other;
         }
@@ -112,15 +115,59 @@ fn best_law(prob: &Problem, fit: Fit, laws: &[DampingLaw], stage: &str, rows: &m
 #[derive(Clone, Debug)]
 pub struct LawRow {
     pub stage: String,
-    pub law: DampingLaw,
+    pub structure: Structure,
     pub rmse: f64,
     pub bic: f64,
 }
 
-pub fn calibrate(prob: &Problem, laws: &LawChoice) -> Result<Outcome, String> {
+/// Runs whose data suggest a moving start (`calibrate::initial_speed`) are fitted both ways with
+/// the baseline's structure, starting at the measured speed and at rest; a run keeps the moving
+/// start only when it lowers that run's BIC by more than `BIC_MARGIN` (one more number per run).
+/// Returns the baseline refitted when some run changed.
+pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
+    if prob.inputs.iter().all(|i| i.initial_link_speed == 0.0) {
+        return moving;
+    }
+    let speeds: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    prob.inputs.iter_mut().for_each(|i| i.initial_link_speed = 0.0);
+    let Ok(resting) = levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS) else {
+        prob.inputs.iter_mut().zip(&speeds).for_each(|(i, v)| i.initial_link_speed = *v);
+        return moving;
+    };
+    let lengths = prob.lengths();
+    let per_run = |f: &Fit| -> Vec<f64> {
+        let mut offset = 0;
+        lengths
+            .iter()
+            .map(|&n| {
+                let s = f.residual[offset..offset + n].iter().map(|e| e * e).sum();
+                offset += n;
+                s
+            })
+            .collect()
+    };
+    let (sm, sr) = (per_run(&moving), per_run(&resting));
+    let mut any_moving = false;
+    for (r, inp) in prob.inputs.iter_mut().enumerate() {
+        let n = lengths[r] as f64;
+        if speeds[r] != 0.0 && n * (sr[r] / sm[r]).ln() > n.ln() + BIC_MARGIN {
+            inp.initial_link_speed = speeds[r];
+            any_moving = true;
+        }
+    }
+    if !any_moving {
+        return resting;
+    }
+    let start = if resting.sse < moving.sse { resting.p.clone() } else { moving.p.clone() };
+    levenberg_marquardt(prob, moving.spec.clone(), start, MAX_ITERATIONS).unwrap_or(moving)
+}
+
+pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String> {
     let mut rows = Vec::new();
     let first = baseline(prob, laws.allowed[0])?;
-    let baseline = best_law(prob, first, &laws.allowed, "baseline", &mut rows);
+    let chosen = best_law(prob, first, &laws.allowed, "baseline", &mut rows);
+    let baseline = resolve_initial_speeds(prob, chosen);
+    let prob = &*prob;
     let baseline_signatures = signatures(prob, &baseline);
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
@@ -217,9 +264,9 @@ pub fn calibrate(prob: &Problem, laws: &LawChoice) -> Result<Outcome, String> {
             Some((f, s)) => {
                 // an effect can change which damping law the data favour (friction read as
                 // frequency-dependent loss before it was in)
-                let law = f.spec.law;
+                let before = (f.spec.law, f.spec.springs);
                 current = best_law(prob, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
-                sig = if current.spec.law == law { s } else { signatures(prob, &current) };
+                sig = if (current.spec.law, current.spec.springs) == before { s } else { signatures(prob, &current) };
             }
             None => break,
         }
@@ -234,6 +281,7 @@ pub fn calibrate(prob: &Problem, laws: &LawChoice) -> Result<Outcome, String> {
             let spec = ModelSpec {
                 effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect(),
                 law: current.spec.law,
+                springs: current.spec.springs,
             };
             let mut p = current.p[..2 * prob.n_groups].to_vec();
             for (o, x) in current.spec.offsets(prob.n_groups) {

@@ -91,6 +91,8 @@ pub struct TransmissionTable {
     pub spring_stiffness: f64,
     /// The FMU's default link inertia, kg·m² (used when a run declares none).
     pub link_inertia: f64,
+    /// The nominal spring bank's torsional stiffness, N·m/rad (part of `stiffness`).
+    pub spring_bank: f64,
 }
 
 /// Samples closer than this relative amount to the nominal step use the nominal step, so the FMU's
@@ -243,6 +245,7 @@ impl Simulator {
             frequency_hz,
             spring_stiffness: inst.get("spring_stiffness")?,
             link_inertia: inst.get("link_inertia")?,
+            spring_bank: inst.get("spring_bank_stiffness")?,
         })
     }
 
