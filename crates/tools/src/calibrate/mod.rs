@@ -176,6 +176,9 @@ pub fn sim_input(r: &data::Run, smoothing_half_width: usize) -> sim::SimInput {
 /// A link that starts at rest and catches up with the motor within a millisecond looks the same
 /// over 20 ms, so `search::resolve_initial_speeds` lets the baseline fit decide.
 pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
+    if std::env::var_os("THERMOVIA_NO_V0").is_some() {
+        return 0.0;
+    }
     let n = t.iter().take_while(|&&ti| ti - t[0] <= 0.02).count().max(10).min(t.len());
     if n < 4 {
         return 0.0;

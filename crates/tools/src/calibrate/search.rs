@@ -98,10 +98,14 @@ fn best_law(prob: &Problem, fit: Fit, laws: &[Structure], stage: &str, rows: &mu
     rows.push(LawRow { stage: stage.into(), structure: first, rmse: best.rmse(), bic: best.bic() });
     for &(law, springs) in laws.iter().filter(|&&l| l != first) {
         let spec = ModelSpec { effects: best.spec.effects.clone(), law, springs };
+        // from the other structure's optimum, and from this law's closed-form transmission with
+        // the effects' values (a transmission fitted under the wrong law is a poor start)
+        let n_t = 2 * prob.n_groups;
         let mut starts = vec![best.p.clone()];
-        if best.spec.effects.is_empty() {
-            starts.extend(baseline_starts(prob, law).into_iter().map(|s| s.1));
-        }
+        starts.extend(baseline_starts(prob, law).into_iter().map(|(_, mut q)| {
+            q.extend_from_slice(&best.p[n_t..]);
+            q
+        }));
         let Ok(other) = fit_from_best(prob, spec, starts, MAX_ITERATIONS) else { continue };
         rows.push(LawRow { stage: stage.into(), structure: (law, springs), rmse: other.rmse(), bic: other.bic() });
         if other.bic() < best.bic() {
@@ -120,15 +124,17 @@ pub struct LawRow {
     pub bic: f64,
 }
 
-/// Runs whose data suggest a moving start (`calibrate::initial_speed`) are fitted both ways with
-/// the baseline's structure, starting at the measured speed and at rest; a run keeps the moving
-/// start only when it lowers that run's BIC by more than `BIC_MARGIN` (one more number per run).
-/// Returns the baseline refitted when some run changed.
+/// Runs started moving (`calibrate::initial_speed` saw the link moving at its first sample) are
+/// fitted again at rest with `fit`'s structure; a run keeps the moving start only when it lowers
+/// that run's BIC by more than `BIC_MARGIN` (one more number per run). A link that starts at rest
+/// and catches up with the motor within a millisecond looks moving over the estimator's window,
+/// so the model decides: once with the baseline, and again with the final model for the runs
+/// still moving. Returns the fit refitted with the chosen starts.
 pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
-    if prob.inputs.iter().all(|i| i.initial_link_speed == 0.0) {
+    let speeds: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    if speeds.iter().all(|&v| v == 0.0) {
         return moving;
     }
-    let speeds: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
     prob.inputs.iter_mut().for_each(|i| i.initial_link_speed = 0.0);
     let Ok(resting) = levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS) else {
         prob.inputs.iter_mut().zip(&speeds).for_each(|(i, v)| i.initial_link_speed = *v);
@@ -147,16 +153,19 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
             .collect()
     };
     let (sm, sr) = (per_run(&moving), per_run(&resting));
-    let mut any_moving = false;
+    let mut kept = 0;
     for (r, inp) in prob.inputs.iter_mut().enumerate() {
         let n = lengths[r] as f64;
         if speeds[r] != 0.0 && n * (sr[r] / sm[r]).ln() > n.ln() + BIC_MARGIN {
             inp.initial_link_speed = speeds[r];
-            any_moving = true;
+            kept += 1;
         }
     }
-    if !any_moving {
+    if kept == 0 {
         return resting;
+    }
+    if kept == speeds.iter().filter(|&&v| v != 0.0).count() {
+        return moving;
     }
     let start = if resting.sse < moving.sse { resting.p.clone() } else { moving.p.clone() };
     levenberg_marquardt(prob, moving.spec.clone(), start, MAX_ITERATIONS).unwrap_or(moving)
@@ -167,7 +176,6 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     let first = baseline(prob, laws.allowed[0])?;
     let chosen = best_law(prob, first, &laws.allowed, "baseline", &mut rows);
     let baseline = resolve_initial_speeds(prob, chosen);
-    let prob = &*prob;
     let baseline_signatures = signatures(prob, &baseline);
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
@@ -297,6 +305,13 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                 changed = current.spec.effects.len() > 1;
                 break;
             }
+        }
+    }
+    if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
+        let before = current.sse;
+        current = resolve_initial_speeds(prob, current);
+        if current.sse != before {
+            sig = signatures(prob, &current);
         }
     }
     let unexplained = !sig.white();
