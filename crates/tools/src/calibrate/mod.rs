@@ -61,10 +61,12 @@ pub struct CalibrateArgs {
     /// FMU instances simulating in parallel (the default is this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
-    /// Half-width (samples) of the zero-phase Savitzky–Golay smoothing of the measured motor
-    /// angle before it drives the model; 0 uses the raw samples.
-    #[cfg_attr(feature = "cli", arg(long, default_value_t = 100))]
-    pub input_smoothing: usize,
+    /// Half-width in seconds of the zero-phase Savitzky–Golay smoothing of the measured motor angle
+    /// before it drives the model; 0 uses the raw samples. Default: per run, 0.1 s over the
+    /// highest frequency it carries (a quintic window that passes it flat while it averages the
+    /// encoder steps), and off when the motor angle carries no noise.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
+    pub input_smoothing: Option<f64>,
     /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and
     /// paper.md into --out. Without FILE, the repository's data/paper-reported.json (built in).
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE", num_args = 0..=1))]
@@ -152,15 +154,81 @@ pub fn savitzky_golay(x: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
-/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`
-/// samples each side; 0 = raw) because it sets the commanded speed of every step: encoder steps
-/// of 2π/10000 at 1 kHz make the raw slope jitter by ~0.6 rad/s, which the PCL damper
-/// (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C and 0.5 Hz) passes to the link as torque noise, and
-/// which a never-pulling backlash contact rectifies into bias.
-pub fn sim_input(r: &data::Run, smoothing_half_width: usize) -> sim::SimInput {
+/// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
+/// var(Δ²x) = 6σ²; a smooth signal sampled fast contributes almost nothing).
+pub fn second_difference_noise(x: &[f64]) -> f64 {
+    if x.len() < 3 {
+        return 0.0;
+    }
+    let s: f64 = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2)).sum();
+    (s / (6.0 * (x.len() - 2) as f64)).sqrt()
+}
+
+/// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
+/// default): 0.1 s over the highest frequency the run carries, its own for a single sinusoid, else
+/// three times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms. A quintic
+/// Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
+/// frequency. A motor angle without noise (second-difference noise below 1e-12 of its swing) is
+/// not smoothed.
+pub fn smoothing_half_width(r: &data::Run, seconds: Option<f64>) -> usize {
+    let n = r.time.len();
+    let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
+    let seconds = match seconds {
+        Some(s) => s,
+        None => {
+            let swing = r.motor.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(1e-300);
+            if second_difference_noise(&r.motor) <= 1e-12 * swing {
+                return 0;
+            }
+            let input = sim::SimInput {
+                time: r.time.clone(),
+                motor: r.motor.clone(),
+                housing_k: vec![],
+                frequency_hz: r.frequency_hz,
+                link_inertia: None,
+                link0: 0.0,
+                com_distance: 0.0,
+                initial_link_speed: 0.0,
+            };
+            let top = if fit::is_sinusoidal(&input) { r.frequency_hz } else { 3.0 * rms_frequency(&r.time, &r.motor) };
+            if top > 0.0 {
+                0.1 / top
+            } else {
+                0.0
+            }
+        }
+    };
+    ((seconds / dt).round() as usize).min(n / 4)
+}
+
+/// rms(x')/(2π rms(x − mean)), x' by differences over ±10 ms (the power-weighted frequency).
+fn rms_frequency(t: &[f64], x: &[f64]) -> f64 {
+    let n = x.len();
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let dt = (t[n - 1] - t[0]) / (n - 1).max(1) as f64;
+    let lag = ((0.01 / dt).round() as usize).max(1);
+    if n <= 2 * lag {
+        return 0.0;
+    }
+    let v2: f64 = (lag..n - lag).map(|k| ((x[k + lag] - x[k - lag]) / (t[k + lag] - t[k - lag])).powi(2)).sum::<f64>()
+        / (n - 2 * lag) as f64;
+    let x2: f64 = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+    if x2 <= 0.0 {
+        0.0
+    } else {
+        v2.sqrt() / (2.0 * std::f64::consts::PI * x2.sqrt())
+    }
+}
+
+/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`)
+/// because it sets the commanded speed of every step: encoder steps of 2π/10000 at 1 kHz make the
+/// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
+/// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
+/// rectifies into bias.
+pub fn sim_input(r: &data::Run, smoothing_seconds: Option<f64>) -> sim::SimInput {
     sim::SimInput {
         time: r.time.clone(),
-        motor: savitzky_golay(&r.motor, smoothing_half_width),
+        motor: savitzky_golay(&r.motor, smoothing_half_width(r, smoothing_seconds)),
         housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
         frequency_hz: r.frequency_hz,
         link_inertia: r.link_inertia,
@@ -244,6 +312,12 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let outcome = search::calibrate(&mut prob, &laws)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
+    for (j, r) in report["runs"].as_array_mut().into_iter().flatten().zip(&runs) {
+        let n = r.time.len();
+        let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
+        j["input_smoothing_s"] = serde_json::json!(smoothing_half_width(r, args.input_smoothing) as f64 * dt);
+        j["inertia_declared"] = serde_json::json!(r.link_inertia.is_some());
+    }
     if held.is_empty() {
         report["held_out"] = serde_json::json!(
             "no held-out set was given (--validate): effects were kept on BIC and the residual's structure, and the held-out error was not estimated"
