@@ -14,6 +14,10 @@ use nalgebra::{DMatrix, DVector};
 
 use super::fit::{spd_inverse, Effect, Fit, ModelSpec, Problem, MAXWELL_TIME_GRID};
 
+/// Stribeck velocities tried before the Stribeck excess's own fit (its velocity is not
+/// identifiable while the excess is 0), rad/s.
+pub const STRIBECK_VELOCITY_GRID: [f64; 3] = [0.01, 0.05, 0.2];
+
 /// Window of the moving average that exposes low-frequency structure, samples.
 pub const STRUCTURE_WINDOW: usize = 25;
 /// Smoothed residual above this many times the white-noise expectation is "structure".
@@ -255,18 +259,27 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
             Effect::FrequencyDependentModulus => settings.extend(MAXWELL_TIME_GRID.iter().map(|&l| (1.0, l))),
             Effect::CoulombFriction | Effect::Backlash => settings.extend([1.0, 5.0].map(|f| (f, f64::NAN))),
             Effect::ThermalLag if !heating => {}
-            Effect::Gravity | Effect::LinkDamping | Effect::ThermalLag => settings.push((1.0, f64::NAN)),
+            Effect::StribeckFriction => settings.extend(STRIBECK_VELOCITY_GRID.iter().map(|&v| (1.0, v))),
+            // an asymmetry shows only on top of friction the model already has
+            Effect::AsymmetricFriction
+                if !fit.spec.effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::LinkDamping)) => {}
+            Effect::Gravity
+            | Effect::LinkDamping
+            | Effect::ThermalLag
+            | Effect::AsymmetricFriction
+            | Effect::ConstantLoad => settings.push((1.0, f64::NAN)),
         }
         let mut best: Option<(f64, Vec<f64>)> = None;
         for (size, lam) in settings {
             let mut p0 = fit.p.clone();
             p0.extend(std::iter::repeat_n(0.0, k));
-            let probe_cols: Vec<usize> = if effect == Effect::FrequencyDependentModulus {
-                p0[base + 1] = lam.ln();
-                vec![base]
-            } else {
-                (base..base + k).collect()
-            };
+            let probe_cols: Vec<usize> =
+                if matches!(effect, Effect::FrequencyDependentModulus | Effect::StribeckFriction) {
+                    p0[base + 1] = lam.ln();
+                    vec![base]
+                } else {
+                    (base..base + k).collect()
+                };
             let step = |j: usize| size * effect.params()[j - base].1;
             let jobs: Vec<_> = probe_cols
                 .iter()
@@ -374,6 +387,20 @@ fn evidence_text(prob: &Problem, effect: Effect, sig: &Signatures, score: f64, d
                 sig.corr_time, drift, if heating { "varies" } else { "is constant (no lag can show)" }, start[0]
             )
         }
+        Effect::StribeckFriction => format!(
+            "corr(e, sign θl') = {:+.2}; linearised static excess {:.3} N·m fading over {:.3} rad/s",
+            sig.corr_sign_link_speed,
+            start[0],
+            start[1].exp()
+        ),
+        Effect::AsymmetricFriction => format!(
+            "DC {:.2e} rad, corr(e, sign θl') = {:+.2}; linearised Coulomb half-difference {:+.3} N·m, viscous {:+.3} N·m·s/rad",
+            h(0),
+            sig.corr_sign_link_speed,
+            start[0],
+            start[1]
+        ),
+        Effect::ConstantLoad => format!("DC {:.2e} rad; linearised torque {:+.3} N·m", h(0), start[0]),
         Effect::FrequencyDependentModulus => {
             let mut pairs = Vec::new();
             for g in 0..prob.n_groups {

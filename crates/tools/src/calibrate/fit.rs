@@ -15,6 +15,14 @@ pub enum Effect {
     LinkDamping,
     ThermalLag,
     FrequencyDependentModulus,
+    /// Static friction above Coulomb that fades with speed (Modelica BearingFriction's Stribeck
+    /// curve): (Fs, v_s), on top of `CoulombFriction` when that is in.
+    StribeckFriction,
+    /// Coulomb and viscous levels per direction: half-differences (a_c, a_v) added to
+    /// `CoulombFriction` and `LinkDamping` (reported as the four levels).
+    AsymmetricFriction,
+    /// A constant torque on the link (a payload offset, a cable, a biased sensor zero).
+    ConstantLoad,
 }
 
 /// Relaxation times tried for the Maxwell branch before its own fit (its λ is not identifiable
@@ -22,13 +30,16 @@ pub enum Effect {
 pub const MAXWELL_TIME_GRID: [f64; 3] = [0.03, 0.1, 0.3];
 
 impl Effect {
-    pub const ALL: [Effect; 6] = [
+    pub const ALL: [Effect; 9] = [
         Effect::CoulombFriction,
         Effect::Backlash,
         Effect::Gravity,
         Effect::LinkDamping,
         Effect::ThermalLag,
         Effect::FrequencyDependentModulus,
+        Effect::StribeckFriction,
+        Effect::AsymmetricFriction,
+        Effect::ConstantLoad,
     ];
 
     pub fn name(self) -> &'static str {
@@ -39,6 +50,9 @@ impl Effect {
             Effect::LinkDamping => "link_damping",
             Effect::ThermalLag => "thermal_lag",
             Effect::FrequencyDependentModulus => "frequency_dependent_modulus",
+            Effect::StribeckFriction => "stribeck_friction",
+            Effect::AsymmetricFriction => "asymmetric_friction",
+            Effect::ConstantLoad => "constant_load",
         }
     }
 
@@ -58,29 +72,52 @@ impl Effect {
             Effect::FrequencyDependentModulus => {
                 &[("stiffness_nm_per_rad", 0.5, Some(0.0)), ("ln_relaxation_time", 0.2, Some(-6.907755278982137))]
             } /* ln 1 ms */,
+            Effect::StribeckFriction => {
+                &[("torque_nm", 0.02, Some(0.0)), ("ln_velocity", 0.2, Some(-9.210340371976182))]
+            } /* ln 1e-4 rad/s */,
+            Effect::AsymmetricFriction => {
+                &[("coulomb_asymmetry_nm", 0.01, None), ("viscous_asymmetry_nms", 0.005, None)]
+            }
+            Effect::ConstantLoad => &[("torque_nm", 0.02, None)],
         }
     }
 
     pub fn apply(self, v: &[f64], e: &mut EffectValues) {
         match self {
-            Effect::CoulombFriction => e.coulomb_friction = v[0],
+            Effect::CoulombFriction => e.coulomb_friction += v[0],
             Effect::Backlash => e.backlash_width = v[0],
             Effect::Gravity => {
                 e.gravity_a = v[0];
                 e.gravity_b = v[1];
             }
-            Effect::LinkDamping => e.link_damping = v[0],
+            Effect::LinkDamping => e.link_damping += v[0],
             Effect::ThermalLag => e.thermal_lag = v[0],
             Effect::FrequencyDependentModulus => {
                 e.maxwell_stiffness = v[0];
                 e.maxwell_time = v[1].exp();
             }
+            Effect::StribeckFriction => {
+                e.stribeck_friction = v[0];
+                e.stribeck_velocity = v[1].exp();
+            }
+            Effect::AsymmetricFriction => {
+                e.coulomb_asymmetry = v[0];
+                e.viscous_asymmetry = v[1];
+            }
+            Effect::ConstantLoad => e.constant_load = v[0],
         }
     }
 
     /// Nonlinear effects switch the FMU to its adaptive solver.
     pub fn is_nonlinear(self) -> bool {
-        matches!(self, Effect::CoulombFriction | Effect::Backlash | Effect::Gravity)
+        matches!(
+            self,
+            Effect::CoulombFriction
+                | Effect::Backlash
+                | Effect::Gravity
+                | Effect::StribeckFriction
+                | Effect::AsymmetricFriction
+        )
     }
 }
 
@@ -195,7 +232,10 @@ impl ModelSpec {
             t.extend([Some(STIFFNESS_RANGE.1.ln()), Some(DAMPING_RANGE.1.ln())]);
         }
         for e in &self.effects {
-            t.extend(e.params().iter().map(|p| if p.0 == "ln_relaxation_time" { Some(10f64.ln()) } else { None }));
+            t.extend(e.params().iter().map(|p| match p.0 {
+                "ln_relaxation_time" | "ln_velocity" => Some(10f64.ln()),
+                _ => None,
+            }));
         }
         t
     }
@@ -329,8 +369,8 @@ impl<'a> Problem<'a> {
     pub fn equation_error_start(&self, law: DampingLaw, effect: Option<Effect>) -> Option<Vec<f64>> {
         let n_eff = match effect {
             None => 0,
-            Some(Effect::Gravity) => 2,
-            Some(Effect::CoulombFriction | Effect::LinkDamping) => 1,
+            Some(Effect::Gravity | Effect::AsymmetricFriction) => 2,
+            Some(Effect::CoulombFriction | Effect::LinkDamping | Effect::ConstantLoad) => 1,
             Some(_) => return None,
         };
         let cols = 2 * self.n_groups + n_eff;
@@ -367,6 +407,13 @@ impl<'a> Problem<'a> {
                     }
                     Some(Effect::CoulombFriction) => row[2 * self.n_groups] = -(v / 1e-3).tanh(),
                     Some(Effect::LinkDamping) => row[2 * self.n_groups] = -v,
+                    Some(Effect::ConstantLoad) => row[2 * self.n_groups] = 1.0,
+                    Some(Effect::AsymmetricFriction) => {
+                        // the model's −a_c s² − a_v s v with s = tanh(v/1 mm/s)
+                        let sign = (v / 1e-3).tanh();
+                        row[2 * self.n_groups] = -sign * sign;
+                        row[2 * self.n_groups + 1] = -sign * v;
+                    }
                     _ => {}
                 }
                 ata += &row * row.transpose();

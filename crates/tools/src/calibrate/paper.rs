@@ -122,20 +122,30 @@ fn with(effect: Effect, v: f64) -> EffectValues {
             e.maxwell_stiffness = v;
             e.maxwell_time = 0.1;
         }
+        Effect::StribeckFriction => {
+            e.stribeck_friction = v;
+            e.stribeck_velocity = 0.05;
+        }
+        Effect::AsymmetricFriction => e.coulomb_asymmetry = v,
+        Effect::ConstantLoad => e.constant_load = v,
     }
     e
 }
 
-/// Parameter scan range of each effect (log-spaced), SI.
-fn range(effect: Effect) -> (f64, f64, &'static str) {
-    match effect {
+/// Parameter scan range of each effect (log-spaced), SI; None for effects that cannot act alone
+/// (an asymmetry needs friction to be asymmetric) or that a symmetric sweep cannot show (a
+/// constant load shifts the centre, not the amplitude ratio the paper reports).
+fn range(effect: Effect) -> Option<(f64, f64, &'static str)> {
+    Some(match effect {
         Effect::CoulombFriction => (1e-3, 5.0, "torque_nm"),
         Effect::Backlash => (1e-4, 0.3, "width_rad"),
         Effect::Gravity => (1e-2, 10.0, "mgl_nm"),
         Effect::LinkDamping => (1e-3, 5.0, "damping_nms"),
         Effect::ThermalLag => (0.1, 10.0, "time_constant_s"),
         Effect::FrequencyDependentModulus => (1e-2, 100.0, "stiffness_nm_per_rad"),
-    }
+        Effect::StribeckFriction => (1e-3, 5.0, "torque_nm"),
+        Effect::AsymmetricFriction | Effect::ConstantLoad => return None,
+    })
 }
 
 fn summary_json(s: &Summary) -> Value {
@@ -156,7 +166,10 @@ fn scan(sim: &Simulator, temps: &[f64], freqs: &[f64], target: f64) -> Result<Sc
             rows.push(json!({"effect": effect.name(), "explains": false, "why": "runs at steady temperature: no lag can show"}));
             continue;
         }
-        let (lo, hi, pname) = range(effect);
+        let Some((lo, hi, pname)) = range(effect) else {
+            rows.push(json!({"effect": effect.name(), "explains": false, "why": "not a single-parameter effect on a symmetric sweep's amplitude ratio"}));
+            continue;
+        };
         // scan for the ratio crossing the target, then bisect in log space
         let grid: Vec<f64> = (0..=16).map(|k| lo * (hi / lo).powf(k as f64 / 16.0)).collect();
         let mut prev: Option<(f64, f64)> = None;

@@ -56,6 +56,38 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
             let lam = v[1].exp();
             vec![("stiffness_nm_per_rad", v[0], c(0, 0).sqrt()), ("relaxation_time_s", lam, lam * c(1, 1).sqrt())]
         }
+        Effect::StribeckFriction => {
+            let vs = v[1].exp();
+            vec![("torque_nm", v[0], c(0, 0).sqrt()), ("velocity", vs, vs * c(1, 1).sqrt())]
+        }
+        Effect::ConstantLoad => vec![("torque_nm", v[0], c(0, 0).sqrt())],
+        Effect::AsymmetricFriction => {
+            // the four levels of interfaces.md: the symmetric parts (Coulomb, link damping, when in
+            // the model) ± the half-differences; errors through the covariance of each sum
+            let level = |e: Effect| -> Option<usize> {
+                fit.spec
+                    .offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2)
+                    .into_iter()
+                    .find(|(_, x)| *x == e)
+                    .map(|(i, _)| i)
+            };
+            let combo = |sym: Option<usize>, asym: usize, sign: f64| {
+                let value = sym.map_or(0.0, |i| fit.p[i]) + sign * fit.p[asym];
+                let var = fit.covariance[(asym, asym)]
+                    + sym.map_or(0.0, |i| fit.covariance[(i, i)] + 2.0 * sign * fit.covariance[(i, asym)]);
+                (value, var.max(0.0).sqrt())
+            };
+            let (cp, cn) =
+                (combo(level(Effect::CoulombFriction), o, 1.0), combo(level(Effect::CoulombFriction), o, -1.0));
+            let (bp, bn) =
+                (combo(level(Effect::LinkDamping), o + 1, 1.0), combo(level(Effect::LinkDamping), o + 1, -1.0));
+            vec![
+                ("coulomb_positive", cp.0, cp.1),
+                ("coulomb_negative", cn.0, cn.1),
+                ("viscous_positive", bp.0, bp.1),
+                ("viscous_negative", bn.0, bn.1),
+            ]
+        }
     }
 }
 
@@ -166,11 +198,17 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
     let diagnosis: Vec<Value> = o.rounds.first().map_or(vec![], |r| {
         r.candidates.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence})).collect()
     });
+    // with an asymmetry in, the symmetric friction levels are part of its four levels
+    let folded = |e: Effect| {
+        o.final_fit.spec.effects.contains(&Effect::AsymmetricFriction)
+            && matches!(e, Effect::CoulombFriction | Effect::LinkDamping)
+    };
     let added: Vec<Value> = o
         .final_fit
         .spec
         .effects
         .iter()
+        .filter(|&&e| !folded(e))
         .map(|&e| {
             let ps = effect_parameters(&o.final_fit, e);
             let mut p = Map::new();

@@ -38,6 +38,12 @@ pub struct EffectValues {
     pub thermal_lag: f64,
     pub maxwell_stiffness: f64,
     pub maxwell_time: f64,
+    pub stribeck_friction: f64,
+    pub stribeck_velocity: f64,
+    pub coulomb_asymmetry: f64,
+    pub viscous_asymmetry: f64,
+    /// Constant torque on the link (the FMU's `load_torque` input, held), N·m.
+    pub constant_load: f64,
 }
 
 impl EffectValues {
@@ -142,6 +148,14 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
     if e.maxwell_time > 0.0 {
         params.push(("maxwell_relaxation_time", e.maxwell_time));
     }
+    if e.stribeck_friction > 0.0 {
+        params.push(("stribeck_friction", e.stribeck_friction));
+        params.push(("stribeck_velocity", e.stribeck_velocity));
+    }
+    if e.coulomb_asymmetry != 0.0 || e.viscous_asymmetry != 0.0 {
+        params.push(("coulomb_friction_asymmetry", e.coulomb_asymmetry));
+        params.push(("viscous_friction_asymmetry", e.viscous_asymmetry));
+    }
     if let Some(k) = m.spring_stiffness {
         params.push(("spring_stiffness", k));
     }
@@ -157,6 +171,9 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
         params.push(("link_inertia", j));
     }
     inst.initialize(input.time[0], None, &params)?;
+    if e.constant_load != 0.0 {
+        inst.set("load_torque", e.constant_load)?;
+    }
     let n = input.time.len();
     let mut out = Vec::with_capacity(n);
     out.push(input.link0);

@@ -139,6 +139,7 @@ impl SynthArgs {
             thermal_lag: self.thermal_lag,
             maxwell_stiffness: self.maxwell_stiffness,
             maxwell_time: self.maxwell_time,
+            ..EffectValues::default()
         }
     }
 
