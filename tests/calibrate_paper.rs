@@ -27,7 +27,7 @@ fn nominal_model_overshoots_and_gravity_turns_decay_positive() {
 fn paper_loop_reports_before_after_and_the_candidates() {
     let source: serde_json::Value = serde_json::from_str(paper::REPORTED_JSON).unwrap();
     let (j, md) = paper::run(&sim(), &source).unwrap();
-    assert_eq!(j["candidates"].as_array().unwrap().len(), 6);
+    assert_eq!(j["candidates"].as_array().unwrap().len(), thermovia_tools::calibrate::fit::Effect::ALL.len());
     assert!(j["baseline"]["conditions"].as_array().unwrap().len() == 4);
     assert!(j["unexplained"].is_boolean());
     // whatever the verdict, the reported "after" has positive Decay when some effect came close

@@ -309,7 +309,61 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let mut prob = fit::Problem::new(&sim, inputs, measured, group, &temperatures)?;
     let laws = damping_laws(&prob);
-    let outcome = search::calibrate(&mut prob, &laws)?;
+    let mut outcome = search::calibrate(&mut prob, &laws)?;
+    let mut notes: Vec<String> = Vec::new();
+    let held_prob = (!held.is_empty()).then(|| {
+        prob.held_out(
+            held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
+            held.iter().map(|r| r.link.clone()).collect(),
+            held_out_groups(&held, &temperatures),
+        )
+    });
+    // One frequency per temperature cannot tell viscous from hysteretic damping (identical fits,
+    // identical in-sample predictions); held-out runs at other frequencies can.
+    if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.inputs.iter().all(fit::is_sinusoidal)) {
+        let mut other = outcome.final_fit.spec.clone();
+        other.law = fit::DampingLaw::Hysteretic;
+        let sse = |spec: &fit::ModelSpec| {
+            h.outputs(spec, &outcome.final_fit.p).map_or(f64::INFINITY, |o| h.residual(&o).iter().map(|e| e * e).sum())
+        };
+        let (v, hy) = (sse(&outcome.final_fit.spec), sse(&other));
+        notes.push(format!(
+            "damping law chosen on the held-out runs (the fitting runs have one frequency per temperature): held-out SSE \
+             viscous {v:.4e}, hysteretic {hy:.4e}"
+        ));
+        if hy < v {
+            outcome.final_fit.spec.law = fit::DampingLaw::Hysteretic;
+            outcome.baseline.spec.law = fit::DampingLaw::Hysteretic;
+        }
+    }
+    // The held-out check (issue 10, item 5): on --validate runs, else on a blocked fold (fitted on
+    // the first half of every run, scored on the second). Effects stay only if they lower it.
+    let (held_base, held_final, method) = match &held_prob {
+        Some(h) => {
+            let rmse = |f: &fit::Fit| {
+                h.outputs(&f.spec, &f.p)
+                    .map(|o| (h.residual(&o).iter().map(|e| e * e).sum::<f64>() / h.n_samples() as f64).sqrt())
+                    .ok_or("the FMU could not simulate a held-out run")
+            };
+            (rmse(&outcome.baseline)?, rmse(&outcome.final_fit)?, "the --validate runs, simulated with the parameters fitted on the others")
+        }
+        None => (
+            blocked_fold_rmse(&prob, &outcome.baseline)?,
+            blocked_fold_rmse(&prob, &outcome.final_fit)?,
+            "a blocked fold: refitted on the first half of every run, scored on the second half (no --validate runs were given)",
+        ),
+    };
+    let reverted = !outcome.final_fit.spec.effects.is_empty() && held_final >= held_base;
+    if reverted {
+        notes.push(format!(
+            "the added effects ({}) did not lower the held-out error ({held_base:.4e} → {held_final:.4e} rad): they were \
+             dropped, and the final model is the baseline",
+            outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
+        ));
+        outcome.final_fit = outcome.baseline.clone();
+        outcome.final_signatures = outcome.baseline_signatures.clone();
+        outcome.unexplained = !outcome.final_signatures.white();
+    }
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
     for (j, r) in report["runs"].as_array_mut().into_iter().flatten().zip(&runs) {
@@ -318,23 +372,21 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         j["input_smoothing_s"] = serde_json::json!(smoothing_half_width(r, args.input_smoothing) as f64 * dt);
         j["inertia_declared"] = serde_json::json!(r.link_inertia.is_some());
     }
-    if held.is_empty() {
-        report["held_out"] = serde_json::json!(
-            "no held-out set was given (--validate): effects were kept on BIC and the residual's structure, and the held-out error was not estimated"
-        );
-    } else {
-        let hprob = prob.held_out(
-            held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
-            held.iter().map(|r| r.link.clone()).collect(),
-            held_out_groups(&held, &temperatures),
-        );
-        let sim_of = |f: &fit::Fit| hprob.outputs(&f.spec, &f.p).ok_or("the FMU could not simulate a held-out run");
+    report["held_out"] = serde_json::json!({
+        "method": method,
+        "baseline_rmse_rad": held_base,
+        "final_rmse_rad": if reverted { held_base } else { held_final },
+        "effects_reverted": reverted,
+        "notes": notes,
+    });
+    if let Some(h) = &held_prob {
+        let sim_of = |f: &fit::Fit| h.outputs(&f.spec, &f.p).ok_or("the FMU could not simulate a held-out run");
         let (b, f) = (sim_of(&outcome.baseline)?, sim_of(&outcome.final_fit)?);
         report["validation"] = serde_json::json!({
             "runs": held.iter().map(|r| serde_json::json!({"file": r.name(), "temperature_c": r.mean_temperature_c(),
                 "frequency_hz": r.frequency_hz, "samples": r.time.len()})).collect::<Vec<_>>(),
-            "baseline": report::held_out_metrics(&hprob.measured, &b),
-            "final": report::held_out_metrics(&hprob.measured, &f),
+            "baseline": report::held_out_metrics(&h.measured, &b),
+            "final": report::held_out_metrics(&h.measured, &f),
         });
     }
     report["warnings"] = serde_json::json!(device_warnings(&runs, &report));
@@ -346,6 +398,36 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         files.extend(report::plots(&runs, &prob, &outcome)?);
     }
     Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
+}
+
+/// RMSE on the second half of every run of the model refitted (from `fit`) on the first halves:
+/// a blocked fold that respects time (the second half is predicted by simulating on from the
+/// start, never fitted).
+fn blocked_fold_rmse(prob: &fit::Problem, fit: &fit::Fit) -> Result<f64, String> {
+    let half = |v: &[f64]| v[..v.len() / 2].to_vec();
+    let first = prob.held_out(
+        prob.inputs
+            .iter()
+            .map(|i| sim::SimInput {
+                time: half(&i.time),
+                motor: half(&i.motor),
+                housing_k: half(&i.housing_k),
+                ..i.clone()
+            })
+            .collect(),
+        prob.measured.iter().map(|m| half(m)).collect(),
+        prob.group.clone(),
+    );
+    let refit = fit::levenberg_marquardt(&first, fit.spec.clone(), fit.p.clone(), search::MAX_ITERATIONS)?;
+    let out = prob.outputs(&refit.spec, &refit.p).ok_or("the FMU could not simulate the blocked fold")?;
+    let (mut sse, mut n) = (0.0, 0usize);
+    for (y, m) in prob.measured.iter().zip(&out) {
+        for k in y.len() / 2..y.len() {
+            sse += (y[k] - m[k]).powi(2);
+            n += 1;
+        }
+    }
+    Ok((sse / n.max(1) as f64).sqrt())
 }
 
 /// Frequencies closer than this (relative) are one frequency.
@@ -392,7 +474,7 @@ fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
         vec![Scaled]
     };
     let allowed = laws.iter().flat_map(|&l| banks.iter().map(move |&b| (l, b))).collect();
-    search::LawChoice { allowed, reason }
+    search::LawChoice { allowed, reason, undecided: sinusoidal && !two_frequencies }
 }
 
 /// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default

@@ -294,16 +294,25 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     }
     if let Some(v) = j.get("validation") {
         s += &format!(
-            "\nHeld-out runs ({}), simulated with the parameters fitted above (reported, not used to select effects): \
-             RMSE {:.3e} → {:.3e} rad, relerr {:.4} → {:.4} %.\n",
+            "\nHeld-out runs ({}), simulated with the parameters fitted above: RMSE {:.3e} → {:.3e} rad, relerr \
+             {:.4} → {:.4} %.\n",
             v["runs"].as_array().map_or(0, Vec::len),
             v["baseline"]["rmse_rad"].as_f64().unwrap_or(f64::NAN),
             v["final"]["rmse_rad"].as_f64().unwrap_or(f64::NAN),
             v["baseline"]["relerr_percent"].as_f64().unwrap_or(f64::NAN),
             v["final"]["relerr_percent"].as_f64().unwrap_or(f64::NAN)
         );
-    } else if let Some(h) = j["held_out"].as_str() {
-        s += &format!("\n{h}.\n");
+    }
+    if let Some(h) = j["held_out"].as_object() {
+        s += &format!(
+            "\n**Held-out error** ({}): baseline {:.3e} rad → final {:.3e} rad. An effect stays only if it lowers it.\n",
+            h["method"].as_str().unwrap_or(""),
+            h["baseline_rmse_rad"].as_f64().unwrap_or(f64::NAN),
+            h["final_rmse_rad"].as_f64().unwrap_or(f64::NAN)
+        );
+        for n in h["notes"].as_array().into_iter().flatten() {
+            s += &format!("- {}\n", n.as_str().unwrap_or_default());
+        }
     }
     s += "\n## Chain of evidence\n\n";
     for (i, r) in o.rounds.iter().enumerate() {

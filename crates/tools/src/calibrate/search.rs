@@ -88,6 +88,9 @@ pub type Structure = (DampingLaw, SpringBank);
 pub struct LawChoice {
     pub allowed: Vec<Structure>,
     pub reason: String,
+    /// Sinusoidal runs at one frequency per temperature: the laws fit alike, held-out runs at
+    /// other frequencies may decide.
+    pub undecided: bool,
 }
 
 /// The same effects under the other allowed laws, refitted from `fit`'s values: the better law by
