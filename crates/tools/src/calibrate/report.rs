@@ -354,9 +354,11 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     }
     s += &identified_markdown(j);
     s += &format!(
-        "\n## Residual\n\n{}\n\nunexplained: **{}**\n\n",
+        "\n## Residual\n\n{}\n\nAgainst a flexible reference fitted to the same runs: {}.\n\nunexplained: **{}** ({})\n\n",
         remaining_structure(&o.final_signatures),
-        o.unexplained
+        j["reference"]["words"].as_str().unwrap_or("no reference computed"),
+        o.unexplained,
+        j["reference"]["rule"].as_str().unwrap_or("")
     );
     s += "Plots: `plots/fit_*.svg` (measured vs model before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
     s
