@@ -459,6 +459,32 @@ impl Model {
         let c = self.coefficients();
         mechanics::transmission(&self.params, &c, &self.mechanics).0
     }
+    /// Whether [`Model::transmitted_torque`] is finite, without evaluating the moduli where a bound
+    /// settles it: the log-linear moduli never leave the range of the material table's rows, so
+    /// |τ| ≤ (K_s r_s² + max E'·κ r_p² + K_M)(|Δ| + b/2) + max C·|Δ'| + K_M |q|; when that bound is
+    /// finite (below 1e300) so is τ, otherwise τ itself is evaluated. Used after every step (an
+    /// FMU must not return a non-finite output), where evaluating the moduli at a PCL temperature
+    /// that moves every step cost more than the exact heating step itself.
+    pub fn transmitted_torque_is_finite(&mut self) -> bool {
+        if self.params.transmission == Transmission::Compliant {
+            let p = &self.params;
+            let (e1, e2) = p.material_table.rows_kpa();
+            let max = |v: [f64; 4]| v.iter().fold(0.0_f64, |a, x| a.max(x.abs())) * 1e3;
+            let kappa = p.modulus_to_torsion().abs();
+            let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
+            let km = p.maxwell_stiffness.abs();
+            let k = p.spring_torsional_stiffness().abs() + max(e1) * p.storage_modulus_scale.abs() * kappa + km;
+            let c = max(e2) * p.loss_modulus_scale.abs() * kappa / omega.abs();
+            let x = &self.mechanics;
+            let delta = (x[mechanics::MOTOR_ANGLE] - x[mechanics::LINK_ANGLE]).abs() + 0.5 * p.backlash_width.abs();
+            let rate = (x[mechanics::MOTOR_SPEED] - x[mechanics::LINK_SPEED]).abs();
+            let bound = k * delta + c * rate + km * x[mechanics::MAXWELL_DEFLECTION].abs();
+            if bound < 1e300 {
+                return true;
+            }
+        }
+        self.transmitted_torque().is_finite()
+    }
     pub fn effective_stiffness(&mut self) -> f64 {
         let c = self.coefficients();
         c.effective(&self.params).0

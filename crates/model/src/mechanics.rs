@@ -532,16 +532,21 @@ impl<N: Tabulated> PropagatorTable<N> {
             -s * (s - 1.0) * (s - 3.0) / 2.0,
             s * (s - 1.0) * (s - 2.0) / 6.0,
         ];
-        for n in j..j + 4 {
-            self.node(p, n);
+        if self.nodes[j..j + 4].iter().any(Option::is_none) {
+            for n in j..j + 4 {
+                self.node(p, n);
+            }
         }
         let node = |d: usize| match &self.nodes[j + d] {
             Some(n) => n.values(),
             None => unreachable!("built above"),
         };
-        let (n0, n1, n2, n3) = (node(0), node(1), node(2), node(3));
-        for ((((o, a), b), c), d) in out.values_mut().iter_mut().zip(n0).zip(n1).zip(n2).zip(n3) {
-            *o = w[0] * a + w[1] * b + w[2] * c + w[3] * d;
+        let out = out.values_mut();
+        let n = out.len();
+        // Equal lengths up front, so the loop below has no bounds checks and vectorises.
+        let (n0, n1, n2, n3) = (&node(0)[..n], &node(1)[..n], &node(2)[..n], &node(3)[..n]);
+        for i in 0..n {
+            out[i] = w[0] * n0[i] + w[1] * n1[i] + w[2] * n2[i] + w[3] * n3[i];
         }
     }
 }

@@ -173,13 +173,24 @@ impl Inversion {
         Inversion { t0, h0, inv_slope, c2: -r2, c3: 2.0 * r2 * r2 - d3 * inv_slope * (1.0 / 6.0) }
     }
 
+    #[cfg(test)]
     fn temperature(&self, p: &Params, enthalpy: f64) -> f64 {
-        let a = (enthalpy - self.h0) * self.inv_slope;
+        self.temperature_at(p, (enthalpy - self.h0) * self.inv_slope)
+    }
+
+    /// h⁻¹ at the enthalpy h0 + a·h'(T0) (a in K).
+    #[inline]
+    fn temperature_at(&self, p: &Params, a: f64) -> f64 {
         if a.abs() <= SERIES_LIMIT {
             self.t0 + a * (1.0 + a * (self.c2 + a * self.c3))
         } else {
-            pcl_temperature_from_enthalpy(p, enthalpy, self.t0 + a)
+            self.newton(p, a)
         }
+    }
+
+    #[inline(never)]
+    fn newton(&self, p: &Params, a: f64) -> f64 {
+        pcl_temperature_from_enthalpy(p, self.h0 + a / self.inv_slope, self.t0 + a)
     }
 }
 
@@ -217,31 +228,32 @@ impl ThermalState {
             // Exact equilibrium: every flux is zero, so the Runge–Kutta step would change nothing.
             return;
         }
-        // flux(T_h, H_p) -> (into housing, into PCL, lost), W
+        // Classical Runge–Kutta on (T_h, H_p). The PCL temperature at a stage comes from the
+        // inverse series about the step's start temperature: with x the stage's enthalpy offset
+        // from the stored H_p, T_p = h⁻¹(H_p + x), whose series argument is base + x/h'.
         let inversion = Inversion::at(&EnthalpyCurve::new(p), self.pcl_temperature);
-        let flux = |t_h: f64, h_p: f64| {
-            let t_p = if h_p == self.pcl_enthalpy { self.pcl_temperature } else { inversion.temperature(p, h_p) };
-            let to_pcl = p.heater_pcl_conductance * (t_h - t_p);
-            let lost = p.housing_ambient_conductance * (t_h - u.ambient_temperature);
-            (u.heater_power - to_pcl - lost, to_pcl, lost)
-        };
-        let c = p.housing_heat_capacity;
-        let (t0, h0) = (self.housing_temperature, self.pcl_enthalpy);
-        let k1 = flux(t0, h0);
-        let k2 = flux(t0 + 0.5 * h * k1.0 / c, h0 + 0.5 * h * k1.1);
-        let k3 = flux(t0 + 0.5 * h * k2.0 / c, h0 + 0.5 * h * k2.1);
-        let k4 = flux(t0 + h * k3.0 / c, h0 + h * k3.1);
-        let avg = |a: f64, b: f64, c2: f64, d: f64| (a + 2.0 * b + 2.0 * c2 + d) / 6.0;
-        let housing = avg(k1.0, k2.0, k3.0, k4.0);
-        let pcl = avg(k1.1, k2.1, k3.1, k4.1);
-        let lost = avg(k1.2, k2.2, k3.2, k4.2);
-        self.housing_temperature = t0 + h * housing / c;
-        let new_enthalpy = h0 + h * pcl;
+        let base = (self.pcl_enthalpy - inversion.h0) * inversion.inv_slope;
+        let pcl_at = |offset: f64| inversion.temperature_at(p, base + offset * inversion.inv_slope);
+        let (g_hp, g_ha) = (p.heater_pcl_conductance, p.housing_ambient_conductance);
+        let (power, ambient) = (u.heater_power, u.ambient_temperature);
+        let hc = h / p.housing_heat_capacity;
+        let t0 = self.housing_temperature;
+        // Stage fluxes (into the PCL, lost to ambient), W; the housing gets P minus both.
+        let flux = |t_h: f64, t_p: f64| (g_hp * (t_h - t_p), g_ha * (t_h - ambient));
+        let (p1, l1) = flux(t0, self.pcl_temperature);
+        let (p2, l2) = flux(t0 + 0.5 * hc * (power - p1 - l1), pcl_at(0.5 * h * p1));
+        let (p3, l3) = flux(t0 + 0.5 * hc * (power - p2 - l2), pcl_at(0.5 * h * p2));
+        let (p4, l4) = flux(t0 + hc * (power - p3 - l3), pcl_at(h * p3));
+        const SIXTH: f64 = 1.0 / 6.0;
+        let pcl = SIXTH * (p1 + 2.0 * (p2 + p3) + p4);
+        let lost = SIXTH * (l1 + 2.0 * (l2 + l3) + l4);
+        self.housing_temperature = t0 + hc * (power - pcl - lost);
+        let new_enthalpy = self.pcl_enthalpy + h * pcl;
         if new_enthalpy != self.pcl_enthalpy {
-            self.pcl_temperature = inversion.temperature(p, new_enthalpy);
+            self.pcl_temperature = pcl_at(new_enthalpy - self.pcl_enthalpy);
             self.pcl_enthalpy = new_enthalpy;
         }
-        self.heater_energy += h * u.heater_power;
+        self.heater_energy += h * power;
         self.heat_lost += h * lost;
     }
 
