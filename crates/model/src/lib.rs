@@ -10,7 +10,7 @@ pub mod thermal;
 
 use std::sync::Arc;
 
-use mechanics::{Coefficients, Drive, EtdStep, LinearStep, PropagatorTable, State};
+use mechanics::{Coefficients, Contact, Coupling, Drive, EtdStep, LinearStep, PropagatorTable, State};
 pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
@@ -124,6 +124,11 @@ pub struct Model {
     etd_tables: Vec<Arc<PropagatorTable<EtdStep>>>,
     /// The last coefficients used at each sub-step length: (PCL temperature, length, step).
     etd_steps: Vec<(f64, f64, EtdStep)>,
+    /// Exact steps of the backlash's free and clipped states (no transmission torque, so no
+    /// dependence on the PCL temperature): (length, coupling, step).
+    contact_steps: Vec<(f64, Coupling, LinearStep)>,
+    /// Exponential Runge–Kutta coefficients of those states: (length, coupling, step).
+    contact_etd: Vec<(f64, Coupling, EtdStep)>,
 }
 
 impl PartialEq for Model {
@@ -156,6 +161,8 @@ impl Model {
             linear_step: None,
             etd_tables: Vec::new(),
             etd_steps: Vec::new(),
+            contact_steps: Vec::new(),
+            contact_etd: Vec::new(),
         };
         m.initialize();
         m
@@ -172,6 +179,8 @@ impl Model {
         self.linear_step = None;
         self.etd_tables.clear();
         self.etd_steps.clear();
+        self.contact_steps.clear();
+        self.contact_etd.clear();
         &mut self.params
     }
 
@@ -269,13 +278,112 @@ impl Model {
         i
     }
 
+    /// Index in `contact_steps` of the exact step of length `len` for the backlash state `coupling`.
+    fn contact_step(&mut self, len: f64, coupling: Coupling) -> usize {
+        if let Some(i) = self.contact_steps.iter().position(|(l, c, _)| *l == len && *c == coupling) {
+            return i;
+        }
+        if self.contact_steps.len() >= 8 {
+            self.contact_steps.remove(0);
+        }
+        let step = LinearStep::with(&self.params, &Coefficients::ZERO, len, coupling);
+        self.contact_steps.push((len, coupling, step));
+        self.contact_steps.len() - 1
+    }
+
+    /// Index in `contact_etd` of the exponential Runge–Kutta coefficients of length `len` for the
+    /// backlash state `coupling`.
+    fn contact_etd(&mut self, len: f64, coupling: Coupling) -> usize {
+        if let Some(i) = self.contact_etd.iter().position(|(l, c, _)| *l == len && *c == coupling) {
+            return i;
+        }
+        if self.contact_etd.len() >= 4 * (MAX_ETD_LEVEL as usize + 1) {
+            self.contact_etd.remove(0);
+        }
+        let step = EtdStep::with(&self.params, &Coefficients::ZERO, len, coupling);
+        self.contact_etd.push((len, coupling, step));
+        self.contact_etd.len() - 1
+    }
+
+    /// One sub-step of length `key` (plus the sliver hs − key to first order) with backlash and
+    /// otherwise linear mechanics: exact between contact events, by the propagator of the contact
+    /// state the step starts in (in coordinates shifted by the play, see [`Contact`]). False,
+    /// state unchanged, when the step may hold an event: its end is in another state, or the
+    /// trajectory may have touched an edge and come back ([`mechanics::may_leave`]); the caller then
+    /// integrates through it.
+    fn advance_contact_linear(&mut self, t: f64, key: f64, hs: f64, u: &Drive) -> bool {
+        let x = self.mechanics;
+        let (mode, c) = if mechanics::in_play(&self.params, &x) {
+            (Contact::Free, Coefficients::ZERO)
+        } else {
+            self.prepare_linear_step(t, key);
+            let c = self.linear_step.as_ref().expect("prepared").2.coefficients();
+            (mechanics::contact(&self.params, &c, &x), c)
+        };
+        let offset = mode.offset(&self.params);
+        let mut shifted = x;
+        shifted[mechanics::MOTOR_ANGLE] -= offset;
+        let mut y = match mode {
+            Contact::Engaged { .. } => self.linear_step.as_ref().expect("prepared").2.apply(&shifted, u),
+            _ => {
+                let i = self.contact_step(key, mode.coupling());
+                self.contact_steps[i].2.apply(&shifted, u)
+            }
+        };
+        y[mechanics::MOTOR_ANGLE] += offset;
+        let p = &self.params;
+        let same = match mode {
+            Contact::Free => mechanics::in_play(p, &y),
+            _ => mechanics::contact(p, &c, &y) == mode,
+        };
+        if !same {
+            return false;
+        }
+        let leaves = match mode {
+            Contact::Free => mechanics::may_leave(p, &c, mode, (&x, &x), (&y, &y), hs),
+            _ => {
+                let (r0, r1) = (mechanics::derivative(p, &c, &x, u), mechanics::derivative(p, &c, &y, u));
+                mechanics::may_leave(p, &c, mode, (&x, &r0), (&y, &r1), hs)
+            }
+        };
+        if leaves {
+            return false;
+        }
+        if hs != key {
+            y += mechanics::derivative(p, &c, &y, u) * (hs - key);
+        }
+        self.mechanics = y;
+        true
+    }
+
+    /// The backlash's contact state at the start of a sub-step and the moduli it was classified
+    /// with (the exponential Runge–Kutta coefficients' at `t`; none needed inside the play).
+    fn contact_at_start(&mut self, t: f64, key: f64) -> (Contact, Coefficients) {
+        if mechanics::in_play(&self.params, &self.mechanics) {
+            return (Contact::Free, Coefficients::ZERO);
+        }
+        let i = self.prepare_etd(t, key);
+        let c = self.etd_steps[i].2.coefficients();
+        (mechanics::contact(&self.params, &c, &self.mechanics), c)
+    }
+
     /// Advances the mechanics over one sub-step of length `key` by exponential Runge–Kutta
     /// steps of key/2^level, the level adapted by the embedded error estimate (kept in
     /// `adaptive_step` as the last accepted length); returns the transmission coefficients at `t`.
     /// None (state unchanged) when even key/2^MAX_ETD_LEVEL fails the tolerance.
     /// Every attempted step costs one of `attempts_left` (the step's work budget, shared with
     /// Dormand–Prince); None when the budget or the finest level runs out.
-    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive, attempts_left: &mut u64) -> Option<Coefficients> {
+    /// With backlash, `contact` is the state the sub-step starts in and the moduli it was
+    /// classified with: the steps are those of that state, and None also when a step may hold a
+    /// contact event (as in [`Model::advance_contact_linear`]).
+    fn advance_exponential(
+        &mut self,
+        t: f64,
+        key: f64,
+        u: &Drive,
+        attempts_left: &mut u64,
+        contact: Option<(Contact, Coefficients)>,
+    ) -> Option<Coefficients> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
         let mut level = if self.adaptive_step > 0.0 {
             ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
@@ -285,16 +393,54 @@ impl Model {
         let mut x = self.mechanics;
         let mut pos = 0u64;
         let mut coefficients = Coefficients::ZERO;
+        let (offset, coupling) = match contact {
+            Some((mode, _)) => (mode.offset(&self.params), mode.coupling()),
+            None => (0.0, Coupling::Engaged),
+        };
+        // The rate at x (for the contact events' slopes), carried from one accepted step to the next.
+        let mut rate: Option<State> = None;
         while pos < full {
             if *attempts_left == 0 {
                 return None;
             }
             *attempts_left -= 1;
             let len = key / (1u64 << level) as f64;
-            let i = self.prepare_etd(t, len);
-            coefficients = self.etd_steps[i].2.coefficients();
-            let (x_new, err) = self.etd_steps[i].2.step(&self.params, &x, u);
+            let mut shifted = x;
+            shifted[mechanics::MOTOR_ANGLE] -= offset;
+            let (mut x_new, err) = if coupling == Coupling::Engaged {
+                let i = self.prepare_etd(t, len);
+                coefficients = self.etd_steps[i].2.coefficients();
+                self.etd_steps[i].2.step(&self.params, &shifted, u)
+            } else {
+                let i = self.contact_etd(len, coupling);
+                self.contact_etd[i].2.step(&self.params, &shifted, u)
+            };
+            x_new[mechanics::MOTOR_ANGLE] += offset;
             if err <= 1.0 {
+                if let Some((mode, c)) = contact {
+                    let p = &self.params;
+                    match mode {
+                        Contact::Free => {
+                            if !mechanics::in_play(p, &x_new)
+                                || mechanics::may_leave(p, &c, mode, (&x, &x), (&x_new, &x_new), len)
+                            {
+                                return None;
+                            }
+                        }
+                        _ => {
+                            if mechanics::contact(p, &c, &x_new) != mode {
+                                return None;
+                            }
+                            let r0 = rate.unwrap_or_else(|| mechanics::derivative(p, &c, &x, u));
+                            let r1 = mechanics::derivative(p, &c, &x_new, u);
+                            if mechanics::may_leave(p, &c, mode, (&x, &r0), (&x_new, &r1), len) {
+                                return None;
+                            }
+                            rate = Some(r1);
+                        }
+                    }
+                    coefficients = c;
+                }
                 x = x_new;
                 pos += full >> level;
                 // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
@@ -355,11 +501,21 @@ impl Model {
                 self.mechanics = x;
                 continue;
             }
-            if self.params.backlash_width == 0.0 && self.params.transmission == Transmission::Compliant {
-                // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
-                // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below).
+            let compliant = self.params.transmission == Transmission::Compliant;
+            let backlash = self.params.backlash_width > 0.0;
+            if compliant && backlash && self.params.link_torque_is_linear() {
+                // Backlash alone: exact steps between contact events.
                 let key = self.step_keys.key(hs);
-                if let Some(c) = self.advance_exponential(t_mid, key, &drive, &mut attempts_left) {
+                if self.advance_contact_linear(t_mid, key, hs, &drive) {
+                    continue;
+                }
+            } else if compliant && (backlash || self.params.backlash_width == 0.0) {
+                // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
+                // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below),
+                // with backlash that of the contact state the step starts in.
+                let key = self.step_keys.key(hs);
+                let contact = if backlash { Some(self.contact_at_start(t_mid, key)) } else { None };
+                if let Some(c) = self.advance_exponential(t_mid, key, &drive, &mut attempts_left, contact) {
                     if hs != key {
                         let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
                         self.mechanics += rate * (hs - key);

@@ -82,9 +82,36 @@ pub struct Propagator {
     pub gamma: SMatrix<f64, N_STATE, 2>,
 }
 
+/// How the transmission couples motor and link over a stretch of time: engaged (springs, PCL and
+/// Maxwell branch, the nominal model), or, with backlash, free inside the play or clipped at its
+/// edge (the spring–damper would pull). In every case the mechanics is linear; with backlash the
+/// engaged and clipped states are linear in coordinates shifted by the play's half-width on θm
+/// (see [`Contact`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coupling {
+    Engaged,
+    /// No torque; the Maxwell branch relaxes (q' = −q/λ).
+    Free,
+    /// No torque; the Maxwell branch follows the deflection beyond the play (q' = (Δ̃ − q)/λ).
+    Clipped,
+}
+
 /// A and B of the linear system (valid when `Params::mechanics_is_linear`).
 pub fn linear_system(p: &Params, c: &Coefficients) -> (SMatrix<f64, N_STATE, N_STATE>, SMatrix<f64, N_STATE, 2>) {
-    let (k, d, km, lam) = (c.stiffness, c.damping, p.maxwell_stiffness, p.maxwell_relaxation_time);
+    linear_system_with(p, c, Coupling::Engaged)
+}
+
+/// A and B of the mechanics with the transmission coupled as `coupling` (free and clipped: the
+/// link torque alone, without the transmission's).
+pub fn linear_system_with(
+    p: &Params,
+    c: &Coefficients,
+    coupling: Coupling,
+) -> (SMatrix<f64, N_STATE, N_STATE>, SMatrix<f64, N_STATE, 2>) {
+    let (k, d, km, lam) = match coupling {
+        Coupling::Engaged => (c.stiffness, c.damping, p.maxwell_stiffness, p.maxwell_relaxation_time),
+        Coupling::Free | Coupling::Clipped => (0.0, 0.0, 0.0, p.maxwell_relaxation_time),
+    };
     let mut a = SMatrix::<f64, N_STATE, N_STATE>::zeros();
     let mut b = SMatrix::<f64, N_STATE, 2>::zeros();
     if p.transmission == Transmission::Rigid {
@@ -118,15 +145,21 @@ pub fn linear_system(p: &Params, c: &Coefficients) -> (SMatrix<f64, N_STATE, N_S
     }
     a[(LINK_SPEED, LINK_SPEED)] -= p.link_damping / p.link_inertia;
     b[(LINK_SPEED, 1)] = 1.0 / p.link_inertia;
-    a[(MAXWELL_DEFLECTION, MOTOR_ANGLE)] = 1.0 / lam;
-    a[(MAXWELL_DEFLECTION, LINK_ANGLE)] = -1.0 / lam;
+    if coupling != Coupling::Free {
+        a[(MAXWELL_DEFLECTION, MOTOR_ANGLE)] = 1.0 / lam;
+        a[(MAXWELL_DEFLECTION, LINK_ANGLE)] = -1.0 / lam;
+    }
     a[(MAXWELL_DEFLECTION, MAXWELL_DEFLECTION)] = -1.0 / lam;
     (a, b)
 }
 
 impl Propagator {
     pub fn new(p: &Params, c: &Coefficients, h: f64) -> Self {
-        let (a, b) = linear_system(p, c);
+        Propagator::with(p, c, h, Coupling::Engaged)
+    }
+
+    pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
+        let (a, b) = linear_system_with(p, c, coupling);
         let mut m = SMatrix::<f64, N_AUG, N_AUG>::zeros();
         m.fixed_view_mut::<N_STATE, N_STATE>(0, 0).copy_from(&(a * h));
         m.fixed_view_mut::<N_STATE, 2>(0, N_STATE).copy_from(&(b * h));
@@ -229,7 +262,11 @@ impl LinearStep {
     pub const ZERO: LinearStep = LinearStep { v: [0.0; N_NODE] };
 
     pub fn new(p: &Params, c: &Coefficients, h: f64) -> Self {
-        let pr = Propagator::new(p, c, h);
+        LinearStep::with(p, c, h, Coupling::Engaged)
+    }
+
+    pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
+        let pr = Propagator::with(p, c, h, coupling);
         let mut v = [0.0; N_NODE];
         for i in 0..N_STATE {
             for j in 0..N_STATE {
@@ -320,7 +357,20 @@ fn phi_blocks(
 
 impl Tabulated for EtdStep {
     fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
-        let (a, b) = linear_system(p, c);
+        EtdStep::with(p, c, h, Coupling::Engaged)
+    }
+    fn values(&self) -> &[f64] {
+        &self.v
+    }
+    fn values_mut(&mut self) -> &mut [f64] {
+        &mut self.v
+    }
+}
+
+impl EtdStep {
+    /// The step for the mechanics coupled as `coupling`.
+    pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
+        let (a, b) = linear_system_with(p, c, coupling);
         let link = 1.0 / p.link_inertia;
         let full = phi_blocks(&a, &b, link, h);
         let half = phi_blocks(&a, &b, link, 0.5 * h);
@@ -345,12 +395,6 @@ impl Tabulated for EtdStep {
         v[COEFFS + 1] = c.damping;
         v[LENGTH] = h;
         EtdStep { v }
-    }
-    fn values(&self) -> &[f64] {
-        &self.v
-    }
-    fn values_mut(&mut self) -> &mut [f64] {
-        &mut self.v
     }
 }
 
@@ -576,6 +620,141 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     (tau, (engaged - q) / lam)
 }
 
+/// The backlash's state at x (ElastoBacklash, as [`transmission`] computes it): free inside the
+/// play (|Δ| ≤ b/2), engaged beyond it while the spring–damper pushes (τ ≥ 0 on the positive side,
+/// ≤ 0 on the negative), clipped while it would pull. Engaged and clipped are linear in
+/// x̃ = x − [`Contact::offset`]·e_θm (Δ̃ = Δ ∓ b/2 is then θ̃m − θl), so between contact events a
+/// step is exact: the engaged propagator, or the free or clipped one, applied to x̃.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Contact {
+    Free,
+    Engaged { positive: bool },
+    Clipped { positive: bool },
+}
+
+impl Contact {
+    /// The shift of θm that makes the state linear: ±b/2 beyond the play, 0 inside it.
+    pub fn offset(self, p: &Params) -> f64 {
+        match self {
+            Contact::Free => 0.0,
+            Contact::Engaged { positive } | Contact::Clipped { positive } => {
+                if positive {
+                    0.5 * p.backlash_width
+                } else {
+                    -0.5 * p.backlash_width
+                }
+            }
+        }
+    }
+
+    pub fn coupling(self) -> Coupling {
+        match self {
+            Contact::Free => Coupling::Free,
+            Contact::Engaged { .. } => Coupling::Engaged,
+            Contact::Clipped { .. } => Coupling::Clipped,
+        }
+    }
+}
+
+/// Whether x lies inside the backlash's play (the transmission passes no torque, whatever the
+/// moduli).
+pub fn in_play(p: &Params, x: &State) -> bool {
+    (x[MOTOR_ANGLE] - x[LINK_ANGLE]).abs() <= 0.5 * p.backlash_width
+}
+
+/// The deflection beyond the play Δ̃ and the unclipped transmission torque there (for x outside
+/// the play).
+fn engaged_torque(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
+    let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
+    let half = 0.5 * p.backlash_width;
+    let engaged = if delta > half { delta - half } else { delta + half };
+    let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
+    let tau = c.stiffness * engaged + c.damping * rate + p.maxwell_stiffness * (engaged - x[MAXWELL_DEFLECTION]);
+    (engaged, tau)
+}
+
+/// The backlash's [`Contact`] state at x with the moduli `c` (`backlash_width` > 0).
+pub fn contact(p: &Params, c: &Coefficients, x: &State) -> Contact {
+    if in_play(p, x) {
+        return Contact::Free;
+    }
+    let (engaged, tau) = engaged_torque(p, c, x);
+    let positive = engaged > 0.0;
+    // transmission(): τ.max(0) on the positive side, τ.min(0) on the negative.
+    let pushes = if positive { tau >= 0.0 } else { tau <= 0.0 };
+    if pushes {
+        Contact::Engaged { positive }
+    } else {
+        Contact::Clipped { positive }
+    }
+}
+
+/// Whether a step from x0 to x1 (length h, both in the contact state `mode`; each with its rate
+/// r from [`derivative`], needed beyond the play only) may have left `mode` and come back within it: the functions whose sign changes
+/// mark contact events (Δ ∓ b/2 at the play's edges; the unclipped torque beyond them), checked on
+/// the cubic Hermite interpolant of their end values and slopes. A trajectory grazing the edge of
+/// the play inside one step is invisible at its ends; the caller then integrates the step
+/// through the event instead. Conservative: an interior minimum within 1e-3 of the slopes' scale
+/// of zero counts (the interpolant is exact for cubics; its error is O(h⁴), ~1e-6 of that scale at
+/// 1 ms and the transmission's ~10 Hz).
+pub fn may_leave(
+    p: &Params,
+    c: &Coefficients,
+    mode: Contact,
+    (x0, r0): (&State, &State),
+    (x1, r1): (&State, &State),
+    h: f64,
+) -> bool {
+    let rate = |x: &State| x[MOTOR_SPEED] - x[LINK_SPEED];
+    let accel = |r: &State| r[MOTOR_SPEED] - r[LINK_SPEED];
+    let half = 0.5 * p.backlash_width;
+    let (d0, d1) = (x0[MOTOR_ANGLE] - x0[LINK_ANGLE], x1[MOTOR_ANGLE] - x1[LINK_ANGLE]);
+    let (v0, v1) = (rate(x0), rate(x1));
+    match mode {
+        Contact::Free => {
+            hermite_dips(half - d0, -h * v0, half - d1, -h * v1) || hermite_dips(half + d0, h * v0, half + d1, h * v1)
+        }
+        Contact::Engaged { positive } | Contact::Clipped { positive } => {
+            let s = if positive { 1.0 } else { -1.0 };
+            let off = s * half;
+            if hermite_dips(s * (d0 - off), s * h * v0, s * (d1 - off), s * h * v1) {
+                return true;
+            }
+            let (_, t0) = engaged_torque(p, c, x0);
+            let (_, t1) = engaged_torque(p, c, x1);
+            let km = p.maxwell_stiffness;
+            let slope =
+                |x: &State, r: &State| (c.stiffness + km) * rate(x) + c.damping * accel(r) - km * r[MAXWELL_DEFLECTION];
+            // inside: s·τ ≥ 0 engaged, s·τ < 0 clipped
+            let g = if matches!(mode, Contact::Engaged { .. }) { s } else { -s };
+            hermite_dips(g * t0, g * h * slope(x0, r0), g * t1, g * h * slope(x1, r1))
+        }
+    }
+}
+
+/// Whether the cubic p on [0, 1] with p(0) = g0 ≥ 0, p'(0) = m0, p(1) = g1 ≥ 0, p'(1) = m1 has an
+/// interior minimum below 1e-3·(|m0| + |m1|).
+fn hermite_dips(g0: f64, m0: f64, g1: f64, m1: f64) -> bool {
+    if m0 >= 0.0 && m1 <= 0.0 {
+        return false; // at most a maximum inside
+    }
+    // p(s) = g0 + m0 s + b s² + c s³
+    let b = 3.0 * (g1 - g0) - 2.0 * m0 - m1;
+    let c = 2.0 * (g0 - g1) + m0 + m1;
+    let margin = 1e-3 * (m0.abs() + m1.abs());
+    let low = |s: f64| s > 0.0 && s < 1.0 && g0 + s * (m0 + s * (b + s * c)) < margin;
+    // p'(s) = m0 + 2 b s + 3 c s²
+    if c == 0.0 {
+        return b != 0.0 && low(-m0 / (2.0 * b));
+    }
+    let disc = b * b - 3.0 * c * m0;
+    if disc < 0.0 {
+        return false;
+    }
+    let r = disc.sqrt();
+    low((-b + r) / (3.0 * c)) || low((-b - r) / (3.0 * c))
+}
+
 /// Link friction: Coulomb plus a Stribeck excess that fades above `stribeck_velocity`, with sign
 /// smoothed by tanh over `friction_smoothing_velocity` (keeps the ODE Lipschitz).
 /// Asymmetric friction (`coulomb_friction_asymmetry` a_c, `viscous_friction_asymmetry` a_v) adds
@@ -720,6 +899,43 @@ mod tests {
         for (t, n) in TABLE_TEMPERATURES_C.iter().zip(ROW_NODES) {
             assert_eq!(node_celsius(n), *t);
         }
+    }
+
+    #[test]
+    fn hermite_dips_finds_interior_minima_only() {
+        // p = 1 − 5s + 5s²: minimum −0.25 at s = ½
+        assert!(hermite_dips(1.0, -5.0, 1.0, 5.0));
+        // p = 1 − 2.5s + 2.5s²: minimum 0.375
+        assert!(!hermite_dips(1.0, -2.5, 1.0, 2.5));
+        // monotone, and a maximum only
+        assert!(!hermite_dips(1.0, -0.5, 0.5, -0.5));
+        assert!(!hermite_dips(0.0, 1.0, 0.0, -1.0));
+    }
+
+    #[test]
+    fn contact_states_follow_the_transmission() {
+        let p = Params { backlash_width: 0.01, ..Params::default() };
+        let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + 22.0);
+        let x = |delta: f64, rate: f64| State::from([delta, rate, 0.0, 0.0, 0.0]);
+        assert_eq!(contact(&p, &c, &x(0.004, 1.0)), Contact::Free);
+        assert_eq!(contact(&p, &c, &x(0.006, 0.0)), Contact::Engaged { positive: true });
+        assert_eq!(contact(&p, &c, &x(-0.006, 0.0)), Contact::Engaged { positive: false });
+        // leaving fast: the damper would pull
+        assert_eq!(contact(&p, &c, &x(0.006, -10.0)), Contact::Clipped { positive: true });
+        assert_eq!(contact(&p, &c, &x(-0.006, 10.0)), Contact::Clipped { positive: false });
+        for (delta, rate) in [(0.004, 1.0), (0.006, 0.0), (-0.006, 0.0), (0.006, -10.0), (-0.006, 10.0)] {
+            let s = x(delta, rate);
+            let tau = transmission(&p, &c, &s).0;
+            assert_eq!(tau != 0.0, contact(&p, &c, &s) == Contact::Engaged { positive: delta > 0.0 }, "{delta} {rate}");
+        }
+        // the link grazes the play's edge between two states inside it
+        let half = 0.005;
+        let a = x(half - 1e-6, 0.1);
+        let b = x(half - 1e-6, -0.1);
+        assert!(may_leave(&p, &c, Contact::Free, (&a, &a), (&b, &b), 1e-3));
+        // ...and approaches it without touching
+        let (a, b) = (x(half - 1e-4, 0.01), x(half - 9e-5, 0.01));
+        assert!(!may_leave(&p, &c, Contact::Free, (&a, &a), (&b, &b), 1e-3));
     }
 
     #[test]
