@@ -129,6 +129,11 @@ pub struct Model {
     contact_steps: Vec<(f64, Coupling, LinearStep)>,
     /// Exponential Runge–Kutta coefficients of those states: (length, coupling, step).
     contact_etd: Vec<(f64, Coupling, EtdStep)>,
+    /// The enthalpy's inverse series about the PCL temperature's current anchor.
+    inversion: thermal::InversionCache,
+    /// Bounds of the transmission's stiffness, damping and Maxwell stiffness over every PCL
+    /// temperature ([`Model::transmitted_torque_is_finite`]).
+    torque_bounds: Option<[f64; 3]>,
 }
 
 impl PartialEq for Model {
@@ -163,6 +168,8 @@ impl Model {
             etd_steps: Vec::new(),
             contact_steps: Vec::new(),
             contact_etd: Vec::new(),
+            inversion: thermal::InversionCache::default(),
+            torque_bounds: None,
         };
         m.initialize();
         m
@@ -181,6 +188,8 @@ impl Model {
         self.etd_steps.clear();
         self.contact_steps.clear();
         self.contact_etd.clear();
+        self.inversion = thermal::InversionCache::default();
+        self.torque_bounds = None;
         &mut self.params
     }
 
@@ -233,18 +242,11 @@ impl Model {
                 0
             }
         };
-        let table = Arc::make_mut(&mut self.tables[i]);
-        match &mut self.linear_step {
-            Some((t0, k0, step)) => {
-                table.at(&self.params, t, step);
-                (*t0, *k0) = (t, key);
-            }
-            None => {
-                let mut step = LinearStep::ZERO;
-                table.at(&self.params, t, &mut step);
-                self.linear_step = Some((t, key, step));
-            }
+        let (t0, k0, step) = self.linear_step.get_or_insert_with(|| (f64::NAN, key, LinearStep::ZERO));
+        if !self.tables[i].try_at(t, step) {
+            Arc::make_mut(&mut self.tables[i]).at(&self.params, t, step);
         }
+        (*t0, *k0) = (t, key);
     }
 
     /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of `len` at
@@ -273,7 +275,9 @@ impl Model {
             }
         };
         let entry = &mut self.etd_steps[i];
-        Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        if !self.etd_tables[k].try_at(t, &mut entry.2) {
+            Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        }
         entry.0 = t;
         i
     }
@@ -460,11 +464,15 @@ impl Model {
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
-        let needed = (h / self.params.max_internal_step).ceil();
-        if needed.is_nan() || needed > MAX_SUBSTEPS_PER_STEP {
-            return Err(StepFailure::TooManySubsteps { needed });
-        }
-        let substeps = if h <= self.params.max_internal_step { 1 } else { needed as usize };
+        let substeps = if h <= self.params.max_internal_step {
+            1
+        } else {
+            let needed = (h / self.params.max_internal_step).ceil();
+            if needed.is_nan() || needed > MAX_SUBSTEPS_PER_STEP {
+                return Err(StepFailure::TooManySubsteps { needed });
+            }
+            needed as usize
+        };
         let mut attempts_left = MAX_SOLVER_ATTEMPTS_PER_STEP;
         let hs = h / substeps as f64;
         let before = (self.mechanics, self.thermal.clone(), self.adaptive_step);
@@ -487,7 +495,7 @@ impl Model {
             // Thermal first, then mechanics with the moduli at the sub-step's mean PCL temperature:
             // the thermal time scale (s) is far above the sub-step (ms).
             let t_start = self.thermal.pcl_temperature;
-            self.thermal.advance(&self.params, &thermal_inputs, hs);
+            self.thermal.advance_cached(&self.params, &thermal_inputs, hs, &mut self.inversion);
             let t_mid = 0.5 * (t_start + self.thermal.pcl_temperature);
             if linear {
                 let key = self.step_keys.key(hs);
@@ -624,13 +632,15 @@ impl Model {
     pub fn transmitted_torque_is_finite(&mut self) -> bool {
         if self.params.transmission == Transmission::Compliant {
             let p = &self.params;
-            let (e1, e2) = p.material_table.rows_kpa();
-            let max = |v: [f64; 4]| v.iter().fold(0.0_f64, |a, x| a.max(x.abs())) * 1e3;
-            let kappa = p.modulus_to_torsion().abs();
-            let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
-            let km = p.maxwell_stiffness.abs();
-            let k = p.spring_torsional_stiffness().abs() + max(e1) * p.storage_modulus_scale.abs() * kappa + km;
-            let c = max(e2) * p.loss_modulus_scale.abs() * kappa / omega.abs();
+            let [k, c, km] = *self.torque_bounds.get_or_insert_with(|| {
+                let (e1, e2) = p.material_table.rows_kpa();
+                let max = |v: [f64; 4]| v.iter().fold(0.0_f64, |a, x| a.max(x.abs())) * 1e3;
+                let kappa = p.modulus_to_torsion().abs();
+                let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
+                let km = p.maxwell_stiffness.abs();
+                let k = p.spring_torsional_stiffness().abs() + max(e1) * p.storage_modulus_scale.abs() * kappa + km;
+                [k, max(e2) * p.loss_modulus_scale.abs() * kappa / omega.abs(), km]
+            });
             let x = &self.mechanics;
             let delta = (x[mechanics::MOTOR_ANGLE] - x[mechanics::LINK_ANGLE]).abs() + 0.5 * p.backlash_width.abs();
             let rate = (x[mechanics::MOTOR_SPEED] - x[mechanics::LINK_SPEED]).abs();

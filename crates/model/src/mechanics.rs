@@ -547,16 +547,40 @@ impl<N: Tabulated> PropagatorTable<N> {
 
     /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
     pub fn at(&mut self, p: &Params, t_kelvin: f64, out: &mut N) {
+        let stencil = Self::stencil(t_kelvin);
+        let (j, n) = match stencil {
+            Stencil::Node(j) => (j, 1),
+            Stencil::Cubic(j, _) => (j, 4),
+        };
+        for k in j..j + n {
+            self.node(p, k);
+        }
+        self.eval(&stencil, out);
+    }
+
+    /// [`PropagatorTable::at`] when the nodes it needs are built (false, `out` unchanged, when not):
+    /// reads the table only, so a table shared with clones is not copied.
+    pub fn try_at(&self, t_kelvin: f64, out: &mut N) -> bool {
+        let stencil = Self::stencil(t_kelvin);
+        let built = match stencil {
+            Stencil::Node(j) => self.nodes[j].is_some(),
+            Stencil::Cubic(j, _) => self.nodes[j..j + 4].iter().all(Option::is_some),
+        };
+        if built {
+            self.eval(&stencil, out);
+        }
+        built
+    }
+
+    fn stencil(t_kelvin: f64) -> Stencil {
         let rows = ROW_NODES;
         let t = t_kelvin - super::params::ZERO_CELSIUS;
         let x = (t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE;
         if x.is_nan() || x <= 0.0 {
-            out.clone_from(self.node(p, 0));
-            return;
+            return Stencil::Node(0);
         }
         if x >= rows[3] as f64 {
-            out.clone_from(self.node(p, rows[3]));
-            return;
+            return Stencil::Node(rows[3]);
         }
         // x > 0, so truncation is floor.
         let i = x as usize;
@@ -576,23 +600,42 @@ impl<N: Tabulated> PropagatorTable<N> {
             -s * (s - 1.0) * (s - 3.0) / 2.0,
             s * (s - 1.0) * (s - 2.0) / 6.0,
         ];
-        if self.nodes[j..j + 4].iter().any(Option::is_none) {
-            for n in j..j + 4 {
-                self.node(p, n);
+        Stencil::Cubic(j, w)
+    }
+
+    /// `out` from built nodes.
+    fn eval(&self, stencil: &Stencil, out: &mut N) {
+        let node = |k: usize| match &self.nodes[k] {
+            Some(n) => n,
+            None => unreachable!("built before"),
+        };
+        let (j, w) = match *stencil {
+            Stencil::Node(j) => {
+                out.clone_from(node(j));
+                return;
             }
-        }
-        let node = |d: usize| match &self.nodes[j + d] {
-            Some(n) => n.values(),
-            None => unreachable!("built above"),
+            Stencil::Cubic(j, w) => (j, w),
         };
         let out = out.values_mut();
         let n = out.len();
         // Equal lengths up front, so the loop below has no bounds checks and vectorises.
-        let (n0, n1, n2, n3) = (&node(0)[..n], &node(1)[..n], &node(2)[..n], &node(3)[..n]);
+        let (n0, n1, n2, n3) = (
+            &node(j).values()[..n],
+            &node(j + 1).values()[..n],
+            &node(j + 2).values()[..n],
+            &node(j + 3).values()[..n],
+        );
         for i in 0..n {
             out[i] = w[0] * n0[i] + w[1] * n1[i] + w[2] * n2[i] + w[3] * n3[i];
         }
     }
+}
+
+/// Where [`PropagatorTable`] reads a temperature: one node (at or beyond the table's ends), or a
+/// cubic through four nodes from the first with these weights.
+enum Stencil {
+    Node(usize),
+    Cubic(usize, [f64; 4]),
 }
 
 /// Transmitted torque τ_t and the Maxwell branch's rate q', with backlash when enabled.
