@@ -84,6 +84,24 @@ impl std::fmt::Display for StepFailure {
 /// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
 const MAX_ETD_LEVEL: u32 = 10;
 
+/// The exponential Runge–Kutta level nearest the last accepted step: round(log2(key/last)) in
+/// 0..=MAX_ETD_LEVEL (0 without a last step), from the binary exponent of √2·key/last (the
+/// ratio is a power of two whenever the last step was exponential; no libm call).
+fn etd_level(key: f64, last: f64) -> u32 {
+    if last.is_nan() || last <= 0.0 {
+        return 0;
+    }
+    let r = std::f64::consts::SQRT_2 * (key / last);
+    if r.is_nan() || r < 1.0 {
+        return 0;
+    }
+    if r >= (1u64 << (MAX_ETD_LEVEL + 1)) as f64 {
+        return MAX_ETD_LEVEL;
+    }
+    // 1 ≤ r < 2^11: a normal number, exponent = floor(log2 r).
+    (((r.to_bits() >> 52) & 0x7ff) as u32 - 1023).min(MAX_ETD_LEVEL)
+}
+
 /// Length of [`Model::state`].
 pub const STATE_LEN: usize = mechanics::N_STATE + 6;
 
@@ -242,7 +260,7 @@ impl Model {
                 0
             }
         };
-        let (t0, k0, step) = self.linear_step.get_or_insert_with(|| (f64::NAN, key, LinearStep::ZERO));
+        let (t0, k0, step) = self.linear_step.get_or_insert((f64::NAN, key, LinearStep::ZERO));
         if !self.tables[i].try_at(t, step) {
             Arc::make_mut(&mut self.tables[i]).at(&self.params, t, step);
         }
@@ -389,11 +407,7 @@ impl Model {
         contact: Option<(Contact, Coefficients)>,
     ) -> Option<Coefficients> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
-        let mut level = if self.adaptive_step > 0.0 {
-            ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
-        } else {
-            0
-        };
+        let mut level = etd_level(key, self.adaptive_step);
         let mut x = self.mechanics;
         let mut pos = 0u64;
         let mut coefficients = Coefficients::ZERO;
@@ -661,5 +675,25 @@ impl Model {
     }
     pub fn melt_fraction(&self) -> f64 {
         thermal::melt_fraction(&self.params, self.thermal.pcl_temperature)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn etd_level_rounds_log2_of_the_step_ratio() {
+        let key = 1e-3;
+        for level in 0..=MAX_ETD_LEVEL {
+            assert_eq!(etd_level(key, key / (1u64 << level) as f64), level);
+        }
+        for (last, expected) in
+            [(0.0, 0), (-1.0, 0), (f64::NAN, 0), (2e-3, 0), (0.8e-3, 0), (0.6e-3, 1), (1e-9, MAX_ETD_LEVEL)]
+        {
+            assert_eq!(etd_level(key, last), expected, "{last}");
+            let old = if last > 0.0 { ((key / last).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL) } else { 0 };
+            assert_eq!(etd_level(key, last), old, "{last}");
+        }
     }
 }
