@@ -462,7 +462,7 @@ impl Model {
                 x = x_new;
                 pos += full >> level;
                 // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
-                if err < 1.0 / 32.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
+                if err < 1.0 / 16.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
                     level -= 1;
                 }
             } else if level == MAX_ETD_LEVEL {

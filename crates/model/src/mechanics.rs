@@ -486,7 +486,8 @@ impl EtdStep {
         let n_x = torque.at(x);
         let a = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_x);
         let n_a = torque.at(&a);
-        let b = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_a);
+        // b = e^{Ah/2}x + Γ(h/2)u + q n_a: a with the forcing swapped.
+        let b = a + self.column(Q_HALF) * (n_a - n_x);
         let n_b = torque.at(&b);
         let c = self.affine(E_HALF, &a, G_HALF, u, Q_HALF, 2.0 * n_b - n_x);
         let n_c = torque.at(&c);
