@@ -181,10 +181,15 @@ pub const PROPAGATOR_LATTICE: f64 = 0.125;
 const STEP_KEY_DIGITS: i32 = 10;
 
 /// Rounds step lengths to [`STEP_KEY_DIGITS`] significant decimal digits within one decade
-/// [lo, hi) of powers of ten; a cache of the last decade makes the common case a multiply, a
-/// round and a divide.
+/// [lo, hi) of powers of ten; a cache of the last two decades makes the common case a multiply, a
+/// round and a divide (two: fmpy's steps t(k+1) − t(k) straddle 1 ms, a power of ten).
 #[derive(Clone, Copy, Debug)]
 pub struct StepKeys {
+    decades: [Decade; 2],
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Decade {
     lo: f64,
     hi: f64,
     /// 10^digits: key = round(h·scale)/scale (digits ≥ 0) or round(h/scale)·scale (digits < 0).
@@ -194,7 +199,8 @@ pub struct StepKeys {
 
 impl Default for StepKeys {
     fn default() -> Self {
-        StepKeys { lo: f64::NAN, hi: f64::NAN, scale: 1.0, below_one_digit: false }
+        let empty = Decade { lo: f64::NAN, hi: f64::NAN, scale: 1.0, below_one_digit: false };
+        StepKeys { decades: [empty; 2] }
     }
 }
 
@@ -207,24 +213,31 @@ impl StepKeys {
     /// [`Model::step`](crate::Model::step) covers the remainder h − key to first order (an Euler
     /// step of ≤ 5e-13 s, error ~ (h − key)² |A|² |x|).
     pub fn key(&mut self, h: f64) -> f64 {
-        if !(h >= self.lo && h < self.hi) {
+        let in_decade = |d: &Decade| h >= d.lo && h < d.hi;
+        if !in_decade(&self.decades[0]) {
             if !(h > 0.0 && h.is_finite()) {
                 return h;
             }
-            self.decade(h);
+            if !in_decade(&self.decades[1]) {
+                self.decades[1] = Decade::of(h);
+            }
+            self.decades.swap(0, 1);
         }
+        let d = &self.decades[0];
         // h·scale < 10^STEP_KEY_DIGITS < 2^52: adding and taking away 2^52 rounds it to an
         // integer (ties to even) without a libm call.
         const SHIFT: f64 = 4_503_599_627_370_496.0;
-        if self.below_one_digit {
-            ((h / self.scale + SHIFT) - SHIFT) * self.scale
+        if d.below_one_digit {
+            ((h / d.scale + SHIFT) - SHIFT) * d.scale
         } else {
-            ((h * self.scale + SHIFT) - SHIFT) / self.scale
+            ((h * d.scale + SHIFT) - SHIFT) / d.scale
         }
     }
+}
 
+impl Decade {
     #[inline(never)]
-    fn decade(&mut self, h: f64) {
+    fn of(h: f64) -> Self {
         let mut e = h.log10().floor() as i32;
         // log10 may be an ulp off at powers of ten: settle the decade by comparison.
         while 10f64.powi(e) > h {
@@ -234,12 +247,12 @@ impl StepKeys {
             e += 1;
         }
         let digits = STEP_KEY_DIGITS - 1 - e;
-        *self = StepKeys {
+        Decade {
             lo: 10f64.powi(e),
             hi: 10f64.powi(e + 1),
             scale: 10f64.powi(digits.abs()),
             below_one_digit: digits < 0,
-        };
+        }
     }
 }
 
