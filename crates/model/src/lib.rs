@@ -253,6 +253,7 @@ impl Model {
     /// The exact linear step of length `key` with the moduli at PCL temperature `t` (interpolated
     /// in the propagator table; reused while t and key stay).
     fn prepare_linear_step(&mut self, t: f64, key: f64) {
+        let t = mechanics::table_temperature(t);
         if matches!(&self.linear_step, Some((t0, k0, _)) if *t0 == t && *k0 == key) {
             return;
         }
@@ -274,6 +275,7 @@ impl Model {
     /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of `len` at
     /// PCL temperature `t`.
     fn prepare_etd(&mut self, t: f64, len: f64) -> usize {
+        let t = mechanics::table_temperature(t);
         let i = match self.etd_steps.iter().position(|(_, l, _)| *l == len) {
             Some(i) if self.etd_steps[i].0 == t => return i,
             Some(i) => i,
@@ -480,6 +482,48 @@ impl Model {
         Some(coefficients)
     }
 
+    /// One sub-step of the mechanics with a nonlinear effect: exact steps between backlash
+    /// contact events, exponential Runge–Kutta for gravity and friction, Dormand–Prince where
+    /// those cannot (a rigid drive, an event inside the step, a tolerance the exponential step
+    /// cannot meet). False when Dormand–Prince fails too (the caller restores the state).
+    /// Kept out of line so the linear path of [`Model::step`] stays small.
+    #[inline(never)]
+    fn nonlinear_substep(&mut self, t_mid: f64, hs: f64, drive: &Drive, attempts_left: &mut u64) -> bool {
+        let compliant = self.params.transmission == Transmission::Compliant;
+        let backlash = self.params.backlash_width > 0.0;
+        if compliant && backlash && self.params.link_torque_is_linear() {
+            // Backlash alone: exact steps between contact events.
+            let key = self.step_keys.key(hs);
+            if self.advance_contact_linear(t_mid, key, hs, drive) {
+                return true;
+            }
+        } else if compliant && (backlash || self.params.backlash_width == 0.0) {
+            // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
+            // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below),
+            // with backlash that of the contact state the step starts in.
+            let key = self.step_keys.key(hs);
+            let contact = if backlash { Some(self.contact_at_start(t_mid, key)) } else { None };
+            if let Some(c) = self.advance_exponential(t_mid, key, drive, attempts_left, contact) {
+                if hs != key {
+                    let rate = mechanics::derivative(&self.params, &c, &self.mechanics, drive);
+                    self.mechanics += rate * (hs - key);
+                }
+                return true;
+            }
+        }
+        let c = self.coefficients_at(on_temperature_lattice(t_mid));
+        mechanics::integrate_adaptive(
+            &self.params,
+            &c,
+            &mut self.mechanics,
+            drive,
+            hs,
+            &mut self.adaptive_step,
+            attempts_left,
+        )
+        .is_some()
+    }
+
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
         let substeps = if h <= self.params.max_internal_step {
@@ -530,40 +574,7 @@ impl Model {
                 self.mechanics = x;
                 continue;
             }
-            let compliant = self.params.transmission == Transmission::Compliant;
-            let backlash = self.params.backlash_width > 0.0;
-            if compliant && backlash && self.params.link_torque_is_linear() {
-                // Backlash alone: exact steps between contact events.
-                let key = self.step_keys.key(hs);
-                if self.advance_contact_linear(t_mid, key, hs, &drive) {
-                    continue;
-                }
-            } else if compliant && (backlash || self.params.backlash_width == 0.0) {
-                // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
-                // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below),
-                // with backlash that of the contact state the step starts in.
-                let key = self.step_keys.key(hs);
-                let contact = if backlash { Some(self.contact_at_start(t_mid, key)) } else { None };
-                if let Some(c) = self.advance_exponential(t_mid, key, &drive, &mut attempts_left, contact) {
-                    if hs != key {
-                        let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
-                        self.mechanics += rate * (hs - key);
-                    }
-                    continue;
-                }
-            }
-            let c = self.coefficients_at(on_temperature_lattice(t_mid));
-            if mechanics::integrate_adaptive(
-                &self.params,
-                &c,
-                &mut self.mechanics,
-                &drive,
-                hs,
-                &mut self.adaptive_step,
-                &mut attempts_left,
-            )
-            .is_none()
-            {
+            if !self.nonlinear_substep(t_mid, hs, &drive, &mut attempts_left) {
                 (self.mechanics, self.thermal, self.adaptive_step) = before;
                 let at_time_in_step = i as f64 * hs;
                 return Err(if attempts_left == 0 {

@@ -567,6 +567,21 @@ pub struct PropagatorTable<N: Tabulated> {
     nodes: Vec<Option<N>>,
 }
 
+/// The PCL temperature clamped to the tables' range (the material table's rows, 22–60 °C): the
+/// moduli are held beyond it, so a table reads the same there; a cache keyed by this temperature
+/// then stays valid while a PCL above 60 °C heats on. NaN stays NaN.
+pub fn table_temperature(t_kelvin: f64) -> f64 {
+    let lo = super::params::ZERO_CELSIUS + TABLE_TEMPERATURES_C[0];
+    let hi = super::params::ZERO_CELSIUS + TABLE_TEMPERATURES_C[3];
+    if t_kelvin < lo {
+        lo
+    } else if t_kelvin > hi {
+        hi
+    } else {
+        t_kelvin
+    }
+}
+
 fn node_celsius(n: usize) -> f64 {
     TABLE_TEMPERATURES_C[0] + n as f64 * PROPAGATOR_LATTICE
 }
@@ -647,12 +662,9 @@ impl<N: Tabulated> PropagatorTable<N> {
         };
         let j = i.saturating_sub(1).clamp(rows[k], rows[k + 1] - 3);
         let s = x - j as f64;
-        let w = [
-            -(s - 1.0) * (s - 2.0) * (s - 3.0) / 6.0,
-            s * (s - 2.0) * (s - 3.0) / 2.0,
-            -s * (s - 1.0) * (s - 3.0) / 2.0,
-            s * (s - 1.0) * (s - 2.0) / 6.0,
-        ];
+        let (s1, s2, s3) = (s - 1.0, s - 2.0, s - 3.0);
+        const SIXTH: f64 = 1.0 / 6.0;
+        let w = [-s1 * s2 * s3 * SIXTH, 0.5 * s * s2 * s3, -0.5 * s * s1 * s3, s * s1 * s2 * SIXTH];
         Stencil::Cubic(j, w)
     }
 
