@@ -390,8 +390,16 @@ impl Model {
         if mechanics::in_play(&self.params, &self.mechanics) {
             return (Contact::Free, Coefficients::ZERO);
         }
-        let i = self.prepare_etd(t, key);
-        let c = self.etd_steps[i].2.coefficients();
+        // Only the two coefficients where the nodes exist (the step itself may be taken at
+        // another level); the same numbers the whole step would hold.
+        let table = self.etd_tables.iter().find(|tb| tb.step_length() == key);
+        let c = match table.and_then(|tb| tb.coefficients_at(mechanics::table_temperature(t))) {
+            Some(c) => c,
+            None => {
+                let i = self.prepare_etd(t, key);
+                self.etd_steps[i].2.coefficients()
+            }
+        };
         (mechanics::contact(&self.params, &c, &self.mechanics), c)
     }
 
@@ -411,7 +419,7 @@ impl Model {
         u: &Drive,
         attempts_left: &mut u64,
         contact: Option<(Contact, Coefficients)>,
-    ) -> Option<Coefficients> {
+    ) -> Option<(Coefficients, Option<State>)> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
         let mut level = etd_level(key, self.adaptive_step);
         let mut x = self.mechanics;
@@ -421,7 +429,8 @@ impl Model {
             Some((mode, _)) => (mode.offset(&self.params), mode.coupling()),
             None => (0.0, Coupling::Engaged),
         };
-        // The rate at x (for the contact events' slopes), carried from one accepted step to the next.
+        // The rate at x (for the contact events' slopes), carried from one accepted step to the next
+        // (and returned: the caller's first-order remainder uses it).
         let mut rate: Option<State> = None;
         while pos < full {
             if *attempts_left == 0 {
@@ -479,7 +488,7 @@ impl Model {
         }
         self.mechanics = x;
         self.adaptive_step = key / (1u64 << level) as f64;
-        Some(coefficients)
+        Some((coefficients, rate))
     }
 
     /// One sub-step of the mechanics with a nonlinear effect: exact steps between backlash
@@ -503,9 +512,10 @@ impl Model {
             // with backlash that of the contact state the step starts in.
             let key = self.step_keys.key(hs);
             let contact = if backlash { Some(self.contact_at_start(t_mid, key)) } else { None };
-            if let Some(c) = self.advance_exponential(t_mid, key, drive, attempts_left, contact) {
+            if let Some((c, rate)) = self.advance_exponential(t_mid, key, drive, attempts_left, contact) {
                 if hs != key {
-                    let rate = mechanics::derivative(&self.params, &c, &self.mechanics, drive);
+                    // the rate at the end, if the contact checks computed it
+                    let rate = rate.unwrap_or_else(|| mechanics::derivative(&self.params, &c, &self.mechanics, drive));
                     self.mechanics += rate * (hs - key);
                 }
                 return true;

@@ -696,6 +696,22 @@ impl<N: Tabulated> PropagatorTable<N> {
     }
 }
 
+impl PropagatorTable<EtdStep> {
+    /// The transmission coefficients the step at `t_kelvin` holds (what [`PropagatorTable::at`]
+    /// would give them, to the bit), from the built nodes alone: two entries instead of the whole
+    /// step. None when a node it needs is not built.
+    pub fn coefficients_at(&self, t_kelvin: f64) -> Option<Coefficients> {
+        let entry = |k: usize, i: usize| self.nodes[k].as_ref().map(|n| n.v[i]);
+        let value = |i: usize| match Self::stencil(t_kelvin) {
+            Stencil::Node(j) => entry(j, i),
+            Stencil::Cubic(j, w) => {
+                Some(w[0] * entry(j, i)? + w[1] * entry(j + 1, i)? + w[2] * entry(j + 2, i)? + w[3] * entry(j + 3, i)?)
+            }
+        };
+        Some(Coefficients { stiffness: value(COEFFS)?, damping: value(COEFFS + 1)?, ..Coefficients::ZERO })
+    }
+}
+
 /// Where [`PropagatorTable`] reads a temperature: one node (at or beyond the table's ends), or a
 /// cubic through four nodes from the first with these weights.
 enum Stencil {
