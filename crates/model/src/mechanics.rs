@@ -702,7 +702,8 @@ impl PropagatorTable<EtdStep> {
     /// step. None when a node it needs is not built.
     pub fn coefficients_at(&self, t_kelvin: f64) -> Option<Coefficients> {
         let entry = |k: usize, i: usize| self.nodes[k].as_ref().map(|n| n.v[i]);
-        let value = |i: usize| match Self::stencil(t_kelvin) {
+        let stencil = Self::stencil(t_kelvin);
+        let value = |i: usize| match stencil {
             Stencil::Node(j) => entry(j, i),
             Stencil::Cubic(j, w) => {
                 Some(w[0] * entry(j, i)? + w[1] * entry(j + 1, i)? + w[2] * entry(j + 2, i)? + w[3] * entry(j + 3, i)?)
