@@ -11,8 +11,10 @@
 //! are tabulated on a 1/8 K lattice and interpolated ([`PropagatorTable`]): no exponential is
 //! rebuilt while the PCL heats or cools. Gravity and friction are smooth nonlinear link torques:
 //! an exponential Runge–Kutta step ([`EtdStep`]) keeps the linear part exact and treats them
-//! explicitly, with error control on dyadic sub-steps. Backlash switches the transmission on and
-//! off; there an adaptive Dormand–Prince 5(4) step with error control runs.
+//! explicitly, with error control on dyadic sub-steps. Backlash switches the transmission between
+//! three linear states ([`Contact`]: free, engaged, clipped); a step takes the exact (or
+//! exponential Runge–Kutta) step of the state it starts in, and one that may hold a contact event
+//! ([`may_leave`]) is integrated by an adaptive Dormand–Prince 5(4) step with error control.
 
 use nalgebra::{SMatrix, SVector};
 
