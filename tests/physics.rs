@@ -278,6 +278,16 @@ fn every_regime_matches_fine_reference_over_20_s() {
     let gravity = Params { gravity_link_mass: 0.91, ..prescribed_motor.clone() };
     let friction = Params { coulomb_friction: 0.05, ..Params::default() };
     let backlash = Params { backlash_width: 0.01, ..prescribed_motor.clone() };
+    // Backlash between contact events takes exact steps (free, engaged, clipped): the bench's
+    // torque-driven motor, and a Maxwell branch, whose deflection follows Δ̃ while clipped and
+    // relaxes inside the play.
+    let backlash_torque = Params { backlash_width: 0.01, ..Params::default() };
+    let backlash_maxwell = Params {
+        backlash_width: 0.01,
+        maxwell_stiffness: 8.0,
+        maxwell_relaxation_time: 0.05,
+        ..prescribed_motor.clone()
+    };
     let smooth = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, ..prescribed_motor.clone() };
     let all = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, backlash_width: 0.01, ..prescribed_motor };
     // Steps off 1 ms by a few 1e-10 relative: beyond fmpy's jitter, past the propagator's step key.
@@ -309,7 +319,22 @@ fn every_regime_matches_fine_reference_over_20_s() {
             sc(friction, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(torque(move |t| 1.5 * (w1 * t).sin()))),
             0.0,
         ),
-        ("backlash 0.01 rad", sc(backlash, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())), 0.0),
+        ("backlash 0.01 rad", sc(backlash.clone(), 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())), 0.0),
+        (
+            "backlash, torque-driven motor",
+            sc(backlash_torque, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(drive())),
+            0.0,
+        ),
+        (
+            "backlash while heating, fmpy's h",
+            sc(backlash, 22.0, 22.0, 8.0, time_grid_steps(20.0), Box::new(motion())),
+            5.0,
+        ),
+        (
+            "backlash with a Maxwell branch",
+            sc(backlash_maxwell, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())),
+            0.0,
+        ),
         (
             "gravity, heating, h varying ±10 % every step",
             sc(gravity.clone(), 22.0, 22.0, 8.0, varying, Box::new(motion())),

@@ -612,8 +612,10 @@ pub fn nonfinite_output(m: &mut Model) -> Option<(&'static str, f64)> {
 /// and 3e17 N·m·s/rad); what remains is the torque (a product with the states, which may overflow)
 /// and the two energy integrals. `fmi2GetReal` refuses a non-finite value as the backstop.
 fn nonfinite_after_step(m: &mut Model) -> Option<(&'static str, f64)> {
-    let torque = m.transmitted_torque();
-    [("transmitted_torque", torque), ("heater_energy", m.thermal.heater_energy), ("heat_lost", m.thermal.heat_lost)]
+    if !m.transmitted_torque_is_finite() {
+        return Some(("transmitted_torque", m.transmitted_torque()));
+    }
+    [("heater_energy", m.thermal.heater_energy), ("heat_lost", m.thermal.heat_lost)]
         .into_iter()
         .find(|(_, x)| !x.is_finite())
 }

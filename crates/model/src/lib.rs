@@ -10,7 +10,7 @@ pub mod thermal;
 
 use std::sync::Arc;
 
-use mechanics::{Coefficients, Drive, EtdStep, LinearStep, PropagatorTable, State};
+use mechanics::{Coefficients, Contact, Coupling, Drive, EtdStep, LinearStep, PropagatorTable, State};
 pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
@@ -81,8 +81,30 @@ impl std::fmt::Display for StepFailure {
     }
 }
 
+/// Relative amount by which an internal sub-step may exceed `max_internal_step` (see
+/// [`Model::step`]), far below anything the sub-step length changes physically.
+pub const SUBSTEP_SLACK: f64 = 1e-9;
+
 /// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
 const MAX_ETD_LEVEL: u32 = 10;
+
+/// The exponential Runge–Kutta level nearest the last accepted step: round(log2(key/last)) in
+/// 0..=MAX_ETD_LEVEL (0 without a last step), from the binary exponent of √2·key/last (the
+/// ratio is a power of two whenever the last step was exponential; no libm call).
+fn etd_level(key: f64, last: f64) -> u32 {
+    if last.is_nan() || last <= 0.0 {
+        return 0;
+    }
+    let r = std::f64::consts::SQRT_2 * (key / last);
+    if r.is_nan() || r < 1.0 {
+        return 0;
+    }
+    if r >= (1u64 << (MAX_ETD_LEVEL + 1)) as f64 {
+        return MAX_ETD_LEVEL;
+    }
+    // 1 ≤ r < 2^11: a normal number, exponent = floor(log2 r).
+    (((r.to_bits() >> 52) & 0x7ff) as u32 - 1023).min(MAX_ETD_LEVEL)
+}
 
 /// Length of [`Model::state`].
 pub const STATE_LEN: usize = mechanics::N_STATE + 6;
@@ -124,6 +146,16 @@ pub struct Model {
     etd_tables: Vec<Arc<PropagatorTable<EtdStep>>>,
     /// The last coefficients used at each sub-step length: (PCL temperature, length, step).
     etd_steps: Vec<(f64, f64, EtdStep)>,
+    /// Exact steps of the backlash's free and clipped states (no transmission torque, so no
+    /// dependence on the PCL temperature): (length, coupling, step).
+    contact_steps: Vec<(f64, Coupling, LinearStep)>,
+    /// Exponential Runge–Kutta coefficients of those states: (length, coupling, step).
+    contact_etd: Vec<(f64, Coupling, EtdStep)>,
+    /// The enthalpy's inverse series about the PCL temperature's current anchor.
+    inversion: thermal::InversionCache,
+    /// Bounds of the transmission's stiffness, damping and Maxwell stiffness over every PCL
+    /// temperature ([`Model::transmitted_torque_is_finite`]).
+    torque_bounds: Option<[f64; 3]>,
 }
 
 impl PartialEq for Model {
@@ -156,6 +188,10 @@ impl Model {
             linear_step: None,
             etd_tables: Vec::new(),
             etd_steps: Vec::new(),
+            contact_steps: Vec::new(),
+            contact_etd: Vec::new(),
+            inversion: thermal::InversionCache::default(),
+            torque_bounds: None,
         };
         m.initialize();
         m
@@ -172,6 +208,10 @@ impl Model {
         self.linear_step = None;
         self.etd_tables.clear();
         self.etd_steps.clear();
+        self.contact_steps.clear();
+        self.contact_etd.clear();
+        self.inversion = thermal::InversionCache::default();
+        self.torque_bounds = None;
         &mut self.params
     }
 
@@ -213,6 +253,7 @@ impl Model {
     /// The exact linear step of length `key` with the moduli at PCL temperature `t` (interpolated
     /// in the propagator table; reused while t and key stay).
     fn prepare_linear_step(&mut self, t: f64, key: f64) {
+        let t = mechanics::table_temperature(t);
         if matches!(&self.linear_step, Some((t0, k0, _)) if *t0 == t && *k0 == key) {
             return;
         }
@@ -224,23 +265,17 @@ impl Model {
                 0
             }
         };
-        let table = Arc::make_mut(&mut self.tables[i]);
-        match &mut self.linear_step {
-            Some((t0, k0, step)) => {
-                table.at(&self.params, t, step);
-                (*t0, *k0) = (t, key);
-            }
-            None => {
-                let mut step = LinearStep::ZERO;
-                table.at(&self.params, t, &mut step);
-                self.linear_step = Some((t, key, step));
-            }
+        let (t0, k0, step) = self.linear_step.get_or_insert((f64::NAN, key, LinearStep::ZERO));
+        if !self.tables[i].try_at(t, step) {
+            Arc::make_mut(&mut self.tables[i]).at(&self.params, t, step);
         }
+        (*t0, *k0) = (t, key);
     }
 
     /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of `len` at
     /// PCL temperature `t`.
     fn prepare_etd(&mut self, t: f64, len: f64) -> usize {
+        let t = mechanics::table_temperature(t);
         let i = match self.etd_steps.iter().position(|(_, l, _)| *l == len) {
             Some(i) if self.etd_steps[i].0 == t => return i,
             Some(i) => i,
@@ -264,9 +299,108 @@ impl Model {
             }
         };
         let entry = &mut self.etd_steps[i];
-        Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        if !self.etd_tables[k].try_at(t, &mut entry.2) {
+            Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        }
         entry.0 = t;
         i
+    }
+
+    /// Index in `contact_steps` of the exact step of length `len` for the backlash state `coupling`.
+    fn contact_step(&mut self, len: f64, coupling: Coupling) -> usize {
+        if let Some(i) = self.contact_steps.iter().position(|(l, c, _)| *l == len && *c == coupling) {
+            return i;
+        }
+        if self.contact_steps.len() >= 8 {
+            self.contact_steps.remove(0);
+        }
+        let step = LinearStep::with(&self.params, &Coefficients::ZERO, len, coupling);
+        self.contact_steps.push((len, coupling, step));
+        self.contact_steps.len() - 1
+    }
+
+    /// Index in `contact_etd` of the exponential Runge–Kutta coefficients of length `len` for the
+    /// backlash state `coupling`.
+    fn contact_etd(&mut self, len: f64, coupling: Coupling) -> usize {
+        if let Some(i) = self.contact_etd.iter().position(|(l, c, _)| *l == len && *c == coupling) {
+            return i;
+        }
+        if self.contact_etd.len() >= 4 * (MAX_ETD_LEVEL as usize + 1) {
+            self.contact_etd.remove(0);
+        }
+        let step = EtdStep::with(&self.params, &Coefficients::ZERO, len, coupling);
+        self.contact_etd.push((len, coupling, step));
+        self.contact_etd.len() - 1
+    }
+
+    /// One sub-step of length `key` (plus the sliver hs − key to first order) with backlash and
+    /// otherwise linear mechanics: exact between contact events, by the propagator of the contact
+    /// state the step starts in (in coordinates shifted by the play, see [`Contact`]). False,
+    /// state unchanged, when the step may hold an event: its end is in another state, or the
+    /// trajectory may have touched an edge and come back ([`mechanics::may_leave`]); the caller then
+    /// integrates through it.
+    fn advance_contact_linear(&mut self, t: f64, key: f64, hs: f64, u: &Drive) -> bool {
+        let x = self.mechanics;
+        let (mode, c) = if mechanics::in_play(&self.params, &x) {
+            (Contact::Free, Coefficients::ZERO)
+        } else {
+            self.prepare_linear_step(t, key);
+            let c = self.linear_step.as_ref().expect("prepared").2.coefficients();
+            (mechanics::contact(&self.params, &c, &x), c)
+        };
+        let offset = mode.offset(&self.params);
+        let mut shifted = x;
+        shifted[mechanics::MOTOR_ANGLE] -= offset;
+        let mut y = match mode {
+            Contact::Engaged { .. } => self.linear_step.as_ref().expect("prepared").2.apply(&shifted, u),
+            _ => {
+                let i = self.contact_step(key, mode.coupling());
+                self.contact_steps[i].2.apply(&shifted, u)
+            }
+        };
+        y[mechanics::MOTOR_ANGLE] += offset;
+        let p = &self.params;
+        let same = match mode {
+            Contact::Free => mechanics::in_play(p, &y),
+            _ => mechanics::contact(p, &c, &y) == mode,
+        };
+        if !same {
+            return false;
+        }
+        let leaves = match mode {
+            Contact::Free => mechanics::may_leave(p, &c, mode, (&x, &x), (&y, &y), hs),
+            _ => {
+                let (r0, r1) = (mechanics::derivative(p, &c, &x, u), mechanics::derivative(p, &c, &y, u));
+                mechanics::may_leave(p, &c, mode, (&x, &r0), (&y, &r1), hs)
+            }
+        };
+        if leaves {
+            return false;
+        }
+        if hs != key {
+            y += mechanics::derivative(p, &c, &y, u) * (hs - key);
+        }
+        self.mechanics = y;
+        true
+    }
+
+    /// The backlash's contact state at the start of a sub-step and the moduli it was classified
+    /// with (the exponential Runge–Kutta coefficients' at `t`; none needed inside the play).
+    fn contact_at_start(&mut self, t: f64, key: f64) -> (Contact, Coefficients) {
+        if mechanics::in_play(&self.params, &self.mechanics) {
+            return (Contact::Free, Coefficients::ZERO);
+        }
+        // Only the two coefficients where the nodes exist (the step itself may be taken at
+        // another level); the same numbers the whole step would hold.
+        let table = self.etd_tables.iter().find(|tb| tb.step_length() == key);
+        let c = match table.and_then(|tb| tb.coefficients_at(mechanics::table_temperature(t))) {
+            Some(c) => c,
+            None => {
+                let i = self.prepare_etd(t, key);
+                self.etd_steps[i].2.coefficients()
+            }
+        };
+        (mechanics::contact(&self.params, &c, &self.mechanics), c)
     }
 
     /// Advances the mechanics over one sub-step of length `key` by exponential Runge–Kutta
@@ -275,30 +409,75 @@ impl Model {
     /// None (state unchanged) when even key/2^MAX_ETD_LEVEL fails the tolerance.
     /// Every attempted step costs one of `attempts_left` (the step's work budget, shared with
     /// Dormand–Prince); None when the budget or the finest level runs out.
-    fn advance_exponential(&mut self, t: f64, key: f64, u: &Drive, attempts_left: &mut u64) -> Option<Coefficients> {
+    /// With backlash, `contact` is the state the sub-step starts in and the moduli it was
+    /// classified with: the steps are those of that state, and None also when a step may hold a
+    /// contact event (as in [`Model::advance_contact_linear`]).
+    fn advance_exponential(
+        &mut self,
+        t: f64,
+        key: f64,
+        u: &Drive,
+        attempts_left: &mut u64,
+        contact: Option<(Contact, Coefficients)>,
+    ) -> Option<(Coefficients, Option<State>)> {
         let full: u64 = 1 << MAX_ETD_LEVEL;
-        let mut level = if self.adaptive_step > 0.0 {
-            ((key / self.adaptive_step).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL)
-        } else {
-            0
-        };
+        let mut level = etd_level(key, self.adaptive_step);
         let mut x = self.mechanics;
         let mut pos = 0u64;
         let mut coefficients = Coefficients::ZERO;
+        let (offset, coupling) = match contact {
+            Some((mode, _)) => (mode.offset(&self.params), mode.coupling()),
+            None => (0.0, Coupling::Engaged),
+        };
+        // The rate at x (for the contact events' slopes), carried from one accepted step to the next
+        // (and returned: the caller's first-order remainder uses it).
+        let mut rate: Option<State> = None;
         while pos < full {
             if *attempts_left == 0 {
                 return None;
             }
             *attempts_left -= 1;
             let len = key / (1u64 << level) as f64;
-            let i = self.prepare_etd(t, len);
-            coefficients = self.etd_steps[i].2.coefficients();
-            let (x_new, err) = self.etd_steps[i].2.step(&self.params, &x, u);
+            let mut shifted = x;
+            shifted[mechanics::MOTOR_ANGLE] -= offset;
+            let (mut x_new, err) = if coupling == Coupling::Engaged {
+                let i = self.prepare_etd(t, len);
+                coefficients = self.etd_steps[i].2.coefficients();
+                self.etd_steps[i].2.step(&self.params, &shifted, u)
+            } else {
+                let i = self.contact_etd(len, coupling);
+                self.contact_etd[i].2.step(&self.params, &shifted, u)
+            };
+            x_new[mechanics::MOTOR_ANGLE] += offset;
             if err <= 1.0 {
+                if let Some((mode, c)) = contact {
+                    let p = &self.params;
+                    match mode {
+                        Contact::Free => {
+                            if !mechanics::in_play(p, &x_new)
+                                || mechanics::may_leave(p, &c, mode, (&x, &x), (&x_new, &x_new), len)
+                            {
+                                return None;
+                            }
+                        }
+                        _ => {
+                            if mechanics::contact(p, &c, &x_new) != mode {
+                                return None;
+                            }
+                            let r0 = rate.unwrap_or_else(|| mechanics::derivative(p, &c, &x, u));
+                            let r1 = mechanics::derivative(p, &c, &x_new, u);
+                            if mechanics::may_leave(p, &c, mode, (&x, &r0), (&x_new, &r1), len) {
+                                return None;
+                            }
+                            rate = Some(r1);
+                        }
+                    }
+                    coefficients = c;
+                }
                 x = x_new;
                 pos += full >> level;
                 // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
-                if err < 1.0 / 32.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
+                if err < 1.0 / 16.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
                     level -= 1;
                 }
             } else if level == MAX_ETD_LEVEL {
@@ -309,16 +488,66 @@ impl Model {
         }
         self.mechanics = x;
         self.adaptive_step = key / (1u64 << level) as f64;
-        Some(coefficients)
+        Some((coefficients, rate))
+    }
+
+    /// One sub-step of the mechanics with a nonlinear effect: exact steps between backlash
+    /// contact events, exponential Runge–Kutta for gravity and friction, Dormand–Prince where
+    /// those cannot (a rigid drive, an event inside the step, a tolerance the exponential step
+    /// cannot meet). False when Dormand–Prince fails too (the caller restores the state).
+    /// Kept out of line so the linear path of [`Model::step`] stays small.
+    #[inline(never)]
+    fn nonlinear_substep(&mut self, t_mid: f64, hs: f64, drive: &Drive, attempts_left: &mut u64) -> bool {
+        let compliant = self.params.transmission == Transmission::Compliant;
+        let backlash = self.params.backlash_width > 0.0;
+        if compliant && backlash && self.params.link_torque_is_linear() {
+            // Backlash alone: exact steps between contact events.
+            let key = self.step_keys.key(hs);
+            if self.advance_contact_linear(t_mid, key, hs, drive) {
+                return true;
+            }
+        } else if compliant && (backlash || self.params.backlash_width == 0.0) {
+            // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
+            // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below),
+            // with backlash that of the contact state the step starts in.
+            let key = self.step_keys.key(hs);
+            let contact = if backlash { Some(self.contact_at_start(t_mid, key)) } else { None };
+            if let Some((c, rate)) = self.advance_exponential(t_mid, key, drive, attempts_left, contact) {
+                if hs != key {
+                    // the rate at the end, if the contact checks computed it
+                    let rate = rate.unwrap_or_else(|| mechanics::derivative(&self.params, &c, &self.mechanics, drive));
+                    self.mechanics += rate * (hs - key);
+                }
+                return true;
+            }
+        }
+        let c = self.coefficients_at(on_temperature_lattice(t_mid));
+        mechanics::integrate_adaptive(
+            &self.params,
+            &c,
+            &mut self.mechanics,
+            drive,
+            hs,
+            &mut self.adaptive_step,
+            attempts_left,
+        )
+        .is_some()
     }
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
-        let needed = (h / self.params.max_internal_step).ceil();
-        if needed.is_nan() || needed > MAX_SUBSTEPS_PER_STEP {
-            return Err(StepFailure::TooManySubsteps { needed });
-        }
-        let substeps = if h <= self.params.max_internal_step { 1 } else { needed as usize };
+        let substeps = if h <= self.params.max_internal_step {
+            1
+        } else {
+            // Sub-steps may exceed max_internal_step by [`SUBSTEP_SLACK`]: fmpy's steps
+            // t(k+1) − t(k) exceed 1 ms by a few ulps on about half of them, which would otherwise
+            // be cut in two half-length sub-steps (twice the work, and tables of their own).
+            let needed = (h / self.params.max_internal_step * (1.0 - SUBSTEP_SLACK)).ceil().max(1.0);
+            if needed.is_nan() || needed > MAX_SUBSTEPS_PER_STEP {
+                return Err(StepFailure::TooManySubsteps { needed });
+            }
+            needed as usize
+        };
         let mut attempts_left = MAX_SOLVER_ATTEMPTS_PER_STEP;
         let hs = h / substeps as f64;
         let before = (self.mechanics, self.thermal.clone(), self.adaptive_step);
@@ -341,7 +570,7 @@ impl Model {
             // Thermal first, then mechanics with the moduli at the sub-step's mean PCL temperature:
             // the thermal time scale (s) is far above the sub-step (ms).
             let t_start = self.thermal.pcl_temperature;
-            self.thermal.advance(&self.params, &thermal_inputs, hs);
+            self.thermal.advance_cached(&self.params, &thermal_inputs, hs, &mut self.inversion);
             let t_mid = 0.5 * (t_start + self.thermal.pcl_temperature);
             if linear {
                 let key = self.step_keys.key(hs);
@@ -355,30 +584,7 @@ impl Model {
                 self.mechanics = x;
                 continue;
             }
-            if self.params.backlash_width == 0.0 && self.params.transmission == Transmission::Compliant {
-                // Gravity and friction are smooth: exponential Runge–Kutta on the exact linear part
-                // (its forcing acts on the link alone, so a rigid drive takes Dormand–Prince below).
-                let key = self.step_keys.key(hs);
-                if let Some(c) = self.advance_exponential(t_mid, key, &drive, &mut attempts_left) {
-                    if hs != key {
-                        let rate = mechanics::derivative(&self.params, &c, &self.mechanics, &drive);
-                        self.mechanics += rate * (hs - key);
-                    }
-                    continue;
-                }
-            }
-            let c = self.coefficients_at(on_temperature_lattice(t_mid));
-            if mechanics::integrate_adaptive(
-                &self.params,
-                &c,
-                &mut self.mechanics,
-                &drive,
-                hs,
-                &mut self.adaptive_step,
-                &mut attempts_left,
-            )
-            .is_none()
-            {
+            if !self.nonlinear_substep(t_mid, hs, &drive, &mut attempts_left) {
                 (self.mechanics, self.thermal, self.adaptive_step) = before;
                 let at_time_in_step = i as f64 * hs;
                 return Err(if attempts_left == 0 {
@@ -459,6 +665,34 @@ impl Model {
         let c = self.coefficients();
         mechanics::transmission(&self.params, &c, &self.mechanics).0
     }
+    /// Whether [`Model::transmitted_torque`] is finite, without evaluating the moduli where a bound
+    /// settles it: the log-linear moduli never leave the range of the material table's rows, so
+    /// |τ| ≤ (K_s r_s² + max E'·κ r_p² + K_M)(|Δ| + b/2) + max C·|Δ'| + K_M |q|; when that bound is
+    /// finite (below 1e300) so is τ, otherwise τ itself is evaluated. Used after every step (an
+    /// FMU must not return a non-finite output), where evaluating the moduli at a PCL temperature
+    /// that moves every step cost more than the exact heating step itself.
+    pub fn transmitted_torque_is_finite(&mut self) -> bool {
+        if self.params.transmission == Transmission::Compliant {
+            let p = &self.params;
+            let [k, c, km] = *self.torque_bounds.get_or_insert_with(|| {
+                let (e1, e2) = p.material_table.rows_kpa();
+                let max = |v: [f64; 4]| v.iter().fold(0.0_f64, |a, x| a.max(x.abs())) * 1e3;
+                let kappa = p.modulus_to_torsion().abs();
+                let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
+                let km = p.maxwell_stiffness.abs();
+                let k = p.spring_torsional_stiffness().abs() + max(e1) * p.storage_modulus_scale.abs() * kappa + km;
+                [k, max(e2) * p.loss_modulus_scale.abs() * kappa / omega.abs(), km]
+            });
+            let x = &self.mechanics;
+            let delta = (x[mechanics::MOTOR_ANGLE] - x[mechanics::LINK_ANGLE]).abs() + 0.5 * p.backlash_width.abs();
+            let rate = (x[mechanics::MOTOR_SPEED] - x[mechanics::LINK_SPEED]).abs();
+            let bound = k * delta + c * rate + km * x[mechanics::MAXWELL_DEFLECTION].abs();
+            if bound < 1e300 {
+                return true;
+            }
+        }
+        self.transmitted_torque().is_finite()
+    }
     pub fn effective_stiffness(&mut self) -> f64 {
         let c = self.coefficients();
         c.effective(&self.params).0
@@ -469,5 +703,25 @@ impl Model {
     }
     pub fn melt_fraction(&self) -> f64 {
         thermal::melt_fraction(&self.params, self.thermal.pcl_temperature)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn etd_level_rounds_log2_of_the_step_ratio() {
+        let key = 1e-3;
+        for level in 0..=MAX_ETD_LEVEL {
+            assert_eq!(etd_level(key, key / (1u64 << level) as f64), level);
+        }
+        for (last, expected) in
+            [(0.0, 0), (-1.0, 0), (f64::NAN, 0), (2e-3, 0), (0.8e-3, 0), (0.6e-3, 1), (1e-9, MAX_ETD_LEVEL)]
+        {
+            assert_eq!(etd_level(key, last), expected, "{last}");
+            let old = if last > 0.0 { ((key / last).log2().round().max(0.0) as u32).min(MAX_ETD_LEVEL) } else { 0 };
+            assert_eq!(etd_level(key, last), old, "{last}");
+        }
     }
 }

@@ -165,6 +165,15 @@ impl Params {
         self.gravity_link_mass * GRAVITY * self.gravity_com_distance
     }
 
+    /// True when the link feels no nonlinear torque (gravity, friction); backlash aside.
+    pub fn link_torque_is_linear(&self) -> bool {
+        self.coulomb_friction == 0.0
+            && self.coulomb_friction_asymmetry == 0.0
+            && self.viscous_friction_asymmetry == 0.0
+            && self.stribeck_friction == 0.0
+            && self.gravity_link_mass == 0.0
+    }
+
     /// True when every enabled effect is linear, so the exact exponential step applies.
     pub fn mechanics_is_linear(&self) -> bool {
         self.coulomb_friction == 0.0
