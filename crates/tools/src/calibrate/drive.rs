@@ -254,8 +254,7 @@ impl Simulated {
 /// a micrometre (1/kp), so the solver's own noise must stay well below what a difference step moves.
 pub const DRIVE_SOLVER_TOLERANCE: f64 = 1e-10;
 
-/// Samples closer than this relative amount to the nominal step use the nominal step.
-const STEP_SNAP: f64 = 1e-6;
+use super::sim::STEP_SNAP;
 
 /// One run through one instance.
 pub fn simulate(inst: &mut Instance, inp: &DriveInput, m: &DriveModel) -> Result<Simulated, HarnessError> {
