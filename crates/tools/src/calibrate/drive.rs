@@ -533,6 +533,7 @@ impl<'a> DriveProblem<'a> {
                 clamp: &clamp,
                 negligible: &|j, old, new| (new - old).abs() <= 1e-7 * self.typical(spec[j]).max(old.abs()),
                 relative_tolerance: 1e-8,
+                broyden: false,
             },
             p0,
             max_iter,

@@ -312,6 +312,46 @@ impl<'a> Problem<'a> {
         }
     }
 
+    /// Range of group g's transmission: the absolute ranges, capped by what its sampling can show
+    /// (issue 10, "never use harmonics at or above Nyquist as evidence"): a natural frequency
+    /// √(K/J) above the Nyquist frequency π f_s and a velocity time constant J/C below 1/(4π f_s)
+    /// are invisible in the samples, and fits that wander there only slow every simulation down
+    /// (a stiff velocity coupling under Coulomb friction).
+    pub fn transmission_range(&self, g: usize) -> ((f64, f64), (f64, f64)) {
+        let runs: Vec<usize> = (0..self.inputs.len()).filter(|&r| self.group[r] == g).collect();
+        let inertia = runs.iter().map(|&r| self.inertia(r)).fold(f64::INFINITY, f64::min);
+        let rate = runs
+            .iter()
+            .map(|&r| {
+                let t = &self.inputs[r].time;
+                (t.len() - 1) as f64 / (t[t.len() - 1] - t[0])
+            })
+            .fold(f64::INFINITY, f64::min);
+        let pi = std::f64::consts::PI;
+        let k_hi = STIFFNESS_RANGE.1.min(inertia * (pi * rate).powi(2)).max(10.0 * STIFFNESS_RANGE.0);
+        let c_hi = DAMPING_RANGE.1.min(4.0 * pi * inertia * rate).max(10.0 * DAMPING_RANGE.0);
+        ((STIFFNESS_RANGE.0, k_hi), (DAMPING_RANGE.0, c_hi))
+    }
+
+    /// Lower and upper bounds of every parameter of `spec` (log-parameters for K and C).
+    pub fn bounds(&self, spec: &ModelSpec) -> (Vec<Option<f64>>, Vec<Option<f64>>) {
+        let (mut lower, mut upper) = (spec.lower(self.n_groups), spec.upper(self.n_groups));
+        for g in 0..self.n_groups {
+            let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);
+            lower[2 * g] = Some(k_lo.ln());
+            upper[2 * g] = Some(k_hi.ln());
+            lower[2 * g + 1] = Some(c_lo.ln());
+            upper[2 * g + 1] = Some(c_hi.ln());
+        }
+        (lower, upper)
+    }
+
+    /// [ln K, ln C] of group g clamped into its range.
+    fn clamp_transmission(&self, g: usize, k: f64, c: f64) -> [f64; 2] {
+        let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);
+        [k.clamp(k_lo, k_hi).ln(), c.clamp(c_lo, c_hi).ln()]
+    }
+
     /// Inertia the simulation of run `r` uses: declared, else the FMU's default.
     pub fn inertia(&self, r: usize) -> f64 {
         self.inputs[r].link_inertia.unwrap_or(self.tables[self.group[r]].link_inertia)
@@ -342,8 +382,9 @@ impl<'a> Problem<'a> {
                 DampingLaw::Hysteretic if is_sinusoidal(inp) => c * inp.frequency_hz / self.tables[g].frequency_hz,
                 _ => c,
             };
-            acc[g].0 += k.clamp(STIFFNESS_RANGE.0, STIFFNESS_RANGE.1).ln();
-            acc[g].1 += c.clamp(DAMPING_RANGE.0, DAMPING_RANGE.1).ln();
+            let [lk, lc] = self.clamp_transmission(g, k, c);
+            acc[g].0 += lk;
+            acc[g].1 += lc;
             acc[g].2 += 1;
         }
         let fallback = self.equation_error_start(law, None).unwrap_or_else(|| self.table_start());
@@ -427,8 +468,7 @@ impl<'a> Problem<'a> {
             if !(k > 0.0 && c > 0.0) {
                 return None;
             }
-            out.push(k.clamp(STIFFNESS_RANGE.0, STIFFNESS_RANGE.1).ln());
-            out.push(c.clamp(DAMPING_RANGE.0, DAMPING_RANGE.1).ln());
+            out.extend(self.clamp_transmission(g, k, c));
         }
         out.extend((0..n_eff).map(|i| beta[2 * self.n_groups + i]));
         Some(out)
@@ -492,7 +532,7 @@ impl<'a> Problem<'a> {
     pub fn jacobian(&self, spec: &ModelSpec, p: &[f64], base: &[Vec<f64>]) -> Option<DMatrix<f64>> {
         // forward steps (backward at an upper bound), so every trial stays inside the bounds
         let typical = spec.typical(self.n_groups);
-        let upper = spec.upper(self.n_groups);
+        let (_, upper) = self.bounds(spec);
         let mut jobs = Vec::new();
         let mut meta = Vec::new();
         for r in 0..self.inputs.len() {
@@ -643,6 +683,10 @@ pub struct LeastSquares<'f, S> {
     pub negligible: &'f dyn Fn(usize, f64, f64) -> bool,
     /// Converged when an accepted step lowers the cost by less than this fraction.
     pub relative_tolerance: f64,
+    /// Update the Jacobian by Broyden's rank-one formula after an accepted step instead of
+    /// differencing it again (at most `MAX_BROYDEN_UPDATES` in a row; refreshed when a step
+    /// fails, and at the optimum so the covariance uses a differenced one).
+    pub broyden: bool,
 }
 
 /// The optimum Levenberg–Marquardt reached, with the Jacobian there (for the covariance).
@@ -666,13 +710,20 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
     let mut cost = sse(&r);
     let mut mu = 1e-3;
     let mut jac = DMatrix::zeros(0, 0);
+    // whether `jac` is a finite-difference Jacobian at p (else a Broyden update of one)
+    let mut fresh = false;
+    let mut broyden_run = 0;
     let mut iterations = 0;
     for it in 0..max_iter {
         iterations = it + 1;
-        jac = (ls.jacobian)(&p, &simulated).ok_or("the FMU could not simulate a difference step")?;
+        if !fresh && (jac.ncols() == 0 || !ls.broyden || broyden_run >= MAX_BROYDEN_UPDATES) {
+            jac = (ls.jacobian)(&p, &simulated).ok_or("the FMU could not simulate a difference step")?;
+            fresh = true;
+            broyden_run = 0;
+        }
         let a = jac.transpose() * &jac;
         let g = jac.transpose() * DVector::from_column_slice(&r);
-        let mut improved = false;
+        let mut accepted: Option<(Vec<f64>, S, Vec<f64>, f64)> = None;
         let mut converged = false;
         for _ in 0..8 {
             let delta = lm_solve(&a, &g, mu);
@@ -684,9 +735,8 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
                 let cq = sse(&rq);
                 if cq < cost {
                     converged = small || (cost - cq) / cost < ls.relative_tolerance;
-                    (p, simulated, r, cost) = (q, out, rq, cq);
+                    accepted = Some((q, out, rq, cq));
                     mu = (mu / 3.0).max(1e-9);
-                    improved = true;
                     break;
                 }
             }
@@ -696,16 +746,41 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
             }
             mu *= 5.0;
         }
-        if !improved || converged {
-            break;
+        match accepted {
+            Some((q, out, rq, cq)) => {
+                if ls.broyden {
+                    // J ← J + (Δŷ − J δ) δᵀ / δᵀδ, with Δŷ = −Δr (r = y − ŷ)
+                    let delta = DVector::from_iterator(q.len(), q.iter().zip(&p).map(|(a, b)| a - b));
+                    let dd = delta.norm_squared();
+                    if dd > 0.0 {
+                        let dy = DVector::from_iterator(r.len(), r.iter().zip(&rq).map(|(old, new)| old - new));
+                        let u = (dy - &jac * &delta) / dd;
+                        jac += u * delta.transpose();
+                    }
+                    fresh = false;
+                    broyden_run += 1;
+                }
+                (p, simulated, r, cost) = (q, out, rq, cq);
+                if converged {
+                    break;
+                }
+            }
+            // an updated Jacobian that finds no descent is refreshed before giving up
+            None if !fresh => broyden_run = MAX_BROYDEN_UPDATES,
+            None => break,
         }
+    }
+    if !fresh {
+        jac = (ls.jacobian)(&p, &simulated).ok_or("the FMU could not simulate a difference step")?;
     }
     Ok(Minimum { p, simulated, residual: r, cost, jacobian: jac, iterations })
 }
 
+/// Broyden updates in a row before the Jacobian is differenced again.
+pub const MAX_BROYDEN_UPDATES: usize = 3;
+
 pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_iter: usize) -> Result<Fit, String> {
-    let lower = spec.lower(prob.n_groups);
-    let upper = spec.upper(prob.n_groups);
+    let (lower, upper) = prob.bounds(&spec);
     let typical = spec.typical(prob.n_groups);
     let clamp = |p: &mut [f64]| {
         for ((x, lo), hi) in p.iter_mut().zip(&lower).zip(&upper) {
@@ -725,6 +800,7 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
             clamp: &clamp,
             negligible: &|j, old, new| (new - old).abs() <= 1e-6 * typical[j].max(old.abs()),
             relative_tolerance: 1e-7,
+            broyden: true,
         },
         p0,
         max_iter,

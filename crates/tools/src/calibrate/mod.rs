@@ -316,6 +316,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         (search::calibrate(&mut prob, &laws), refs.join())
     });
     let mut outcome = outcome?;
+    search::debug(format_args!("search and reference: {:?}", t0.elapsed()));
     let references = references.map_err(|_| "the black-box reference panicked")?;
     let mut notes: Vec<String> = Vec::new();
     let held_prob = (!held.is_empty()).then(|| {
@@ -360,6 +361,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
             "a blocked fold: refitted on the first half of every run, scored on the second half (no --validate runs were given)",
         ),
     };
+    search::debug(format_args!("held-out: {:?}", t0.elapsed()));
     let reverted = !outcome.final_fit.spec.effects.is_empty() && held_final >= held_base;
     if reverted {
         notes.push(format!(
@@ -542,16 +544,17 @@ fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String
         for g in report[key].as_array().into_iter().flatten() {
             if g["at_bound"].as_bool() == Some(true) {
                 warnings.push(format!(
-                "{stage} fit at {} °C: the transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.0e}, C = {:.4e} \
-                 N·m·s/rad within {:.0e}–{:.0e}): the structure cannot reach what these data want, and what the loop \
-                 adds may be filling that gap",
+                "{stage} fit at {} °C: the transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.2e}, C = \
+                 {:.4e} N·m·s/rad within {:.0e}–{:.2e}; the upper ends are what the sample rate can show for this \
+                 inertia): the structure cannot reach what these data want, and what the loop adds may be filling \
+                 that gap",
                 g["temperature_c"].as_f64().unwrap_or(f64::NAN),
                 g["stiffness"].as_f64().unwrap_or(f64::NAN),
-                fit::STIFFNESS_RANGE.0,
-                fit::STIFFNESS_RANGE.1,
+                g["stiffness_range"][0].as_f64().unwrap_or(f64::NAN),
+                g["stiffness_range"][1].as_f64().unwrap_or(f64::NAN),
                 g["damping"].as_f64().unwrap_or(f64::NAN),
-                fit::DAMPING_RANGE.0,
-                fit::DAMPING_RANGE.1,
+                g["damping_range"][0].as_f64().unwrap_or(f64::NAN),
+                g["damping_range"][1].as_f64().unwrap_or(f64::NAN),
             ));
             }
         }

@@ -133,7 +133,9 @@ pub fn identified(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
                     "viscous_damping": ground.0,
                     "viscous_damping_std": ground.1,
                     "identified_as": if declared { "physical values (inertia declared)" } else { "K/J and C/J only: the inertia is the FMU's default, not declared; natural frequency and damping ratio are identified, K and C scale with the true inertia" },
-                    "at_bound": at_bound(lk, super::fit::STIFFNESS_RANGE) || at_bound(lc, super::fit::DAMPING_RANGE),
+                    "at_bound": at_bound(lk, prob.transmission_range(g).0) || at_bound(lc, prob.transmission_range(g).1),
+                    "stiffness_range": [prob.transmission_range(g).0 .0, prob.transmission_range(g).0 .1],
+                    "damping_range": [prob.transmission_range(g).1 .0, prob.transmission_range(g).1 .1],
                     "table_stiffness": t.stiffness,
                     "table_damping": t.damping,
                 })

@@ -17,6 +17,25 @@ pub const MAX_ITERATIONS: usize = 25;
 /// winner then runs to convergence (speed: most of a search is spent on losers).
 pub const SCREEN_ITERATIONS: usize = 4;
 
+/// A candidate is refitted only if its linearised score is at least this share of the best one's.
+pub const SHORTLIST_SHARE: f64 = 0.25;
+
+/// The backward check skips the refit of an effect whose linearised removal costs more than this
+/// many BIC margins.
+pub const PRUNE_SKIP: f64 = 10.0;
+
+/// Predicted BIC change of removing effect `e` from `fit` (the others re-adjusted, linearised).
+fn removal_delta_bic(fit: &Fit, e: Effect, n_groups: usize) -> f64 {
+    let Some((o, _)) = fit.spec.offsets(n_groups).into_iter().find(|(_, x)| *x == e) else { return f64::NEG_INFINITY };
+    let k = e.params().len();
+    let inv = super::fit::spd_inverse(&(fit.jacobian.transpose() * &fit.jacobian));
+    let block = inv.view((o, o), (k, k)).into_owned();
+    let theta = nalgebra::DVector::from_column_slice(&fit.p[o..o + k]);
+    let delta_sse = (theta.transpose() * super::fit::spd_inverse(&block) * &theta)[(0, 0)].max(0.0);
+    let n = fit.n as f64;
+    n * ((fit.sse + delta_sse) / fit.sse.max(1e-300)).ln() - k as f64 * n.ln()
+}
+
 /// One round of diagnosis and what came of it.
 #[derive(Clone, Debug)]
 pub struct Round {
@@ -105,11 +124,20 @@ fn best_law(prob: &Problem, fit: Fit, laws: &[Structure], stage: &str, rows: &mu
         // the effects' values (a transmission fitted under the wrong law is a poor start)
         let n_t = 2 * prob.n_groups;
         let mut starts = vec![best.p.clone()];
-        starts.extend(baseline_starts(prob, law).into_iter().map(|(_, mut q)| {
+        if best.spec.effects.is_empty() {
+            starts.extend(baseline_starts(prob, law).into_iter().map(|s| s.1));
+        } else {
+            let mut q = prob.closed_form_start(law);
             q.extend_from_slice(&best.p[n_t..]);
-            q
-        }));
-        let Ok(other) = fit_from_best(prob, spec, starts, MAX_ITERATIONS) else { continue };
+            starts.push(q);
+        }
+        // screened first; only a structure that already wins is run to convergence
+        let Ok(screen) = fit_from_best(prob, spec.clone(), starts, SCREEN_ITERATIONS) else { continue };
+        let other = if screen.bic() < best.bic() && screen.iterations >= SCREEN_ITERATIONS {
+            levenberg_marquardt(prob, spec, screen.p.clone(), MAX_ITERATIONS).unwrap_or(screen)
+        } else {
+            screen
+        };
         rows.push(LawRow { stage: stage.into(), structure: (law, springs), rmse: other.rmse(), bic: other.bic() });
         if other.bic() < best.bic() {
             best = other;
@@ -174,11 +202,27 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
     levenberg_marquardt(prob, moving.spec.clone(), start, MAX_ITERATIONS).unwrap_or(moving)
 }
 
+/// `THERMOVIA_DEBUG=1`: where the loop's time goes, on stderr.
+pub fn debug(what: std::fmt::Arguments) {
+    if std::env::var_os("THERMOVIA_DEBUG").is_some() {
+        eprintln!("{what}");
+    }
+}
+
+/// Simulations run so far (for `debug`).
+fn sims(prob: &Problem) -> usize {
+    prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed)
+}
+
 pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String> {
     let mut rows = Vec::new();
+    let t = std::time::Instant::now();
     let first = baseline(prob, laws.allowed[0])?;
+    debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
     let chosen = best_law(prob, first, &laws.allowed, "baseline", &mut rows);
+    debug(format_args!("law choice: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline = resolve_initial_speeds(prob, chosen);
+    debug(format_args!("initial speeds: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline_signatures = signatures(prob, &baseline);
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
@@ -197,7 +241,14 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
         // earn their place, the one with the lowest BIC is added.
         let mut accepted: Option<(Fit, Signatures)> = None;
         let shortlist = if sig.white() { 0 } else { TRIES_PER_ROUND };
-        for c in candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(shortlist) {
+        // refits are for candidates the linearised ranking cannot tell apart from the best: a
+        // score below SHORTLIST_SHARE of the best one's is not worth a refit
+        let best_score = candidates.first().map_or(0.0, |c| c.score);
+        for c in candidates
+            .iter()
+            .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
+            .take(shortlist)
+        {
             let mut spec = current.spec.clone();
             spec.effects.push(c.effect);
             // Starts: the current transmission and the closed-form one (the transmission fitted
@@ -259,6 +310,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                 a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
             }
         }
+        debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
         // the winner runs to convergence
         if let Some((f, _)) = &accepted {
             if f.iterations >= SCREEN_ITERATIONS {
@@ -270,11 +322,12 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                 }
             }
         }
+        debug(format_args!("winner converged: {:?}, {} simulations", t.elapsed(), sims(prob)));
         rounds.push(round);
         match accepted {
             Some((f, s)) => {
                 // an effect can change which damping law the data favour (friction read as
-                // frequency-dependent loss before it was in)
+                // frequency-dependent loss before it was in): chosen again with it
                 let before = (f.spec.law, f.spec.springs);
                 current = best_law(prob, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
                 sig = if (current.spec.law, current.spec.springs) == before { s } else { signatures(prob, &current) };
@@ -300,7 +353,19 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                     p.extend_from_slice(&current.p[o..o + x.params().len()]);
                 }
             }
-            let Ok(refit) = levenberg_marquardt(prob, spec, p, MAX_ITERATIONS) else { continue };
+            // Linearised first: the Gauss–Newton cost of forcing the effect off while the rest
+            // re-adjusts, θ_eᵀ [(JᵀJ)⁻¹]_ee⁻¹ θ_e. Far beyond the margin, the effect is plainly
+            // needed, and a refit without it would only wander to a bound, where every simulation
+            // is slow.
+            if removal_delta_bic(&current, e, prob.n_groups) > PRUNE_SKIP * BIC_MARGIN {
+                continue;
+            }
+            // then a screening refit: if even that cannot come within the margin, keep the effect
+            let Ok(screen) = levenberg_marquardt(prob, spec.clone(), p, SCREEN_ITERATIONS) else { continue };
+            if screen.bic() >= current.bic() + BIC_MARGIN {
+                continue;
+            }
+            let Ok(refit) = levenberg_marquardt(prob, spec, screen.p, MAX_ITERATIONS) else { continue };
             if refit.bic() < current.bic() + BIC_MARGIN {
                 pruned.push((e, current.bic(), refit.bic()));
                 sig = signatures(prob, &refit);
@@ -310,6 +375,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             }
         }
     }
+    debug(format_args!("pruned: {:?}, {} simulations", t.elapsed(), sims(prob)));
     if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
         current = resolve_initial_speeds(prob, current);
@@ -317,6 +383,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             sig = signatures(prob, &current);
         }
     }
+    debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let unexplained = !sig.white();
     Ok(Outcome {
         baseline,
