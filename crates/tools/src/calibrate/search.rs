@@ -24,6 +24,13 @@ pub const SHORTLIST_SHARE: f64 = 0.25;
 /// many BIC margins.
 pub const PRUNE_SKIP: f64 = 10.0;
 
+/// Whether some temperature group's stiffness or damping sits on its bound.
+pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
+    let (lower, upper) = prob.bounds(&fit.spec);
+    (0..2 * prob.n_groups)
+        .any(|j| lower[j].is_some_and(|b| fit.p[j] <= b + 1e-9) || upper[j].is_some_and(|b| fit.p[j] >= b - 1e-9))
+}
+
 /// Predicted BIC change of removing effect `e` from `fit` (the others re-adjusted, linearised).
 fn removal_delta_bic(fit: &Fit, e: Effect, n_groups: usize) -> f64 {
     let Some((o, _)) = fit.spec.offsets(n_groups).into_iter().find(|(_, x)| *x == e) else { return f64::NEG_INFINITY };
@@ -243,7 +250,9 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
         let shortlist = if sig.white() { 0 } else { TRIES_PER_ROUND };
         // refits are for candidates the linearised ranking cannot tell apart from the best: a
         // score below SHORTLIST_SHARE of the best one's is not worth a refit
-        let best_score = candidates.first().map_or(0.0, |c| c.score);
+        // (unless the fit sits at a bound, where the linearisation is blind: a rigid fit does not
+        // feel a small gravity probe)
+        let best_score = if at_bound(prob, &current) { 0.0 } else { candidates.first().map_or(0.0, |c| c.score) };
         for c in candidates
             .iter()
             .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
