@@ -370,6 +370,26 @@ fn phi_blocks(
     m.exp()
 }
 
+/// The first [`N_STATE`] rows of [`phi_blocks`] at 2h from its value at h, by squaring (one
+/// 10×10 product instead of a second exponential). With the chain's unit entries written as
+/// 1/h, the augmented matrix is h·N for one N, so its exponential at 2h is the square of that at h;
+/// undoing the scaling divides the φ2 and φ3 columns by 2 and 4.
+fn doubled(half: &SMatrix<f64, 10, 10>) -> SMatrix<f64, N_STATE, 10> {
+    let mut full = SMatrix::<f64, N_STATE, 10>::zeros();
+    for i in 0..N_STATE {
+        for j in 0..10 {
+            let mut acc = 0.0;
+            for k in 0..10 {
+                acc += half[(i, k)] * half[(k, j)];
+            }
+            full[(i, j)] = acc;
+        }
+        full[(i, 8)] *= 0.5;
+        full[(i, 9)] *= 0.25;
+    }
+    full
+}
+
 impl Tabulated for EtdStep {
     fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
         EtdStep::with(p, c, h, Coupling::Engaged)
@@ -387,8 +407,8 @@ impl EtdStep {
     pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
         let (a, b) = linear_system_with(p, c, coupling);
         let link = 1.0 / p.link_inertia;
-        let full = phi_blocks(&a, &b, link, h);
         let half = phi_blocks(&a, &b, link, 0.5 * h);
+        let full = doubled(&half);
         let mut v = [0.0; N_ETD];
         for i in 0..N_STATE {
             for j in 0..N_STATE {
@@ -900,8 +920,19 @@ pub fn link_friction(p: &Params, link_speed: f64) -> f64 {
         let s = link_speed / p.stribeck_velocity;
         p.coulomb_friction + p.stribeck_friction * (-s * s).exp()
     };
-    let sign = (link_speed / p.friction_smoothing_velocity).tanh();
+    let sign = smooth_sign(link_speed / p.friction_smoothing_velocity);
     -level * sign - p.coulomb_friction_asymmetry * sign * sign - p.viscous_friction_asymmetry * sign * link_speed
+}
+
+/// tanh(s), the friction's smoothed sign, without the library call where it is ±1: for |s| ≥ 20,
+/// 1 − tanh|s| < 1e-17 is below half an ulp of 1, so tanh rounds to ±1 exactly there (the same
+/// number libm returns; the speeds of a moving link are thousands of smoothing velocities).
+fn smooth_sign(s: f64) -> f64 {
+    if s.abs() >= 20.0 {
+        1.0_f64.copysign(s)
+    } else {
+        s.tanh()
+    }
 }
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
@@ -1044,6 +1075,42 @@ mod tests {
                 assert!((torque.at(&x) - exact).abs() < 1e-15, "{theta0} {d}: {} vs {exact}", torque.at(&x));
             }
         }
+    }
+
+    #[test]
+    fn doubled_blocks_equal_the_exponential_at_twice_the_step() {
+        let p = Params { gravity_link_mass: 0.91, maxwell_stiffness: 8.0, maxwell_relaxation_time: 0.05, ..Params::default() };
+        for t in [22.0, 41.3, 60.0] {
+            let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
+            for coupling in [Coupling::Engaged, Coupling::Free, Coupling::Clipped] {
+                let (a, b) = linear_system_with(&p, &c, coupling);
+                let link = 1.0 / p.link_inertia;
+                for h in [1e-3, 1e-3 / 1024.0, 2e-2] {
+                    let direct = phi_blocks(&a, &b, link, h);
+                    let squared = doubled(&phi_blocks(&a, &b, link, 0.5 * h));
+                    for j in 0..10 {
+                        let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
+                        for i in 0..N_STATE {
+                            let err = (direct[(i, j)] - squared[(i, j)]).abs();
+                            assert!(err <= 1e-13 * scale, "{t} {coupling:?} {h} ({i}, {j}): {err:e} of {scale:e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn smooth_sign_is_tanh() {
+        let mut s: f64 = 1e-3;
+        while s < 1e3 {
+            for v in [s, -s, 20.0 + s, -20.0 - s, 20.0 - s.min(1.0), -20.0 + s.min(1.0)] {
+                assert_eq!(smooth_sign(v).to_bits(), v.tanh().to_bits(), "{v}");
+            }
+            s *= 1.01;
+        }
+        assert!(smooth_sign(f64::NAN).is_nan());
+        assert_eq!(smooth_sign(f64::INFINITY), 1.0);
     }
 
     #[test]
