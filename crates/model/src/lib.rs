@@ -432,6 +432,8 @@ impl Model {
         // The rate at x (for the contact events' slopes), carried from one accepted step to the next
         // (and returned: the caller's first-order remainder uses it).
         let mut rate: Option<State> = None;
+        // The stage torque at x, carried from one accepted step's end to the next step.
+        let mut start: Option<mechanics::StepStart> = None;
         while pos < full {
             if *attempts_left == 0 {
                 return None;
@@ -440,16 +442,19 @@ impl Model {
             let len = key / (1u64 << level) as f64;
             let mut shifted = x;
             shifted[mechanics::MOTOR_ANGLE] -= offset;
+            let s0 = *start.get_or_insert_with(|| mechanics::StepStart::new(&self.params, &x));
             let (mut x_new, err) = if coupling == Coupling::Engaged {
                 let i = self.prepare_etd(t, len);
                 coefficients = self.etd_steps[i].2.coefficients();
-                self.etd_steps[i].2.step(&self.params, &shifted, u)
+                self.etd_steps[i].2.step(&self.params, &shifted, u, &s0)
             } else {
                 let i = self.contact_etd(len, coupling);
-                self.contact_etd[i].2.step(&self.params, &shifted, u)
+                self.contact_etd[i].2.step(&self.params, &shifted, u, &s0)
             };
             x_new[mechanics::MOTOR_ANGLE] += offset;
             if err <= 1.0 {
+                let n0 = s0.link_torque();
+                let mut next = None;
                 if let Some((mode, c)) = contact {
                     let p = &self.params;
                     match mode {
@@ -464,16 +469,19 @@ impl Model {
                             if mechanics::contact(p, &c, &x_new) != mode {
                                 return None;
                             }
-                            let r0 = rate.unwrap_or_else(|| mechanics::derivative(p, &c, &x, u));
-                            let r1 = mechanics::derivative(p, &c, &x_new, u);
+                            let s1 = s0.advanced(p, &x_new);
+                            let r0 = rate.unwrap_or_else(|| mechanics::derivative_with_link_torque(p, &c, &x, u, n0));
+                            let r1 = mechanics::derivative_with_link_torque(p, &c, &x_new, u, s1.link_torque());
                             if mechanics::may_leave(p, &c, mode, (&x, &r0), (&x_new, &r1), len) {
                                 return None;
                             }
                             rate = Some(r1);
+                            next = Some(s1);
                         }
                     }
                     coefficients = c;
                 }
+                start = next;
                 x = x_new;
                 pos += full >> level;
                 // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.

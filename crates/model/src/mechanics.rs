@@ -449,36 +449,90 @@ pub fn smooth_link_torque(p: &Params, x: &State) -> f64 {
 /// step's start angle θ0, sin(θ0 + d) = sin θ0 cos d + cos θ0 sin d, with Taylor series of the
 /// small offset d (to d⁹ and d¹⁰: the next terms are < 1e-21 for |d| < 0.05 rad, where the stages
 /// of a millisecond step lie), so a step takes one `sin_cos` instead of five sines.
-struct StageTorque<'a> {
-    p: &'a Params,
+#[derive(Clone, Copy, Debug)]
+struct StageTorque {
+    friction: Friction,
     theta0: f64,
     sin0: f64,
     cos0: f64,
     amplitude: f64,
+    offset: f64,
 }
 
-impl<'a> StageTorque<'a> {
-    fn new(p: &'a Params, theta0: f64) -> Self {
+/// Where an exponential Runge–Kutta step starts: the stage torque about the link angle there and
+/// its value n(x) ([`smooth_link_torque`], to the bit). An accepted step's end is the next step's
+/// start, so the caller builds it once for both: the next step's first stage and the contact
+/// checks' rates ([`derivative_with_link_torque`]).
+#[derive(Clone, Copy, Debug)]
+pub struct StepStart {
+    torque: StageTorque,
+    n: f64,
+}
+
+impl StepStart {
+    pub fn new(p: &Params, x: &State) -> Self {
+        let torque = StageTorque::new(p, x[LINK_ANGLE]);
+        let n = torque.at(x);
+        StepStart { torque, n }
+    }
+
+    /// n(x): gravity and friction on the link at the step's start, N·m.
+    pub fn link_torque(&self) -> f64 {
+        self.n
+    }
+
+    /// The start of the next step, at the end x1 of this one: gravity's sine and cosine there by
+    /// angle addition from this start's (the series [`StageTorque::at`] uses; rounding apart the
+    /// same numbers as [`StepStart::new`], without a `sin_cos`), or afresh beyond its range.
+    pub fn advanced(&self, p: &Params, x1: &State) -> Self {
+        let t = &self.torque;
+        let d = x1[LINK_ANGLE] - t.theta0;
+        if t.amplitude == 0.0 || d.is_nan() || d.abs() >= 0.05 {
+            return StepStart::new(p, x1);
+        }
+        let (sin_d, cos_d) = sin_cos_small(d);
+        let torque = StageTorque {
+            theta0: x1[LINK_ANGLE],
+            sin0: t.sin0 * cos_d + t.cos0 * sin_d,
+            cos0: t.cos0 * cos_d - t.sin0 * sin_d,
+            ..*t
+        };
+        let n = torque.at(x1);
+        StepStart { torque, n }
+    }
+}
+
+/// sin d and cos d by their Taylor series to d⁹ and d¹⁰ (for |d| < 0.05 rad the next terms are
+/// < 1e-21).
+fn sin_cos_small(d: f64) -> (f64, f64) {
+    let d2 = d * d;
+    let sin_d = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
+    let cos_d =
+        1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 - d2 * (1.0 / 3_628_800.0)))));
+    (sin_d, cos_d)
+}
+
+impl StageTorque {
+    fn new(p: &Params, theta0: f64) -> Self {
+        let friction = Friction::new(p);
         if p.gravity_link_mass == 0.0 {
-            return StageTorque { p, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0 };
+            return StageTorque { friction, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0, offset: 0.0 };
         }
         let (sin0, cos0) = (theta0 - p.gravity_offset).sin_cos();
-        StageTorque { p, theta0, sin0, cos0, amplitude: p.gravity_torque_amplitude() }
+        StageTorque { friction, theta0, sin0, cos0, amplitude: p.gravity_torque_amplitude(), offset: p.gravity_offset }
     }
 
     fn at(&self, x: &State) -> f64 {
-        let friction = link_friction(self.p, x[LINK_SPEED]);
+        let friction = self.friction.at(x[LINK_SPEED]);
         if self.amplitude == 0.0 {
             return friction;
         }
         let d = x[LINK_ANGLE] - self.theta0;
         if d.is_nan() || d.abs() >= 0.05 {
-            return friction + link_gravity(self.p, x[LINK_ANGLE]);
+            // link_gravity
+            return friction + -self.amplitude * (x[LINK_ANGLE] - self.offset).sin();
         }
-        let d2 = d * d;
-        let sin_d = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
-        let cos_d = 1.0
-            + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 - d2 * (1.0 / 3_628_800.0)))));
+        let (sin_d, cos_d) = sin_cos_small(d);
         friction - self.amplitude * (self.sin0 * cos_d + self.cos0 * sin_d)
     }
 }
@@ -516,9 +570,9 @@ impl EtdStep {
     }
 
     /// One ETDRK4 step from x; returns the new state and the scaled error estimate (≤ 1: accept).
-    pub fn step(&self, p: &Params, x: &State, u: &Drive) -> (State, f64) {
-        let torque = StageTorque::new(p, x[LINK_ANGLE]);
-        let n_x = torque.at(x);
+    /// `start` is [`StepStart::new`] at x (its link angle and speed: the motor angle may be shifted).
+    pub fn step(&self, p: &Params, x: &State, u: &Drive, start: &StepStart) -> (State, f64) {
+        let (torque, n_x) = (&start.torque, start.n);
         let a = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_x);
         let n_a = torque.at(&a);
         // b = e^{Ah/2}x + Γ(h/2)u + q n_a: a with the forcing swapped.
@@ -907,21 +961,46 @@ fn hermite_dips(g0: f64, m0: f64, g1: f64, m1: f64) -> bool {
 /// Asymmetric friction (`coulomb_friction_asymmetry` a_c, `viscous_friction_asymmetry` a_v) adds
 /// −a_c s² − a_v s v with s the smoothed sign: levels F_c ± a_c and B_l ± a_v for θl' ≷ 0.
 pub fn link_friction(p: &Params, link_speed: f64) -> f64 {
-    if p.coulomb_friction == 0.0
-        && p.stribeck_friction == 0.0
-        && p.coulomb_friction_asymmetry == 0.0
-        && p.viscous_friction_asymmetry == 0.0
-    {
-        return 0.0;
+    Friction::new(p).at(link_speed)
+}
+
+/// [`link_friction`]'s parameters, copied out of the parameter set.
+#[derive(Clone, Copy, Debug)]
+struct Friction {
+    coulomb: f64,
+    stribeck: f64,
+    stribeck_velocity: f64,
+    smoothing_velocity: f64,
+    coulomb_asymmetry: f64,
+    viscous_asymmetry: f64,
+}
+
+impl Friction {
+    fn new(p: &Params) -> Self {
+        Friction {
+            coulomb: p.coulomb_friction,
+            stribeck: p.stribeck_friction,
+            stribeck_velocity: p.stribeck_velocity,
+            smoothing_velocity: p.friction_smoothing_velocity,
+            coulomb_asymmetry: p.coulomb_friction_asymmetry,
+            viscous_asymmetry: p.viscous_friction_asymmetry,
+        }
     }
-    let level = if p.stribeck_friction == 0.0 {
-        p.coulomb_friction
-    } else {
-        let s = link_speed / p.stribeck_velocity;
-        p.coulomb_friction + p.stribeck_friction * (-s * s).exp()
-    };
-    let sign = smooth_sign(link_speed / p.friction_smoothing_velocity);
-    -level * sign - p.coulomb_friction_asymmetry * sign * sign - p.viscous_friction_asymmetry * sign * link_speed
+
+    fn at(&self, link_speed: f64) -> f64 {
+        if self.coulomb == 0.0 && self.stribeck == 0.0 && self.coulomb_asymmetry == 0.0 && self.viscous_asymmetry == 0.0
+        {
+            return 0.0;
+        }
+        let level = if self.stribeck == 0.0 {
+            self.coulomb
+        } else {
+            let s = link_speed / self.stribeck_velocity;
+            self.coulomb + self.stribeck * (-s * s).exp()
+        };
+        let sign = smooth_sign(link_speed / self.smoothing_velocity);
+        -level * sign - self.coulomb_asymmetry * sign * sign - self.viscous_asymmetry * sign * link_speed
+    }
 }
 
 /// tanh(s), the friction's smoothed sign, without the library call where it is ±1: for |s| ≥ 20,
@@ -965,6 +1044,18 @@ pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
     };
     let link_torque =
         tau + u[1] - p.link_damping * x[LINK_SPEED] + link_friction(p, x[LINK_SPEED]) + link_gravity(p, x[LINK_ANGLE]);
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
+}
+
+/// [`derivative`] of the compliant transmission with the smooth link torque (gravity and friction,
+/// [`smooth_link_torque`]) given: `smooth` from a [`StepStart`] saves its sine and tanh.
+pub fn derivative_with_link_torque(p: &Params, c: &Coefficients, x: &State, u: &Drive, smooth: f64) -> State {
+    let (tau, q_rate) = transmission(p, c, x);
+    let motor_accel = match p.motor_drive {
+        MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
+        MotorDrive::PrescribedAngle => 0.0,
+    };
+    let link_torque = tau + u[1] - p.link_damping * x[LINK_SPEED] + smooth;
     State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
 }
 
@@ -1079,7 +1170,12 @@ mod tests {
 
     #[test]
     fn doubled_blocks_equal_the_exponential_at_twice_the_step() {
-        let p = Params { gravity_link_mass: 0.91, maxwell_stiffness: 8.0, maxwell_relaxation_time: 0.05, ..Params::default() };
+        let p = Params {
+            gravity_link_mass: 0.91,
+            maxwell_stiffness: 8.0,
+            maxwell_relaxation_time: 0.05,
+            ..Params::default()
+        };
         for t in [22.0, 41.3, 60.0] {
             let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
             for coupling in [Coupling::Engaged, Coupling::Free, Coupling::Clipped] {
@@ -1111,6 +1207,22 @@ mod tests {
         }
         assert!(smooth_sign(f64::NAN).is_nan());
         assert_eq!(smooth_sign(f64::INFINITY), 1.0);
+    }
+
+    #[test]
+    fn advanced_start_equals_a_fresh_one() {
+        let p = Params { gravity_link_mass: 0.91, gravity_offset: 0.3, coulomb_friction: 0.05, ..Params::default() };
+        for k in 0..200 {
+            let x0 = State::from([0.0, 0.0, -3.0 + 0.031 * k as f64, 0.7, 0.0]);
+            let start = StepStart::new(&p, &x0);
+            for d in [-0.049, -1e-3, 0.0, 2e-6, 0.02, 0.07] {
+                let x1 = State::from([0.0, 0.0, x0[LINK_ANGLE] + d, 0.3 * d, 0.0]);
+                let (a, b) = (start.advanced(&p, &x1), StepStart::new(&p, &x1));
+                assert!((a.link_torque() - b.link_torque()).abs() < 1e-15, "{k} {d}");
+                let x2 = State::from([0.0, 0.0, x1[LINK_ANGLE] + 0.01, 0.1, 0.0]);
+                assert!((a.torque.at(&x2) - b.torque.at(&x2)).abs() < 1e-15, "{k} {d}");
+            }
+        }
     }
 
     #[test]
