@@ -481,9 +481,13 @@ impl Model {
                     }
                     coefficients = c;
                 }
-                start = next;
                 x = x_new;
                 pos += full >> level;
+                // the next step starts where this one ended (built above for the contact checks)
+                start = match next {
+                    None if pos < full => Some(s0.advanced(&self.params, &x)),
+                    next => next,
+                };
                 // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
                 if err < 1.0 / 16.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
                     level -= 1;
