@@ -347,8 +347,8 @@ const N_ETD: usize = 98;
 /// Coefficients of one exponential Runge–Kutta step (Cox–Matthews ETDRK4 with the ETDRK3 of the
 /// same family as its embedded error estimate) for x' = A x + B u + b n(x), where the linear
 /// transmission is A, B (exact) and the smooth nonlinear link torque n (gravity, tanh-smoothed
-/// friction) enters through b = e_θl'/J_l. Built from two matrix exponentials of 10×10
-/// augmented matrices (e^{Ah}, Γ and the φ-functions applied to b at h and h/2).
+/// friction) enters through b = e_θl'/J_l. Built from the matrix exponential of a 10×10
+/// augmented matrix (e^{Ah}, Γ and the φ-functions applied to b) at h/2, squared for h.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EtdStep {
     v: [f64; N_ETD],
