@@ -958,8 +958,10 @@ fn hermite_dips(g0: f64, m0: f64, g1: f64, m1: f64) -> bool {
     if disc < 0.0 {
         return false;
     }
-    let r = disc.sqrt();
-    low((-b + r) / (3.0 * c)) || low((-b - r) / (3.0 * c))
+    // The roots of 3c s² + 2b s + m0 without cancellation (c may be tiny next to b: a cubic
+    // that is nearly a parabola), from q = −(b + sign(b)·√disc): q/(3c) and m0/q.
+    let q = -(b + disc.sqrt().copysign(b));
+    low(q / (3.0 * c)) || low(m0 / q)
 }
 
 /// Link friction: Coulomb plus a Stribeck excess that fades above `stribeck_velocity`, with sign
@@ -1240,6 +1242,9 @@ mod tests {
         // monotone, and a maximum only
         assert!(!hermite_dips(1.0, -0.5, 0.5, -0.5));
         assert!(!hermite_dips(0.0, 1.0, 0.0, -1.0));
+        // nearly a parabola (c ~ 1e-16, not 0): minimum −0.018 at s = ½, which the textbook root
+        // formula's cancellation put at s = ⅔ (p = 0.032)
+        assert!(hermite_dips(0.43200000000000005, -1.8, 0.43200000000000005, 1.8000000000000003));
         // where the bound's shortcut answers, no sample of the cubic comes near the margin
         for i in 0..40 {
             for j in 0..40 {
