@@ -370,22 +370,37 @@ fn phi_blocks(
     m.exp()
 }
 
-/// The first [`N_STATE`] rows of [`phi_blocks`] at 2h from its value at h, by squaring (one
-/// 10×10 product instead of a second exponential). With the chain's unit entries written as
-/// 1/h, the augmented matrix is h·N for one N, so its exponential at 2h is the square of that at h;
-/// undoing the scaling divides the φ2 and φ3 columns by 2 and 4.
-fn doubled(half: &SMatrix<f64, 10, 10>) -> SMatrix<f64, N_STATE, 10> {
-    let mut full = SMatrix::<f64, N_STATE, 10>::zeros();
-    for i in 0..N_STATE {
-        for j in 0..10 {
-            let mut acc = 0.0;
-            for k in 0..10 {
-                acc += half[(i, k)] * half[(k, j)];
-            }
-            full[(i, j)] = acc;
+/// The first [`N_STATE`] rows of [`phi_blocks`] at 2h from those at h, by squaring (a product
+/// instead of a second exponential). With the chain's unit entries written as 1/h, the augmented
+/// matrix is h·N for one N, so its exponential at 2h is the square of that at h; undoing the
+/// scaling divides the φ2 and φ3 columns by 2 and 4. The other rows of the exponential are known:
+/// identity rows for the inputs, and e^S = [[1, 1, ½], [0, 1, 1], [0, 0, 1]] for the chain's shift S.
+fn doubled(half: &PhiRows) -> PhiRows {
+    let mut h = [[0.0; 10]; N_STATE];
+    for (i, row) in h.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = half[(i, j)];
         }
-        full[(i, 8)] *= 0.5;
-        full[(i, 9)] *= 0.25;
+    }
+    let mut full = PhiRows::zeros();
+    for (i, r) in h.iter().enumerate() {
+        let mut acc = [0.0; 10];
+        for (k, hk) in h.iter().enumerate() {
+            let a = r[k];
+            for j in 0..10 {
+                acc[j] += a * hk[j];
+            }
+        }
+        acc[5] += r[5];
+        acc[6] += r[6];
+        acc[7] += r[7];
+        acc[8] += r[7] + r[8];
+        acc[9] += 0.5 * r[7] + r[8] + r[9];
+        acc[8] *= 0.5;
+        acc[9] *= 0.25;
+        for (j, v) in acc.iter().enumerate() {
+            full[(i, j)] = *v;
+        }
     }
     full
 }
@@ -406,9 +421,12 @@ impl EtdStep {
     /// The step for the mechanics coupled as `coupling`.
     pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
         let (a, b) = linear_system_with(p, c, coupling);
-        let link = 1.0 / p.link_inertia;
-        let half = phi_blocks(&a, &b, link, 0.5 * h);
-        let full = doubled(&half);
+        let half = phi_blocks(&a, &b, 1.0 / p.link_inertia, 0.5 * h).fixed_rows::<N_STATE>(0).into_owned();
+        EtdStep::from_rows(&half, &doubled(&half), c, h)
+    }
+
+    /// The step of length h from the first [`N_STATE`] rows of [`phi_blocks`] at h/2 and h.
+    pub fn from_rows(half: &PhiRows, full: &PhiRows, c: &Coefficients, h: f64) -> Self {
         let mut v = [0.0; N_ETD];
         for i in 0..N_STATE {
             for j in 0..N_STATE {
@@ -431,6 +449,25 @@ impl EtdStep {
         v[LENGTH] = h;
         EtdStep { v }
     }
+}
+
+/// The first [`N_STATE`] rows of [`phi_blocks`] (the rest are known: identity rows for the inputs,
+/// e^N of the φ-chain's shift N).
+pub type PhiRows = SMatrix<f64, N_STATE, 10>;
+
+/// The engaged transmission's [`phi_blocks`] rows at key/2^ℓ for ℓ = 0..=levels + 1, from one
+/// exponential at key/2^(levels+1), doubled level by level ([`doubled`]): every level of one
+/// node for one exponential. The numbers are a function of (p, c, key, levels) alone, so a table
+/// filled from them does not depend on which of its levels were built first.
+pub fn phi_chain(p: &Params, c: &Coefficients, key: f64, levels: u32) -> Vec<PhiRows> {
+    let (a, b) = linear_system_with(p, c, Coupling::Engaged);
+    let deepest = phi_blocks(&a, &b, 1.0 / p.link_inertia, key / (1u64 << (levels + 1)) as f64);
+    let mut rows = vec![PhiRows::zeros(); levels as usize + 2];
+    rows[levels as usize + 1] = deepest.fixed_rows::<N_STATE>(0).into_owned();
+    for l in (0..=levels as usize).rev() {
+        rows[l] = doubled(&rows[l + 1]);
+    }
+    rows
 }
 
 /// The embedded estimate measures the third-order solution. With Stribeck friction it has been
@@ -662,6 +699,11 @@ fn node_celsius(n: usize) -> f64 {
     TABLE_TEMPERATURES_C[0] + n as f64 * PROPAGATOR_LATTICE
 }
 
+/// The PCL temperature of a [`PropagatorTable`]'s node `n`, K.
+pub fn node_temperature(n: usize) -> f64 {
+    super::params::ZERO_CELSIUS + node_celsius(n)
+}
+
 /// Node index of each material table row (exact: the rows are whole multiples of the lattice
 /// apart, checked by a test).
 const ROW_NODES: [usize; 4] = {
@@ -685,8 +727,7 @@ impl<N: Tabulated> PropagatorTable<N> {
 
     fn node(&mut self, p: &Params, n: usize) -> &N {
         let h = self.h;
-        self.nodes[n]
-            .get_or_insert_with(|| N::build(p, &Coefficients::at(p, super::params::ZERO_CELSIUS + node_celsius(n)), h))
+        self.nodes[n].get_or_insert_with(|| N::build(p, &Coefficients::at(p, node_temperature(n)), h))
     }
 
     /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
@@ -700,6 +741,24 @@ impl<N: Tabulated> PropagatorTable<N> {
             self.node(p, k);
         }
         self.eval(&stencil, out);
+    }
+
+    /// The nodes [`PropagatorTable::at`] reads at `t_kelvin` that are not built yet.
+    pub fn missing(&self, t_kelvin: f64) -> Vec<usize> {
+        let (j, n) = match Self::stencil(t_kelvin) {
+            Stencil::Node(j) => (j, 1),
+            Stencil::Cubic(j, _) => (j, 4),
+        };
+        (j..j + n).filter(|&k| self.nodes[k].is_none()).collect()
+    }
+
+    pub fn has(&self, n: usize) -> bool {
+        self.nodes[n].is_some()
+    }
+
+    /// Sets node `n`, built for the moduli at [`node_temperature`]`(n)` and this table's step.
+    pub fn insert(&mut self, n: usize, node: N) {
+        self.nodes[n] = Some(node);
     }
 
     /// [`PropagatorTable::at`] when the nodes it needs are built (false, `out` unchanged, when not):
@@ -1191,12 +1250,40 @@ mod tests {
                 let link = 1.0 / p.link_inertia;
                 for h in [1e-3, 1e-3 / 1024.0, 2e-2] {
                     let direct = phi_blocks(&a, &b, link, h);
-                    let squared = doubled(&phi_blocks(&a, &b, link, 0.5 * h));
+                    let squared = doubled(&phi_blocks(&a, &b, link, 0.5 * h).fixed_rows::<N_STATE>(0).into_owned());
                     for j in 0..10 {
                         let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
                         for i in 0..N_STATE {
                             let err = (direct[(i, j)] - squared[(i, j)]).abs();
                             assert!(err <= 1e-13 * scale, "{t} {coupling:?} {h} ({i}, {j}): {err:e} of {scale:e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn chained_blocks_equal_the_exponential_at_every_level() {
+        let p = Params {
+            gravity_link_mass: 0.91,
+            maxwell_stiffness: 8.0,
+            maxwell_relaxation_time: 0.05,
+            ..Params::default()
+        };
+        for t in [22.0, 41.3, 60.0] {
+            let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
+            let (a, b) = linear_system_with(&p, &c, Coupling::Engaged);
+            let link = 1.0 / p.link_inertia;
+            for key in [1e-3, 1e-3 * (1.0 + 3e-10), 2e-2] {
+                let chain = phi_chain(&p, &c, key, 10);
+                for (l, rows) in chain.iter().enumerate() {
+                    let direct = phi_blocks(&a, &b, link, key / (1u64 << l) as f64);
+                    for j in 0..10 {
+                        let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
+                        for i in 0..N_STATE {
+                            let err = (direct[(i, j)] - rows[(i, j)]).abs();
+                            assert!(err <= 1e-12 * scale, "{t} {key} level {l} ({i}, {j}): {err:e} of {scale:e}");
                         }
                     }
                 }
