@@ -559,6 +559,7 @@ impl StageTorque {
         StageTorque { friction, theta0, sin0, cos0, amplitude: p.gravity_torque_amplitude(), offset: p.gravity_offset }
     }
 
+    #[inline(always)]
     fn at(&self, x: &State) -> f64 {
         let friction = self.friction.at(x[LINK_SPEED]);
         if self.amplitude == 0.0 {
@@ -1054,6 +1055,7 @@ impl Friction {
         }
     }
 
+    #[inline(always)]
     fn at(&self, link_speed: f64) -> f64 {
         if self.coulomb == 0.0 && self.stribeck == 0.0 && self.coulomb_asymmetry == 0.0 && self.viscous_asymmetry == 0.0
         {
