@@ -589,6 +589,7 @@ impl EtdStep {
     }
 
     /// M x + G u + col·s for the 5×5 block at `m`, the 5×2 block at `g` and the column at `col`.
+    #[inline(always)]
     fn affine(&self, m: usize, x: &State, g: usize, u: &Drive, col: usize, s: f64) -> State {
         let v = &self.v;
         let mut y = State::zeros();
