@@ -464,14 +464,14 @@ impl Model {
             let len = key / (1u64 << level) as f64;
             let mut shifted = x;
             shifted[mechanics::MOTOR_ANGLE] -= offset;
-            let s0 = *start.get_or_insert_with(|| mechanics::StepStart::new(&self.params, &x));
+            let s0 = start.get_or_insert_with(|| mechanics::StepStart::new(&self.params, &x));
             let (mut x_new, err) = if coupling == Coupling::Engaged {
                 let i = self.prepare_etd(t, key, level);
                 coefficients = self.etd_steps[i].3.coefficients();
-                self.etd_steps[i].3.step(&self.params, &shifted, u, &s0)
+                self.etd_steps[i].3.step(&self.params, &shifted, u, s0)
             } else {
                 let i = self.contact_etd(len, coupling);
-                self.contact_etd[i].2.step(&self.params, &shifted, u, &s0)
+                self.contact_etd[i].2.step(&self.params, &shifted, u, s0)
             };
             x_new[mechanics::MOTOR_ANGLE] += offset;
             if err <= 1.0 {

@@ -1042,6 +1042,9 @@ struct Friction {
     smoothing_velocity: f64,
     coulomb_asymmetry: f64,
     viscous_asymmetry: f64,
+    /// Some friction at all; asymmetric friction.
+    active: bool,
+    asymmetric: bool,
 }
 
 impl Friction {
@@ -1053,13 +1056,17 @@ impl Friction {
             smoothing_velocity: p.friction_smoothing_velocity,
             coulomb_asymmetry: p.coulomb_friction_asymmetry,
             viscous_asymmetry: p.viscous_friction_asymmetry,
+            active: p.coulomb_friction != 0.0
+                || p.stribeck_friction != 0.0
+                || p.coulomb_friction_asymmetry != 0.0
+                || p.viscous_friction_asymmetry != 0.0,
+            asymmetric: p.coulomb_friction_asymmetry != 0.0 || p.viscous_friction_asymmetry != 0.0,
         }
     }
 
     #[inline(always)]
     fn at(&self, link_speed: f64) -> f64 {
-        if self.coulomb == 0.0 && self.stribeck == 0.0 && self.coulomb_asymmetry == 0.0 && self.viscous_asymmetry == 0.0
-        {
+        if !self.active {
             return 0.0;
         }
         let level = if self.stribeck == 0.0 {
@@ -1069,6 +1076,9 @@ impl Friction {
             self.coulomb + self.stribeck * (-s * s).exp()
         };
         let sign = smooth_sign(link_speed / self.smoothing_velocity);
+        if !self.asymmetric {
+            return -level * sign; // the terms below are +0 then
+        }
         -level * sign - self.coulomb_asymmetry * sign * sign - self.viscous_asymmetry * sign * link_speed
     }
 }
