@@ -142,10 +142,12 @@ pub struct Model {
     step_keys: mechanics::StepKeys,
     /// The last linear step used: (PCL temperature, step key, step).
     linear_step: Option<(f64, f64, LinearStep)>,
-    /// Exponential Runge–Kutta coefficient tables, one per sub-step length (key / 2^level).
-    etd_tables: Vec<Arc<PropagatorTable<EtdStep>>>,
-    /// The last coefficients used at each sub-step length: (PCL temperature, length, step).
-    etd_steps: Vec<(f64, f64, EtdStep)>,
+    /// Exponential Runge–Kutta coefficient tables, one per step key and level (sub-steps of
+    /// key / 2^level): (key, level, table). The levels of one key share each node's exponential
+    /// ([`mechanics::phi_chain`]).
+    etd_tables: Vec<(f64, u32, Arc<PropagatorTable<EtdStep>>)>,
+    /// The last coefficients used at each key and level: (PCL temperature, key, level, step).
+    etd_steps: Vec<(f64, f64, u32, EtdStep)>,
     /// Exact steps of the backlash's free and clipped states (no transmission torque, so no
     /// dependence on the PCL temperature): (length, coupling, step).
     contact_steps: Vec<(f64, Coupling, LinearStep)>,
@@ -272,11 +274,11 @@ impl Model {
         (*t0, *k0) = (t, key);
     }
 
-    /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of `len` at
-    /// PCL temperature `t`.
-    fn prepare_etd(&mut self, t: f64, len: f64) -> usize {
+    /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of
+    /// key / 2^level at PCL temperature `t`.
+    fn prepare_etd(&mut self, t: f64, key: f64, level: u32) -> usize {
         let t = mechanics::table_temperature(t);
-        let i = match self.etd_steps.iter().position(|(_, l, _)| *l == len) {
+        let i = match self.etd_steps.iter().position(|(_, k, l, _)| *k == key && *l == level) {
             Some(i) if self.etd_steps[i].0 == t => return i,
             Some(i) => i,
             None => {
@@ -284,26 +286,46 @@ impl Model {
                 if self.etd_steps.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
                     self.etd_steps.remove(0);
                 }
-                self.etd_steps.push((f64::NAN, len, EtdStep::ZERO));
+                self.etd_steps.push((f64::NAN, key, level, EtdStep::ZERO));
                 self.etd_steps.len() - 1
             }
         };
-        let k = match self.etd_tables.iter().position(|tb| tb.step_length() == len) {
+        let k = match self.etd_tables.iter().position(|(k, l, _)| *k == key && *l == level) {
             Some(k) => k,
             None => {
                 if self.etd_tables.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
                     self.etd_tables.remove(0);
                 }
-                self.etd_tables.push(Arc::new(PropagatorTable::new(len)));
+                let len = key / (1u64 << level) as f64;
+                self.etd_tables.push((key, level, Arc::new(PropagatorTable::new(len))));
                 self.etd_tables.len() - 1
             }
         };
-        let entry = &mut self.etd_steps[i];
-        if !self.etd_tables[k].try_at(t, &mut entry.2) {
-            Arc::make_mut(&mut self.etd_tables[k]).at(&self.params, t, &mut entry.2);
+        if !self.etd_tables[k].2.try_at(t, &mut self.etd_steps[i].3) {
+            self.build_etd_nodes(key, k, t);
+            let built = self.etd_tables[k].2.try_at(t, &mut self.etd_steps[i].3);
+            debug_assert!(built, "the stencil's nodes were built");
         }
-        entry.0 = t;
+        self.etd_steps[i].0 = t;
         i
+    }
+
+    /// Builds the nodes table `k` (of step key `key`) lacks at PCL temperature `t`, and the same
+    /// nodes of the key's other levels' tables where missing: one exponential per node for every
+    /// level ([`mechanics::phi_chain`]), the same numbers whichever level asks first.
+    #[inline(never)]
+    fn build_etd_nodes(&mut self, key: f64, k: usize, t: f64) {
+        for n in self.etd_tables[k].2.missing(t) {
+            let c = Coefficients::at(&self.params, mechanics::node_temperature(n));
+            let rows = mechanics::phi_chain(&self.params, &c, key, MAX_ETD_LEVEL);
+            for (table_key, level, table) in self.etd_tables.iter_mut() {
+                if *table_key == key && !table.has(n) {
+                    let l = *level as usize;
+                    let len = key / (1u64 << l) as f64;
+                    Arc::make_mut(table).insert(n, EtdStep::from_rows(&rows[l + 1], &rows[l], &c, len));
+                }
+            }
+        }
     }
 
     /// Index in `contact_steps` of the exact step of length `len` for the backlash state `coupling`.
@@ -392,12 +414,12 @@ impl Model {
         }
         // Only the two coefficients where the nodes exist (the step itself may be taken at
         // another level); the same numbers the whole step would hold.
-        let table = self.etd_tables.iter().find(|tb| tb.step_length() == key);
-        let c = match table.and_then(|tb| tb.coefficients_at(mechanics::table_temperature(t))) {
+        let table = self.etd_tables.iter().find(|(k, l, _)| *k == key && *l == 0);
+        let c = match table.and_then(|(_, _, tb)| tb.coefficients_at(mechanics::table_temperature(t))) {
             Some(c) => c,
             None => {
-                let i = self.prepare_etd(t, key);
-                self.etd_steps[i].2.coefficients()
+                let i = self.prepare_etd(t, key, 0);
+                self.etd_steps[i].3.coefficients()
             }
         };
         (mechanics::contact(&self.params, &c, &self.mechanics), c)
@@ -432,6 +454,8 @@ impl Model {
         // The rate at x (for the contact events' slopes), carried from one accepted step to the next
         // (and returned: the caller's first-order remainder uses it).
         let mut rate: Option<State> = None;
+        // The stage torque at x, carried from one accepted step's end to the next step.
+        let mut start: Option<mechanics::StepStart> = None;
         while pos < full {
             if *attempts_left == 0 {
                 return None;
@@ -440,16 +464,19 @@ impl Model {
             let len = key / (1u64 << level) as f64;
             let mut shifted = x;
             shifted[mechanics::MOTOR_ANGLE] -= offset;
+            let s0 = start.get_or_insert_with(|| mechanics::StepStart::new(&self.params, &x));
             let (mut x_new, err) = if coupling == Coupling::Engaged {
-                let i = self.prepare_etd(t, len);
-                coefficients = self.etd_steps[i].2.coefficients();
-                self.etd_steps[i].2.step(&self.params, &shifted, u)
+                let i = self.prepare_etd(t, key, level);
+                coefficients = self.etd_steps[i].3.coefficients();
+                self.etd_steps[i].3.step(&self.params, &shifted, u, s0)
             } else {
                 let i = self.contact_etd(len, coupling);
-                self.contact_etd[i].2.step(&self.params, &shifted, u)
+                self.contact_etd[i].2.step(&self.params, &shifted, u, s0)
             };
             x_new[mechanics::MOTOR_ANGLE] += offset;
             if err <= 1.0 {
+                let n0 = s0.link_torque();
+                let mut next = None;
                 if let Some((mode, c)) = contact {
                     let p = &self.params;
                     match mode {
@@ -464,18 +491,25 @@ impl Model {
                             if mechanics::contact(p, &c, &x_new) != mode {
                                 return None;
                             }
-                            let r0 = rate.unwrap_or_else(|| mechanics::derivative(p, &c, &x, u));
-                            let r1 = mechanics::derivative(p, &c, &x_new, u);
+                            let s1 = s0.advanced(p, &x_new);
+                            let r0 = rate.unwrap_or_else(|| mechanics::derivative_with_link_torque(p, &c, &x, u, n0));
+                            let r1 = mechanics::derivative_with_link_torque(p, &c, &x_new, u, s1.link_torque());
                             if mechanics::may_leave(p, &c, mode, (&x, &r0), (&x_new, &r1), len) {
                                 return None;
                             }
                             rate = Some(r1);
+                            next = Some(s1);
                         }
                     }
                     coefficients = c;
                 }
                 x = x_new;
                 pos += full >> level;
+                // the next step starts where this one ended (built above for the contact checks)
+                start = match next {
+                    None if pos < full => Some(s0.advanced(&self.params, &x)),
+                    next => next,
+                };
                 // A fourth-order step twice as long has ~16× the estimate: coarsen when that passes.
                 if err < 1.0 / 16.0 && level > 0 && pos.is_multiple_of(full >> (level - 1)) {
                     level -= 1;

@@ -347,8 +347,8 @@ const N_ETD: usize = 98;
 /// Coefficients of one exponential Runge–Kutta step (Cox–Matthews ETDRK4 with the ETDRK3 of the
 /// same family as its embedded error estimate) for x' = A x + B u + b n(x), where the linear
 /// transmission is A, B (exact) and the smooth nonlinear link torque n (gravity, tanh-smoothed
-/// friction) enters through b = e_θl'/J_l. Built from two matrix exponentials of 10×10
-/// augmented matrices (e^{Ah}, Γ and the φ-functions applied to b at h and h/2).
+/// friction) enters through b = e_θl'/J_l. Built from the matrix exponential of a 10×10
+/// augmented matrix (e^{Ah}, Γ and the φ-functions applied to b) at h/2, squared for h.
 #[derive(Clone, Debug, PartialEq)]
 pub struct EtdStep {
     v: [f64; N_ETD],
@@ -370,6 +370,41 @@ fn phi_blocks(
     m.exp()
 }
 
+/// The first [`N_STATE`] rows of [`phi_blocks`] at 2h from those at h, by squaring (a product
+/// instead of a second exponential). With the chain's unit entries written as 1/h, the augmented
+/// matrix is h·N for one N, so its exponential at 2h is the square of that at h; undoing the
+/// scaling divides the φ2 and φ3 columns by 2 and 4. The other rows of the exponential are known:
+/// identity rows for the inputs, and e^S = [[1, 1, ½], [0, 1, 1], [0, 0, 1]] for the chain's shift S.
+fn doubled(half: &PhiRows) -> PhiRows {
+    let mut h = [[0.0; 10]; N_STATE];
+    for (i, row) in h.iter_mut().enumerate() {
+        for (j, v) in row.iter_mut().enumerate() {
+            *v = half[(i, j)];
+        }
+    }
+    let mut full = PhiRows::zeros();
+    for (i, r) in h.iter().enumerate() {
+        let mut acc = [0.0; 10];
+        for (k, hk) in h.iter().enumerate() {
+            let a = r[k];
+            for j in 0..10 {
+                acc[j] += a * hk[j];
+            }
+        }
+        acc[5] += r[5];
+        acc[6] += r[6];
+        acc[7] += r[7];
+        acc[8] += r[7] + r[8];
+        acc[9] += 0.5 * r[7] + r[8] + r[9];
+        acc[8] *= 0.5;
+        acc[9] *= 0.25;
+        for (j, v) in acc.iter().enumerate() {
+            full[(i, j)] = *v;
+        }
+    }
+    full
+}
+
 impl Tabulated for EtdStep {
     fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
         EtdStep::with(p, c, h, Coupling::Engaged)
@@ -386,9 +421,12 @@ impl EtdStep {
     /// The step for the mechanics coupled as `coupling`.
     pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
         let (a, b) = linear_system_with(p, c, coupling);
-        let link = 1.0 / p.link_inertia;
-        let full = phi_blocks(&a, &b, link, h);
-        let half = phi_blocks(&a, &b, link, 0.5 * h);
+        let half = phi_blocks(&a, &b, 1.0 / p.link_inertia, 0.5 * h).fixed_rows::<N_STATE>(0).into_owned();
+        EtdStep::from_rows(&half, &doubled(&half), c, h)
+    }
+
+    /// The step of length h from the first [`N_STATE`] rows of [`phi_blocks`] at h/2 and h.
+    pub fn from_rows(half: &PhiRows, full: &PhiRows, c: &Coefficients, h: f64) -> Self {
         let mut v = [0.0; N_ETD];
         for i in 0..N_STATE {
             for j in 0..N_STATE {
@@ -413,6 +451,25 @@ impl EtdStep {
     }
 }
 
+/// The first [`N_STATE`] rows of [`phi_blocks`] (the rest are known: identity rows for the inputs,
+/// e^N of the φ-chain's shift N).
+pub type PhiRows = SMatrix<f64, N_STATE, 10>;
+
+/// The engaged transmission's [`phi_blocks`] rows at key/2^ℓ for ℓ = 0..=levels + 1, from one
+/// exponential at key/2^(levels+1), doubled level by level ([`doubled`]): every level of one
+/// node for one exponential. The numbers are a function of (p, c, key, levels) alone, so a table
+/// filled from them does not depend on which of its levels were built first.
+pub fn phi_chain(p: &Params, c: &Coefficients, key: f64, levels: u32) -> Vec<PhiRows> {
+    let (a, b) = linear_system_with(p, c, Coupling::Engaged);
+    let deepest = phi_blocks(&a, &b, 1.0 / p.link_inertia, key / (1u64 << (levels + 1)) as f64);
+    let mut rows = vec![PhiRows::zeros(); levels as usize + 2];
+    rows[levels as usize + 1] = deepest.fixed_rows::<N_STATE>(0).into_owned();
+    for l in (0..=levels as usize).rev() {
+        rows[l] = doubled(&rows[l + 1]);
+    }
+    rows
+}
+
 /// The embedded estimate measures the third-order solution. With Stribeck friction it has been
 /// seen to pass steps whose error is larger (tests/physics.rs, torque-driven at 60 °C: 2.6e-6
 /// rad over 20 s at `solver_tolerance`, under 1e-7 at 1/100 of it), so the exponential
@@ -429,36 +486,91 @@ pub fn smooth_link_torque(p: &Params, x: &State) -> f64 {
 /// step's start angle θ0, sin(θ0 + d) = sin θ0 cos d + cos θ0 sin d, with Taylor series of the
 /// small offset d (to d⁹ and d¹⁰: the next terms are < 1e-21 for |d| < 0.05 rad, where the stages
 /// of a millisecond step lie), so a step takes one `sin_cos` instead of five sines.
-struct StageTorque<'a> {
-    p: &'a Params,
+#[derive(Clone, Copy, Debug)]
+struct StageTorque {
+    friction: Friction,
     theta0: f64,
     sin0: f64,
     cos0: f64,
     amplitude: f64,
+    offset: f64,
 }
 
-impl<'a> StageTorque<'a> {
-    fn new(p: &'a Params, theta0: f64) -> Self {
-        if p.gravity_link_mass == 0.0 {
-            return StageTorque { p, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0 };
-        }
-        let (sin0, cos0) = (theta0 - p.gravity_offset).sin_cos();
-        StageTorque { p, theta0, sin0, cos0, amplitude: p.gravity_torque_amplitude() }
+/// Where an exponential Runge–Kutta step starts: the stage torque about the link angle there and
+/// its value n(x) ([`smooth_link_torque`], to the bit). An accepted step's end is the next step's
+/// start, so the caller builds it once for both: the next step's first stage and the contact
+/// checks' rates ([`derivative_with_link_torque`]).
+#[derive(Clone, Copy, Debug)]
+pub struct StepStart {
+    torque: StageTorque,
+    n: f64,
+}
+
+impl StepStart {
+    pub fn new(p: &Params, x: &State) -> Self {
+        let torque = StageTorque::new(p, x[LINK_ANGLE]);
+        let n = torque.at(x);
+        StepStart { torque, n }
     }
 
+    /// n(x): gravity and friction on the link at the step's start, N·m.
+    pub fn link_torque(&self) -> f64 {
+        self.n
+    }
+
+    /// The start of the next step, at the end x1 of this one: gravity's sine and cosine there by
+    /// angle addition from this start's (the series [`StageTorque::at`] uses; rounding apart the
+    /// same numbers as [`StepStart::new`], without a `sin_cos`), or afresh beyond its range.
+    pub fn advanced(&self, p: &Params, x1: &State) -> Self {
+        let t = &self.torque;
+        let d = x1[LINK_ANGLE] - t.theta0;
+        if t.amplitude == 0.0 || d.is_nan() || d.abs() >= 0.05 {
+            return StepStart::new(p, x1);
+        }
+        let (sin_d, cos_d) = sin_cos_small(d);
+        let torque = StageTorque {
+            theta0: x1[LINK_ANGLE],
+            sin0: t.sin0 * cos_d + t.cos0 * sin_d,
+            cos0: t.cos0 * cos_d - t.sin0 * sin_d,
+            ..*t
+        };
+        let n = torque.at(x1);
+        StepStart { torque, n }
+    }
+}
+
+/// sin d and cos d by their Taylor series to d⁹ and d¹⁰ (for |d| < 0.05 rad the next terms are
+/// < 1e-21).
+fn sin_cos_small(d: f64) -> (f64, f64) {
+    let d2 = d * d;
+    let sin_d = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
+    let cos_d =
+        1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 - d2 * (1.0 / 3_628_800.0)))));
+    (sin_d, cos_d)
+}
+
+impl StageTorque {
+    fn new(p: &Params, theta0: f64) -> Self {
+        let friction = Friction::new(p);
+        if p.gravity_link_mass == 0.0 {
+            return StageTorque { friction, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0, offset: 0.0 };
+        }
+        let (sin0, cos0) = (theta0 - p.gravity_offset).sin_cos();
+        StageTorque { friction, theta0, sin0, cos0, amplitude: p.gravity_torque_amplitude(), offset: p.gravity_offset }
+    }
+
+    #[inline(always)]
     fn at(&self, x: &State) -> f64 {
-        let friction = link_friction(self.p, x[LINK_SPEED]);
+        let friction = self.friction.at(x[LINK_SPEED]);
         if self.amplitude == 0.0 {
             return friction;
         }
         let d = x[LINK_ANGLE] - self.theta0;
         if d.is_nan() || d.abs() >= 0.05 {
-            return friction + link_gravity(self.p, x[LINK_ANGLE]);
+            // link_gravity
+            return friction + -self.amplitude * (x[LINK_ANGLE] - self.offset).sin();
         }
-        let d2 = d * d;
-        let sin_d = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
-        let cos_d = 1.0
-            + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 - d2 * (1.0 / 3_628_800.0)))));
+        let (sin_d, cos_d) = sin_cos_small(d);
         friction - self.amplitude * (self.sin0 * cos_d + self.cos0 * sin_d)
     }
 }
@@ -477,6 +589,7 @@ impl EtdStep {
     }
 
     /// M x + G u + col·s for the 5×5 block at `m`, the 5×2 block at `g` and the column at `col`.
+    #[inline(always)]
     fn affine(&self, m: usize, x: &State, g: usize, u: &Drive, col: usize, s: f64) -> State {
         let v = &self.v;
         let mut y = State::zeros();
@@ -496,9 +609,9 @@ impl EtdStep {
     }
 
     /// One ETDRK4 step from x; returns the new state and the scaled error estimate (≤ 1: accept).
-    pub fn step(&self, p: &Params, x: &State, u: &Drive) -> (State, f64) {
-        let torque = StageTorque::new(p, x[LINK_ANGLE]);
-        let n_x = torque.at(x);
+    /// `start` is [`StepStart::new`] at x (its link angle and speed: the motor angle may be shifted).
+    pub fn step(&self, p: &Params, x: &State, u: &Drive, start: &StepStart) -> (State, f64) {
+        let (torque, n_x) = (&start.torque, start.n);
         let a = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_x);
         let n_a = torque.at(&a);
         // b = e^{Ah/2}x + Γ(h/2)u + q n_a: a with the forcing swapped.
@@ -588,6 +701,11 @@ fn node_celsius(n: usize) -> f64 {
     TABLE_TEMPERATURES_C[0] + n as f64 * PROPAGATOR_LATTICE
 }
 
+/// The PCL temperature of a [`PropagatorTable`]'s node `n`, K.
+pub fn node_temperature(n: usize) -> f64 {
+    super::params::ZERO_CELSIUS + node_celsius(n)
+}
+
 /// Node index of each material table row (exact: the rows are whole multiples of the lattice
 /// apart, checked by a test).
 const ROW_NODES: [usize; 4] = {
@@ -611,8 +729,7 @@ impl<N: Tabulated> PropagatorTable<N> {
 
     fn node(&mut self, p: &Params, n: usize) -> &N {
         let h = self.h;
-        self.nodes[n]
-            .get_or_insert_with(|| N::build(p, &Coefficients::at(p, super::params::ZERO_CELSIUS + node_celsius(n)), h))
+        self.nodes[n].get_or_insert_with(|| N::build(p, &Coefficients::at(p, node_temperature(n)), h))
     }
 
     /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
@@ -626,6 +743,24 @@ impl<N: Tabulated> PropagatorTable<N> {
             self.node(p, k);
         }
         self.eval(&stencil, out);
+    }
+
+    /// The nodes [`PropagatorTable::at`] reads at `t_kelvin` that are not built yet.
+    pub fn missing(&self, t_kelvin: f64) -> Vec<usize> {
+        let (j, n) = match Self::stencil(t_kelvin) {
+            Stencil::Node(j) => (j, 1),
+            Stencil::Cubic(j, _) => (j, 4),
+        };
+        (j..j + n).filter(|&k| self.nodes[k].is_none()).collect()
+    }
+
+    pub fn has(&self, n: usize) -> bool {
+        self.nodes[n].is_some()
+    }
+
+    /// Sets node `n`, built for the moduli at [`node_temperature`]`(n)` and this table's step.
+    pub fn insert(&mut self, n: usize, node: N) {
+        self.nodes[n] = Some(node);
     }
 
     /// [`PropagatorTable::at`] when the nodes it needs are built (false, `out` unchanged, when not):
@@ -865,6 +1000,12 @@ fn hermite_dips(g0: f64, m0: f64, g1: f64, m1: f64) -> bool {
     if m0 >= 0.0 && m1 <= 0.0 {
         return false; // at most a maximum inside
     }
+    // In the Hermite basis p = g0 h00 + g1 h01 + m0 h10 + m1 h11 with h00 + h01 = 1 and |h10|,
+    // |h11| ≤ 4/27 on [0, 1]: p ≥ min(g0, g1) − 4/27 (|m0| + |m1|), so far from zero (the common
+    // case: an edge or a torque sign not approached) no minimum needs finding.
+    if g0.min(g1) > 0.16 * (m0.abs() + m1.abs()) {
+        return false;
+    }
     // p(s) = g0 + m0 s + b s² + c s³
     let b = 3.0 * (g1 - g0) - 2.0 * m0 - m1;
     let c = 2.0 * (g0 - g1) + m0 + m1;
@@ -878,8 +1019,10 @@ fn hermite_dips(g0: f64, m0: f64, g1: f64, m1: f64) -> bool {
     if disc < 0.0 {
         return false;
     }
-    let r = disc.sqrt();
-    low((-b + r) / (3.0 * c)) || low((-b - r) / (3.0 * c))
+    // The roots of 3c s² + 2b s + m0 without cancellation (c may be tiny next to b: a cubic
+    // that is nearly a parabola), from q = −(b + sign(b)·√disc): q/(3c) and m0/q.
+    let q = -(b + disc.sqrt().copysign(b));
+    low(q / (3.0 * c)) || low(m0 / q)
 }
 
 /// Link friction: Coulomb plus a Stribeck excess that fades above `stribeck_velocity`, with sign
@@ -887,21 +1030,68 @@ fn hermite_dips(g0: f64, m0: f64, g1: f64, m1: f64) -> bool {
 /// Asymmetric friction (`coulomb_friction_asymmetry` a_c, `viscous_friction_asymmetry` a_v) adds
 /// −a_c s² − a_v s v with s the smoothed sign: levels F_c ± a_c and B_l ± a_v for θl' ≷ 0.
 pub fn link_friction(p: &Params, link_speed: f64) -> f64 {
-    if p.coulomb_friction == 0.0
-        && p.stribeck_friction == 0.0
-        && p.coulomb_friction_asymmetry == 0.0
-        && p.viscous_friction_asymmetry == 0.0
-    {
-        return 0.0;
+    Friction::new(p).at(link_speed)
+}
+
+/// [`link_friction`]'s parameters, copied out of the parameter set.
+#[derive(Clone, Copy, Debug)]
+struct Friction {
+    coulomb: f64,
+    stribeck: f64,
+    stribeck_velocity: f64,
+    smoothing_velocity: f64,
+    coulomb_asymmetry: f64,
+    viscous_asymmetry: f64,
+    /// Some friction at all; asymmetric friction.
+    active: bool,
+    asymmetric: bool,
+}
+
+impl Friction {
+    fn new(p: &Params) -> Self {
+        Friction {
+            coulomb: p.coulomb_friction,
+            stribeck: p.stribeck_friction,
+            stribeck_velocity: p.stribeck_velocity,
+            smoothing_velocity: p.friction_smoothing_velocity,
+            coulomb_asymmetry: p.coulomb_friction_asymmetry,
+            viscous_asymmetry: p.viscous_friction_asymmetry,
+            active: p.coulomb_friction != 0.0
+                || p.stribeck_friction != 0.0
+                || p.coulomb_friction_asymmetry != 0.0
+                || p.viscous_friction_asymmetry != 0.0,
+            asymmetric: p.coulomb_friction_asymmetry != 0.0 || p.viscous_friction_asymmetry != 0.0,
+        }
     }
-    let level = if p.stribeck_friction == 0.0 {
-        p.coulomb_friction
+
+    #[inline(always)]
+    fn at(&self, link_speed: f64) -> f64 {
+        if !self.active {
+            return 0.0;
+        }
+        let level = if self.stribeck == 0.0 {
+            self.coulomb
+        } else {
+            let s = link_speed / self.stribeck_velocity;
+            self.coulomb + self.stribeck * (-s * s).exp()
+        };
+        let sign = smooth_sign(link_speed / self.smoothing_velocity);
+        if !self.asymmetric {
+            return -level * sign; // the terms below are +0 then
+        }
+        -level * sign - self.coulomb_asymmetry * sign * sign - self.viscous_asymmetry * sign * link_speed
+    }
+}
+
+/// tanh(s), the friction's smoothed sign, without the library call where it is ±1: for |s| ≥ 20,
+/// 1 − tanh|s| < 1e-17 is below half an ulp of 1, so tanh rounds to ±1 exactly there (the same
+/// number libm returns; the speeds of a moving link are thousands of smoothing velocities).
+fn smooth_sign(s: f64) -> f64 {
+    if s.abs() >= 20.0 {
+        1.0_f64.copysign(s)
     } else {
-        let s = link_speed / p.stribeck_velocity;
-        p.coulomb_friction + p.stribeck_friction * (-s * s).exp()
-    };
-    let sign = (link_speed / p.friction_smoothing_velocity).tanh();
-    -level * sign - p.coulomb_friction_asymmetry * sign * sign - p.viscous_friction_asymmetry * sign * link_speed
+        s.tanh()
+    }
 }
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
@@ -934,6 +1124,18 @@ pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
     };
     let link_torque =
         tau + u[1] - p.link_damping * x[LINK_SPEED] + link_friction(p, x[LINK_SPEED]) + link_gravity(p, x[LINK_ANGLE]);
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
+}
+
+/// [`derivative`] of the compliant transmission with the smooth link torque (gravity and friction,
+/// [`smooth_link_torque`]) given: `smooth` from a [`StepStart`] saves its sine and tanh.
+pub fn derivative_with_link_torque(p: &Params, c: &Coefficients, x: &State, u: &Drive, smooth: f64) -> State {
+    let (tau, q_rate) = transmission(p, c, x);
+    let motor_accel = match p.motor_drive {
+        MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
+        MotorDrive::PrescribedAngle => 0.0,
+    };
+    let link_torque = tau + u[1] - p.link_damping * x[LINK_SPEED] + smooth;
     State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
 }
 
@@ -1047,6 +1249,91 @@ mod tests {
     }
 
     #[test]
+    fn doubled_blocks_equal_the_exponential_at_twice_the_step() {
+        let p = Params {
+            gravity_link_mass: 0.91,
+            maxwell_stiffness: 8.0,
+            maxwell_relaxation_time: 0.05,
+            ..Params::default()
+        };
+        for t in [22.0, 41.3, 60.0] {
+            let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
+            for coupling in [Coupling::Engaged, Coupling::Free, Coupling::Clipped] {
+                let (a, b) = linear_system_with(&p, &c, coupling);
+                let link = 1.0 / p.link_inertia;
+                for h in [1e-3, 1e-3 / 1024.0, 2e-2] {
+                    let direct = phi_blocks(&a, &b, link, h);
+                    let squared = doubled(&phi_blocks(&a, &b, link, 0.5 * h).fixed_rows::<N_STATE>(0).into_owned());
+                    for j in 0..10 {
+                        let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
+                        for i in 0..N_STATE {
+                            let err = (direct[(i, j)] - squared[(i, j)]).abs();
+                            assert!(err <= 1e-13 * scale, "{t} {coupling:?} {h} ({i}, {j}): {err:e} of {scale:e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn chained_blocks_equal_the_exponential_at_every_level() {
+        let p = Params {
+            gravity_link_mass: 0.91,
+            maxwell_stiffness: 8.0,
+            maxwell_relaxation_time: 0.05,
+            ..Params::default()
+        };
+        for t in [22.0, 41.3, 60.0] {
+            let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
+            let (a, b) = linear_system_with(&p, &c, Coupling::Engaged);
+            let link = 1.0 / p.link_inertia;
+            for key in [1e-3, 1e-3 * (1.0 + 3e-10), 2e-2] {
+                let chain = phi_chain(&p, &c, key, 10);
+                for (l, rows) in chain.iter().enumerate() {
+                    let direct = phi_blocks(&a, &b, link, key / (1u64 << l) as f64);
+                    for j in 0..10 {
+                        let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
+                        for i in 0..N_STATE {
+                            let err = (direct[(i, j)] - rows[(i, j)]).abs();
+                            assert!(err <= 1e-12 * scale, "{t} {key} level {l} ({i}, {j}): {err:e} of {scale:e}");
+                        }
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn smooth_sign_is_tanh() {
+        let mut s: f64 = 1e-3;
+        while s < 1e3 {
+            for v in [s, -s, 20.0 + s, -20.0 - s, 20.0 - s.min(1.0), -20.0 + s.min(1.0)] {
+                assert_eq!(smooth_sign(v).to_bits(), v.tanh().to_bits(), "{v}");
+            }
+            s *= 1.01;
+        }
+        assert!(smooth_sign(f64::NAN).is_nan());
+        assert_eq!(smooth_sign(f64::INFINITY), 1.0);
+    }
+
+    #[test]
+    fn advanced_start_equals_a_fresh_one() {
+        let p = Params { gravity_link_mass: 0.91, gravity_offset: 0.3, coulomb_friction: 0.05, ..Params::default() };
+        for k in 0..200 {
+            let x0 = State::from([0.0, 0.0, -3.0 + 0.031 * k as f64, 0.7, 0.0]);
+            let start = StepStart::new(&p, &x0);
+            for d in [-0.049, -1e-3, 0.0, 2e-6, 0.02, 0.07] {
+                let x1 = State::from([0.0, 0.0, x0[LINK_ANGLE] + d, 0.3 * d, 0.0]);
+                let (a, b) = (start.advanced(&p, &x1), StepStart::new(&p, &x1));
+                assert!((a.link_torque() - b.link_torque()).abs() < 1e-15, "{k} {d}");
+                let x2 = State::from([0.0, 0.0, x1[LINK_ANGLE] + 0.01, 0.1, 0.0]);
+                assert!((a.torque.at(&x2) - b.torque.at(&x2)).abs() < 1e-15, "{k} {d}");
+            }
+        }
+    }
+
+    #[test]
     fn hermite_dips_finds_interior_minima_only() {
         // p = 1 − 5s + 5s²: minimum −0.25 at s = ½
         assert!(hermite_dips(1.0, -5.0, 1.0, 5.0));
@@ -1055,6 +1342,29 @@ mod tests {
         // monotone, and a maximum only
         assert!(!hermite_dips(1.0, -0.5, 0.5, -0.5));
         assert!(!hermite_dips(0.0, 1.0, 0.0, -1.0));
+        // nearly a parabola (c ~ 1e-16, not 0): minimum −0.018 at s = ½, which the textbook root
+        // formula's cancellation put at s = ⅔ (p = 0.032)
+        assert!(hermite_dips(0.43200000000000005, -1.8, 0.43200000000000005, 1.8000000000000003));
+        // where the bound's shortcut answers, no sample of the cubic comes near the margin
+        for i in 0..40 {
+            for j in 0..40 {
+                for k in 0..24 {
+                    let (m0, m1) = (-2.0 + 0.1 * i as f64, -2.0 + 0.1 * j as f64);
+                    let g0 = 0.01 * k as f64 * (m0.abs() + m1.abs());
+                    for g1 in [g0, 0.5 * g0, 2.0 * g0] {
+                        let b = 3.0 * (g1 - g0) - 2.0 * m0 - m1;
+                        let c = 2.0 * (g0 - g1) + m0 + m1;
+                        let margin = 1e-3 * (m0.abs() + m1.abs());
+                        let low = (1..1000)
+                            .map(|n| n as f64 / 1000.0)
+                            .any(|s| g0 + s * (m0 + s * (b + s * c)) < 2.0 * margin);
+                        if g0.min(g1) > 0.16 * (m0.abs() + m1.abs()) {
+                            assert!(!low && !hermite_dips(g0, m0, g1, m1), "{g0} {m0} {g1} {m1}");
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]
