@@ -128,3 +128,21 @@ fn the_cli_exits_non_zero_and_leaves_out_untouched_on_bad_input() {
     let leftovers: Vec<_> = std::fs::read_dir(&d).unwrap().filter_map(|e| e.ok()).map(|e| e.file_name()).collect();
     assert_eq!(leftovers.len(), 1, "no temporary folder may remain: {leftovers:?}");
 }
+
+/// `link_mass_kg` is used or refused, never silently ignored: with `link_length_m` it is the
+/// point-mass inertia m·l² (a declared inertia wins); without the length the file is refused at
+/// the mass's own line.
+#[test]
+fn a_declared_link_mass_becomes_an_inertia_or_is_refused() {
+    let with_length = GOOD.replacen("# source=test\n", "# source=test\n# link_mass_kg=0.91\n# link_length_m=0.14\n", 1);
+    let r = parse_run(Path::new("m.csv"), &with_length).unwrap();
+    assert!((r.link_inertia.unwrap() - 0.91 * 0.14 * 0.14).abs() < 1e-15);
+    assert!(r.inertia_from_mass);
+    let declared = with_length.replacen("# source=test\n", "# source=test\n# link_inertia_kgm2=0.02\n", 1);
+    let r = parse_run(Path::new("m.csv"), &declared).unwrap();
+    assert_eq!(r.link_inertia, Some(0.02));
+    assert!(!r.inertia_from_mass);
+    let e = err(&GOOD.replacen("# source=test\n", "# source=test\n# link_mass_kg=0.91\n", 1));
+    assert_eq!(e.line, Some(3), "{e}");
+    assert!(e.to_string().contains("link_length_m"), "{e}");
+}

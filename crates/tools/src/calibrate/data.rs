@@ -73,6 +73,9 @@ pub struct Run {
     pub frequency_hz: f64,
     pub frequency_declared: bool,
     pub link_inertia: Option<f64>,
+    /// The inertia is a point mass m·l² from `link_mass_kg` and `link_length_m` (an estimate: a
+    /// real link's own inertia adds to it).
+    pub inertia_from_mass: bool,
     pub drive: DriveKind,
     pub axis: Axis,
     /// `# transmission=rigid`: motor and link one body; `link` then repeats `motor`.
@@ -266,6 +269,7 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
         frequency_hz: 0.0,
         frequency_declared: false,
         link_inertia: None,
+        inertia_from_mass: false,
         drive,
         axis,
         rigid,
@@ -297,6 +301,33 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
         ));
     }
     run.link_inertia = run.meta_f64(inertia_key);
+    if run.meta.contains_key("link_mass_kg") {
+        // a declared mass is used, never silently dropped: with the centre-of-mass distance it is
+        // a point-mass inertia m·l² when no inertia is declared (the gravity effect uses l too)
+        if axis == Axis::Linear {
+            return Err(meta_error(
+                path,
+                text,
+                "link_mass_kg",
+                "link_mass_kg on a linear axis: declare the moving mass as `# inertia_kg=`".into(),
+            ));
+        }
+        match (run.link_inertia, run.meta_f64("link_length_m")) {
+            (Some(_), _) => {}
+            (None, Some(l)) => {
+                run.link_inertia = Some(run.meta_f64("link_mass_kg").unwrap_or(0.0) * l * l);
+                run.inertia_from_mass = true;
+            }
+            (None, None) => return Err(meta_error(
+                path,
+                text,
+                "link_mass_kg",
+                "link_mass_kg without link_length_m: the mass becomes an inertia m·l² only with the centre-of-mass \
+                     distance (`# link_length_m=`); or declare `# link_inertia_kgm2=`"
+                    .into(),
+            )),
+        }
+    }
     if drive == DriveKind::Reference {
         let get = |key: &str, what: &str| -> Result<f64, DataError> {
             match run.meta.get(key) {

@@ -529,6 +529,14 @@ fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
 /// `warnings`, report.md and the console.
 fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String> {
     let mut warnings = Vec::new();
+    let from_mass: Vec<String> = runs.iter().filter(|r| r.inertia_from_mass).map(|r| r.name()).collect();
+    if !from_mass.is_empty() {
+        warnings.push(format!(
+            "the link inertia of {} is the point mass m·l² from link_mass_kg and link_length_m (the link's own \
+             inertia about its centre is not in it): declare link_inertia_kgm2 when it is known",
+            from_mass.join(", ")
+        ));
+    }
     let undeclared: Vec<String> = runs.iter().filter(|r| r.link_inertia.is_none()).map(|r| r.name()).collect();
     if !undeclared.is_empty() {
         warnings.push(format!(
