@@ -124,3 +124,38 @@ def test_a_lightly_damped_link_gives_its_natural_frequency_and_damping_ratio(tmp
     assert abs(g["damping_ratio"] / zeta - 1) <= 0.1, g
     assert g["inertia_declared"] is True and g["at_bound"] is False
     assert ratio <= 1.2, f"final {ratio:.2f}× the noise floor"
+
+
+def split_in_halves(folder: Path, first: Path, second: Path):
+    """Each run file cut in two at its middle sample (metadata and header kept in both)."""
+    for f in sorted(folder.glob("*.csv")):
+        lines = f.read_text().splitlines(keepends=True)
+        head = [ln for ln in lines if ln.startswith("#")]
+        header = lines[len(head)]
+        rows = lines[len(head) + 1:]
+        for out, part in ((first, rows[: len(rows) // 2]), (second, rows[len(rows) // 2:])):
+            out.mkdir(parents=True, exist_ok=True)
+            (out / f.name).write_text("".join(head) + header + "".join(part))
+
+
+def test_standard_errors_hold_between_the_two_halves_of_the_runs(tmp_path):
+    """Issue 10, item 7: K and C fitted on the first and on the second half of every run differ by
+    no more than twice their combined (block-sandwich) standard error. The second halves start
+    mid-swing, so the moving start is exercised too."""
+    data = tmp_path / "runs"
+    truth_model.main(["--out", str(data), "--declare-inertia", "--duration", "20", "--temperatures", "40,60",
+                      "--stiffness", "20,5", "--damping", "0.3,0.1"])
+    first, second = tmp_path / "first", tmp_path / "second"
+    split_in_halves(data, first, second)
+    reports = []
+    for part in (first, second):
+        out = tmp_path / (part.name + "-calibration")
+        run = subprocess.run([str(THERMOVIA), "calibrate", str(part), "--out", str(out), "--no-plots"],
+                             capture_output=True, text=True)
+        assert run.returncode == 0, run.stderr
+        reports.append(json.loads((out / "report.json").read_text()))
+    for a, b in zip(reports[0]["identified"], reports[1]["identified"]):
+        for key in ("stiffness", "damping"):
+            sigma = math.hypot(a[key + "_std"], b[key + "_std"])
+            assert sigma > 0.0
+            assert abs(a[key] - b[key]) <= 2 * sigma, f"{a['temperature_c']} °C {key}: {a[key]} vs {b[key]} ± {sigma}"
