@@ -584,6 +584,25 @@ pub struct Fit {
 }
 
 impl Fit {
+    /// The model at `p` without fitting (no Jacobian, no covariance): `spec` judged on other data.
+    pub fn evaluate(prob: &Problem, spec: ModelSpec, p: Vec<f64>) -> Option<Fit> {
+        let outputs = prob.outputs(&spec, &p)?;
+        let residual = prob.residual(&outputs);
+        let sse = sse(&residual);
+        let n = residual.len();
+        Some(Fit {
+            spec,
+            p,
+            outputs,
+            residual,
+            sse,
+            n,
+            jacobian: DMatrix::zeros(0, 0),
+            covariance: DMatrix::zeros(0, 0),
+            iterations: 0,
+        })
+    }
+
     pub fn rmse(&self) -> f64 {
         (self.sse / self.n as f64).sqrt()
     }

@@ -24,6 +24,49 @@ pub const SHORTLIST_SHARE: f64 = 0.25;
 /// many BIC margins.
 pub const PRUNE_SKIP: f64 = 10.0;
 
+/// An effect earns its place if BIC falls by more than `BIC_MARGIN` and the residual loses at least
+/// `STRUCTURE_DROP` of its low-frequency excess over white noise (BIC alone, with N = every
+/// sample, over-rewards small effects fitting correlated leftovers).
+fn earns_its_place(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Signatures) -> bool {
+    let excess = |x: f64| (x - 1.0).max(0.0);
+    refit.bic() < current.bic() - BIC_MARGIN
+        && excess(refit_sig.structure_ratio) <= (1.0 - STRUCTURE_DROP) * excess(sig.structure_ratio)
+}
+
+/// Share of every run the candidates are screened on (its start), when that still holds three
+/// cycles of every sinusoidal run and 3 s of any other: the screening refits then cost this share.
+pub const SCREEN_SHARE: f64 = 0.35;
+
+/// The first `SCREEN_SHARE` of every run, with the current fit evaluated on it; None when the
+/// runs are too short for that (the full runs are screened).
+fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, Fit, Signatures)> {
+    let long_enough = prob.inputs.iter().all(|i| {
+        let span = SCREEN_SHARE * (i.time[i.time.len() - 1] - i.time[0]);
+        let need = if super::fit::is_sinusoidal(i) { 3.0 / i.frequency_hz } else { 3.0 };
+        span >= need
+    });
+    if !long_enough {
+        return None;
+    }
+    let cut = |v: &[f64]| v[..((v.len() as f64 * SCREEN_SHARE) as usize).max(2)].to_vec();
+    let sprob = prob.held_out(
+        prob.inputs
+            .iter()
+            .map(|i| super::sim::SimInput {
+                time: cut(&i.time),
+                motor: cut(&i.motor),
+                housing_k: cut(&i.housing_k),
+                ..i.clone()
+            })
+            .collect(),
+        prob.measured.iter().map(|m| cut(m)).collect(),
+        prob.group.clone(),
+    );
+    let f = Fit::evaluate(&sprob, fit.spec.clone(), fit.p.clone())?;
+    let s = signatures(&sprob, &f);
+    Some((sprob, f, s))
+}
+
 /// Whether some temperature group's stiffness or damping sits on its bound.
 pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
     let (lower, upper) = prob.bounds(&fit.spec);
@@ -121,10 +164,20 @@ pub struct LawChoice {
 
 /// The same effects under the other allowed laws, refitted from `fit`'s values: the better law by
 /// BIC (equal parameter counts: the lower error). Rows (stage, law, rmse, bic) for the report.
-fn best_law(prob: &Problem, fit: Fit, laws: &[Structure], stage: &str, rows: &mut Vec<LawRow>) -> Fit {
+fn best_law(
+    prob: &Problem,
+    screen: Option<&Problem>,
+    fit: Fit,
+    laws: &[Structure],
+    stage: &str,
+    rows: &mut Vec<LawRow>,
+) -> Fit {
     let mut best = fit;
     let first = (best.spec.law, best.spec.springs);
     rows.push(LawRow { stage: stage.into(), structure: first, rmse: best.rmse(), bic: best.bic() });
+    // screened on the start of the runs when a screening problem is given, else on all of them
+    let sprob = screen.unwrap_or(prob);
+    let Some(best_screened) = Fit::evaluate(sprob, best.spec.clone(), best.p.clone()) else { return best };
     for &(law, springs) in laws.iter().filter(|&&l| l != first) {
         let spec = ModelSpec { effects: best.spec.effects.clone(), law, springs };
         // from the other structure's optimum, and from this law's closed-form transmission with
@@ -138,13 +191,17 @@ fn best_law(prob: &Problem, fit: Fit, laws: &[Structure], stage: &str, rows: &mu
             q.extend_from_slice(&best.p[n_t..]);
             starts.push(q);
         }
-        // screened first; only a structure that already wins is run to convergence
-        let Ok(screen) = fit_from_best(prob, spec.clone(), starts, SCREEN_ITERATIONS) else { continue };
-        let other = if screen.bic() < best.bic() && screen.iterations >= SCREEN_ITERATIONS {
-            levenberg_marquardt(prob, spec, screen.p.clone(), MAX_ITERATIONS).unwrap_or(screen)
+        // screened first; only a structure that already wins is run to convergence on every sample
+        let Ok(screened) = fit_from_best(sprob, spec.clone(), starts, SCREEN_ITERATIONS) else { continue };
+        let wins = screened.bic() < best_screened.bic();
+        let other = if wins && (screen.is_some() || screened.iterations >= SCREEN_ITERATIONS) {
+            levenberg_marquardt(prob, spec, screened.p.clone(), MAX_ITERATIONS).ok()
+        } else if screen.is_none() {
+            Some(screened)
         } else {
-            screen
+            Fit::evaluate(prob, spec, screened.p.clone())
         };
+        let Some(other) = other else { continue };
         rows.push(LawRow { stage: stage.into(), structure: (law, springs), rmse: other.rmse(), bic: other.bic() });
         if other.bic() < best.bic() {
             best = other;
@@ -226,11 +283,13 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     let t = std::time::Instant::now();
     let first = baseline(prob, laws.allowed[0])?;
     debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
-    let chosen = best_law(prob, first, &laws.allowed, "baseline", &mut rows);
+    let chosen = best_law(prob, None, first, &laws.allowed, "baseline", &mut rows);
     debug(format_args!("law choice: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline = resolve_initial_speeds(prob, chosen);
     debug(format_args!("initial speeds: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline_signatures = signatures(prob, &baseline);
+    // candidates are screened on the start of every run (cheaper), the winner is judged on all
+    let mut screen = screening_problem(prob, &baseline);
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
     let mut rounds = Vec::new();
@@ -284,29 +343,31 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                 q.extend_from_slice(&e[n_t..]);
                 starts.push(q);
             }
+            let (sprob, scurrent, ssig) = match &screen {
+                Some((sp, sc, ss)) => (sp, sc, ss),
+                None => (&*prob, &current, &sig),
+            };
             let p = starts
                 .into_iter()
-                .map(|q| (cost(prob, &spec, &q), q))
+                .map(|q| (cost(sprob, &spec, &q), q))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .map(|(_, q)| q)
                 .expect("four starts");
             let t = std::time::Instant::now();
-            let Ok(refit) = levenberg_marquardt(prob, spec, p, SCREEN_ITERATIONS) else { continue };
+            let Ok(refit) = levenberg_marquardt(sprob, spec, p, SCREEN_ITERATIONS) else { continue };
             if std::env::var_os("THERMOVIA_DEBUG").is_some() {
                 eprintln!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations);
             }
-            let refit_sig = signatures(prob, &refit);
+            let refit_sig = signatures(sprob, &refit);
             // it earns its place if BIC says so and the residual lost the structure it explained:
             // at least STRUCTURE_DROP of the low-frequency excess over white noise (BIC alone,
             // with N = every sample, over-rewards small effects fitting correlated leftovers)
-            let excess = |x: f64| (x - 1.0).max(0.0);
-            let keep = refit.bic() < current.bic() - BIC_MARGIN
-                && excess(refit_sig.structure_ratio) <= (1.0 - STRUCTURE_DROP) * excess(sig.structure_ratio);
+            let keep = earns_its_place(scurrent, ssig, &refit, &refit_sig);
             round.attempts.push((
                 c.effect,
-                current.bic(),
+                scurrent.bic(),
                 refit.bic(),
-                sig.structure_ratio,
+                ssig.structure_ratio,
                 refit_sig.structure_ratio,
                 keep,
             ));
@@ -320,14 +381,16 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             }
         }
         debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
-        // the winner runs to convergence
-        if let Some((f, _)) = &accepted {
-            if f.iterations >= SCREEN_ITERATIONS {
-                if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
-                    if done.sse <= f.sse {
-                        let s = signatures(prob, &done);
-                        accepted = Some((done, s));
-                    }
+        // the winner runs to convergence on every sample, and must earn its place there too
+        if let Some((f, fs)) = accepted.take() {
+            if screen.is_none() && f.iterations < SCREEN_ITERATIONS {
+                accepted = Some((f, fs));
+            } else if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
+                let s = signatures(prob, &done);
+                if earns_its_place(&current, &sig, &done, &s) {
+                    accepted = Some((done, s));
+                } else if let Some(a) = round.attempts.iter_mut().find(|a| a.5) {
+                    a.5 = false;
                 }
             }
         }
@@ -338,8 +401,21 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                 // an effect can change which damping law the data favour (friction read as
                 // frequency-dependent loss before it was in): chosen again with it
                 let before = (f.spec.law, f.spec.springs);
-                current = best_law(prob, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
+                let sp = screen.as_ref().map(|s| &s.0);
+                current = best_law(prob, sp, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
                 sig = if (current.spec.law, current.spec.springs) == before { s } else { signatures(prob, &current) };
+                debug(format_args!(
+                    "law re-checked: {:?}, {} simulations, {:?}",
+                    t.elapsed(),
+                    sims(prob),
+                    current.spec.law
+                ));
+                if let Some((sp, sc, ss)) = screen.as_mut() {
+                    if let Some(f) = Fit::evaluate(sp, current.spec.clone(), current.p.clone()) {
+                        *ss = signatures(sp, &f);
+                        *sc = f;
+                    }
+                }
             }
             None => break,
         }
@@ -369,6 +445,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             if removal_delta_bic(&current, e, prob.n_groups) > PRUNE_SKIP * BIC_MARGIN {
                 continue;
             }
+            debug(format_args!("prune screen of {}: {:?}", e.name(), t.elapsed()));
             // then a screening refit: if even that cannot come within the margin, keep the effect
             let Ok(screen) = levenberg_marquardt(prob, spec.clone(), p, SCREEN_ITERATIONS) else { continue };
             if screen.bic() >= current.bic() + BIC_MARGIN {
