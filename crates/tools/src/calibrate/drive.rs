@@ -547,29 +547,7 @@ impl<'a> DriveProblem<'a> {
     /// run's record: standard errors that allow residuals correlated within a block (the closed
     /// loop's residual is correlated over hundreds of samples), scaled by B/(B − p).
     pub fn sandwich(&self, jac: &DMatrix<f64>, r: &[f64]) -> DMatrix<f64> {
-        let np = jac.ncols();
-        let a = jac.transpose() * jac;
-        let ainv = spd_inverse(&a);
-        let mut meat = DMatrix::<f64>::zeros(np, np);
-        let mut offset = 0;
-        let mut blocks = 0usize;
-        for len in self.lengths() {
-            let b = COVARIANCE_BLOCKS.min(len);
-            for i in 0..b {
-                let (lo, hi) = (offset + i * len / b, offset + (i + 1) * len / b);
-                let mut s = DVector::<f64>::zeros(np);
-                for t in lo..hi {
-                    for j in 0..np {
-                        s[j] += jac[(t, j)] * r[t];
-                    }
-                }
-                meat += &s * s.transpose();
-                blocks += 1;
-            }
-            offset += len;
-        }
-        let scale = blocks as f64 / (blocks.saturating_sub(np).max(1)) as f64;
-        &ainv * meat * &ainv * scale
+        super::fit::block_sandwich(jac, r, &self.lengths())
     }
 }
 

@@ -451,20 +451,7 @@ const BLACK_BOX_MAX_ORDER: usize = 4;
 /// a blocked fold that respects time (the second half is predicted by simulating on from the
 /// start, never fitted).
 fn blocked_fold_rmse(prob: &fit::Problem, fit: &fit::Fit) -> Result<f64, String> {
-    let half = |v: &[f64]| v[..v.len() / 2].to_vec();
-    let first = prob.held_out(
-        prob.inputs
-            .iter()
-            .map(|i| sim::SimInput {
-                time: half(&i.time),
-                motor: half(&i.motor),
-                housing_k: half(&i.housing_k),
-                ..i.clone()
-            })
-            .collect(),
-        prob.measured.iter().map(|m| half(m)).collect(),
-        prob.group.clone(),
-    );
+    let first = prob.truncated(0.5);
     let refit = fit::levenberg_marquardt(&first, fit.spec.clone(), fit.p.clone(), search::MAX_ITERATIONS)?;
     let out = prob.outputs(&refit.spec, &refit.p).ok_or("the FMU could not simulate the blocked fold")?;
     let (mut sse, mut n) = (0.0, 0usize);

@@ -48,20 +48,7 @@ fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, 
     if !long_enough {
         return None;
     }
-    let cut = |v: &[f64]| v[..((v.len() as f64 * SCREEN_SHARE) as usize).max(2)].to_vec();
-    let sprob = prob.held_out(
-        prob.inputs
-            .iter()
-            .map(|i| super::sim::SimInput {
-                time: cut(&i.time),
-                motor: cut(&i.motor),
-                housing_k: cut(&i.housing_k),
-                ..i.clone()
-            })
-            .collect(),
-        prob.measured.iter().map(|m| cut(m)).collect(),
-        prob.group.clone(),
-    );
+    let sprob = prob.truncated(SCREEN_SHARE);
     let f = Fit::evaluate(&sprob, fit.spec.clone(), fit.p.clone())?;
     let s = signatures(&sprob, &f);
     Some((sprob, f, s))
