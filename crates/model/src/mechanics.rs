@@ -1264,14 +1264,23 @@ mod tests {
                 for h in [1e-3, 1e-3 / 1024.0, 2e-2] {
                     let direct = phi_blocks(&a, &b, link, h);
                     let squared = doubled(&phi_blocks(&a, &b, link, 0.5 * h).fixed_rows::<N_STATE>(0).into_owned());
-                    for j in 0..10 {
-                        let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
-                        for i in 0..N_STATE {
-                            let err = (direct[(i, j)] - squared[(i, j)]).abs();
-                            assert!(err <= 1e-13 * scale, "{t} {coupling:?} {h} ({i}, {j}): {err:e} of {scale:e}");
-                        }
-                    }
+                    assert_columns_close(&direct, &squared, 1e-13, &format!("{t} {coupling:?} {h}"));
                 }
+            }
+        }
+    }
+
+    /// Every entry of the first ten columns of `other` within `tol` of its column's largest in `direct`.
+    fn assert_columns_close<A, B>(direct: &A, other: &B, tol: f64, context: &str)
+    where
+        A: std::ops::Index<(usize, usize), Output = f64>,
+        B: std::ops::Index<(usize, usize), Output = f64>,
+    {
+        for j in 0..10 {
+            let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
+            for i in 0..N_STATE {
+                let err = (direct[(i, j)] - other[(i, j)]).abs();
+                assert!(err <= tol * scale, "{context} ({i}, {j}): {err:e} of {scale:e}");
             }
         }
     }
@@ -1292,13 +1301,7 @@ mod tests {
                 let chain = phi_chain(&p, &c, key, 10);
                 for (l, rows) in chain.iter().enumerate() {
                     let direct = phi_blocks(&a, &b, link, key / (1u64 << l) as f64);
-                    for j in 0..10 {
-                        let scale = (0..N_STATE).fold(0.0_f64, |m, i| m.max(direct[(i, j)].abs()));
-                        for i in 0..N_STATE {
-                            let err = (direct[(i, j)] - rows[(i, j)]).abs();
-                            assert!(err <= 1e-12 * scale, "{t} {key} level {l} ({i}, {j}): {err:e} of {scale:e}");
-                        }
-                    }
+                    assert_columns_close(&direct, rows, 1e-12, &format!("{t} {key} level {l}"));
                 }
             }
         }
