@@ -164,7 +164,14 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
         let cycles = ((span - period) / period).floor().max(0.0);
         let (t0, t1) = (t[0] + period, t[0] + period * (1.0 + cycles));
         let w0 = 2.0 * std::f64::consts::PI * f;
-        let (dc, hs) = harmonics(t, e, w0, &[1, 2, 3, 5], t0, t1);
+        // harmonics at or above the Nyquist frequency alias onto others: never evidence
+        let nyquist = 0.5 * (n - 1) as f64 / span;
+        let orders: Vec<usize> = [1, 2, 3, 5].into_iter().filter(|&k| (k as f64) * f < nyquist).collect();
+        let (dc, hs_below) = harmonics(t, e, w0, &orders, t0, t1);
+        let hs: Vec<(f64, f64)> = [1, 2, 3, 5]
+            .iter()
+            .map(|k| orders.iter().position(|o| o == k).map_or((0.0, 0.0), |i| hs_below[i]))
+            .collect();
         let (_, motor_h) = harmonics(t, &inp.motor, w0, &[1], t0, t1);
         // phase of the residual's fundamental relative to the motor's
         let (mc, ms) = motor_h[0];

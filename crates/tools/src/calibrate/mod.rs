@@ -428,6 +428,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     ];
     if !args.no_plots {
         files.extend(report::plots(&runs, &prob, &outcome)?);
+        files.push(("plots/identified.svg".to_string(), report::identified_plot(&report)?.into_bytes()));
     }
     Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
 }

@@ -362,7 +362,8 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         o.unexplained,
         j["reference"]["rule"].as_str().unwrap_or("")
     );
-    s += "Plots: `plots/fit_*.svg` (measured vs model before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
+    s += "Plots: `plots/identified.svg` (stiffness and damping per temperature), `plots/fit_*.svg` (measured vs model \
+          before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
     s
 }
 
@@ -397,6 +398,61 @@ fn identified_markdown(j: &Value) -> String {
         );
     }
     s
+}
+
+/// The paper's quantities against temperature (report.json `identified` and `identified_baseline`):
+/// stiffness and damping on log axes, the final fit with ±2σ bars, the baseline beside it.
+pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> {
+    let points = |key: &str, what: &str| -> Vec<(f64, f64, f64)> {
+        j[key]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|g| {
+                let f = |k: &str| g[k].as_f64().unwrap_or(f64::NAN);
+                (f("temperature_c"), f(what), f(&format!("{what}_std")))
+            })
+            .filter(|p| p.0.is_finite() && p.1 > 0.0)
+            .collect()
+    };
+    let mut svg = String::new();
+    {
+        let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
+        root.fill(&WHITE)?;
+        let panels = root.split_evenly((1, 2));
+        for (panel, (what, unit)) in panels.iter().zip([("stiffness", "K (N·m/rad)"), ("damping", "C (N·m·s/rad)")])
+        {
+            let (fin, base) = (points("identified", what), points("identified_baseline", what));
+            let all: Vec<&(f64, f64, f64)> = fin.iter().chain(&base).collect();
+            if all.is_empty() {
+                continue;
+            }
+            let (t0, t1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
+            let (v0, v1) = all.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
+                (a.min((p.1 - 2.0 * p.2).max(p.1 / 10.0)), b.max(p.1 + 2.0 * p.2))
+            });
+            let mut ch = ChartBuilder::on(panel)
+                .caption(format!("identified {what} per temperature (final ± 2σ, baseline)"), ("sans-serif", 15))
+                .margin(10)
+                .x_label_area_size(32)
+                .y_label_area_size(70)
+                .build_cartesian_2d((t0 - 5.0)..(t1 + 5.0), ((v0 / 1.5)..(v1 * 1.5)).log_scale())?;
+            ch.configure_mesh().x_desc("temperature (°C)").y_desc(unit).draw()?;
+            let blue = RGBColor(31, 119, 180);
+            let orange = RGBColor(255, 127, 14);
+            ch.draw_series(base.iter().map(|p| Circle::new((p.0 + 0.6, p.1), 4, orange.filled())))?
+                .label("baseline")
+                .legend(move |(x, y)| Circle::new((x + 9, y), 4, orange.filled()));
+            ch.draw_series(fin.iter().map(|p| {
+                ErrorBar::new_vertical(p.0, (p.1 - 2.0 * p.2).max(p.1 / 10.0), p.1, p.1 + 2.0 * p.2, blue.filled(), 8)
+            }))?
+            .label("final ± 2σ")
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], blue));
+            ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
+        }
+        root.present()?;
+    }
+    Ok(svg)
 }
 
 pub(crate) fn line_plot(
