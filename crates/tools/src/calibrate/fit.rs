@@ -621,6 +621,13 @@ impl Fit {
         })
     }
 
+    /// `evaluate` with the Jacobian at `p` (what the ranking's projections need).
+    pub fn evaluate_with_jacobian(prob: &Problem, spec: ModelSpec, p: Vec<f64>) -> Option<Fit> {
+        let mut f = Fit::evaluate(prob, spec, p)?;
+        f.jacobian = prob.jacobian(&f.spec, &f.p, &f.outputs)?;
+        Some(f)
+    }
+
     pub fn rmse(&self) -> f64 {
         (self.sse / self.n as f64).sqrt()
     }

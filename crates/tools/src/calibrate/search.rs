@@ -49,7 +49,7 @@ fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, 
         return None;
     }
     let sprob = prob.truncated(SCREEN_SHARE);
-    let f = Fit::evaluate(&sprob, fit.spec.clone(), fit.p.clone())?;
+    let f = Fit::evaluate_with_jacobian(&sprob, fit.spec.clone(), fit.p.clone())?;
     let s = signatures(&sprob, &f);
     Some((sprob, f, s))
 }
@@ -285,11 +285,16 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     // white residual); refits happen only while structure remains.
     while current.spec.effects.len() < MAX_EFFECTS && (rounds.is_empty() || !sig.white()) {
         let t = std::time::Instant::now();
-        let candidates = rank(prob, &current, &sig);
+        // ranked on the screening share too (the linearised projections need no more)
+        let (rprob, rcurrent, rsig) = match &screen {
+            Some((sp, sc, ss)) => (sp, sc, ss),
+            None => (&*prob, &current, &sig),
+        };
+        let candidates = rank(rprob, rcurrent, rsig);
         if std::env::var_os("THERMOVIA_DEBUG").is_some() {
             eprintln!("rank took {:?}", t.elapsed());
         }
-        let mut round = Round { signatures: sig.clone(), candidates: candidates.clone(), attempts: vec![] };
+        let mut round = Round { signatures: rsig.clone(), candidates: candidates.clone(), attempts: vec![] };
         // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
         // earn their place, the one with the lowest BIC is added.
         let mut accepted: Option<(Fit, Signatures)> = None;
@@ -370,6 +375,16 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
         debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
         // the winner runs to convergence on every sample, and must earn its place there too
         if let Some((f, fs)) = accepted.take() {
+            // an effect can change which damping law the data favour (friction read as frequency-
+            // dependent loss before it was in): re-chosen on the screening share with it, so only
+            // the chosen structure is fitted on every sample
+            let f = match &screen {
+                Some((sp, _, _)) => {
+                    let stage = format!("round {} (screening share)", rounds.len() + 1);
+                    best_law(sp, None, f, &laws.allowed, &stage, &mut rows)
+                }
+                None => f,
+            };
             if screen.is_none() && f.iterations < SCREEN_ITERATIONS {
                 accepted = Some((f, fs));
             } else if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
@@ -385,12 +400,16 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
         rounds.push(round);
         match accepted {
             Some((f, s)) => {
-                // an effect can change which damping law the data favour (friction read as
-                // frequency-dependent loss before it was in): chosen again with it
-                let before = (f.spec.law, f.spec.springs);
-                let sp = screen.as_ref().map(|s| &s.0);
-                current = best_law(prob, sp, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
-                sig = if (current.spec.law, current.spec.springs) == before { s } else { signatures(prob, &current) };
+                // (without a screening share the structure is re-chosen here, on every sample)
+                if screen.is_none() {
+                    let before = (f.spec.law, f.spec.springs);
+                    current = best_law(prob, None, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
+                    sig =
+                        if (current.spec.law, current.spec.springs) == before { s } else { signatures(prob, &current) };
+                } else {
+                    current = f;
+                    sig = s;
+                }
                 debug(format_args!(
                     "law re-checked: {:?}, {} simulations, {:?}",
                     t.elapsed(),
@@ -398,7 +417,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                     current.spec.law
                 ));
                 if let Some((sp, sc, ss)) = screen.as_mut() {
-                    if let Some(f) = Fit::evaluate(sp, current.spec.clone(), current.p.clone()) {
+                    if let Some(f) = Fit::evaluate_with_jacobian(sp, current.spec.clone(), current.p.clone()) {
                         *ss = signatures(sp, &f);
                         *sc = f;
                     }
