@@ -843,7 +843,7 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
             jacobian: &|p, out| prob.jacobian(&spec, p, out),
             clamp: &clamp,
             negligible: &|j, old, new| (new - old).abs() <= 1e-6 * typical[j].max(old.abs()),
-            relative_tolerance: 1e-7,
+            relative_tolerance: 1e-6,
             broyden: true,
         },
         p0,

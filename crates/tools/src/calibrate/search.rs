@@ -37,15 +37,19 @@ fn earns_its_place(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Sig
 /// cycles of every sinusoidal run and 3 s of any other: the screening refits then cost this share.
 pub const SCREEN_SHARE: f64 = 0.35;
 
-/// The first `SCREEN_SHARE` of every run, with the current fit evaluated on it; None when the
-/// runs are too short for that (the full runs are screened).
-fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, Fit, Signatures)> {
-    let long_enough = prob.inputs.iter().all(|i| {
+/// Whether `SCREEN_SHARE` of every run holds three cycles of a sinusoidal run, 3 s of any other.
+fn screening_share_fits(prob: &Problem) -> bool {
+    prob.inputs.iter().all(|i| {
         let span = SCREEN_SHARE * (i.time[i.time.len() - 1] - i.time[0]);
         let need = if super::fit::is_sinusoidal(i) { 3.0 / i.frequency_hz } else { 3.0 };
         span >= need
-    });
-    if !long_enough {
+    })
+}
+
+/// The first `SCREEN_SHARE` of every run, with the current fit evaluated on it; None when the
+/// runs are too short for that (the full runs are screened).
+fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, Fit, Signatures)> {
+    if !screening_share_fits(prob) {
         return None;
     }
     let sprob = prob.truncated(SCREEN_SHARE);
@@ -270,7 +274,8 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     let t = std::time::Instant::now();
     let first = baseline(prob, laws.allowed[0])?;
     debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
-    let chosen = best_law(prob, None, first, &laws.allowed, "baseline", &mut rows);
+    let share = screening_share_fits(prob).then(|| prob.truncated(SCREEN_SHARE));
+    let chosen = best_law(prob, share.as_ref(), first, &laws.allowed, "baseline", &mut rows);
     debug(format_args!("law choice: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline = resolve_initial_speeds(prob, chosen);
     debug(format_args!("initial speeds: {:?}, {} simulations", t.elapsed(), sims(prob)));
@@ -388,6 +393,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             if screen.is_none() && f.iterations < SCREEN_ITERATIONS {
                 accepted = Some((f, fs));
             } else if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
+                debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
                 let s = signatures(prob, &done);
                 if earns_its_place(&current, &sig, &done, &s) {
                     accepted = Some((done, s));
