@@ -441,7 +441,10 @@ const REFERENCE_MARGIN: f64 = 1.1;
 fn black_box_references(runs: &[data::Run], group: &[usize]) -> (reference::Reference, reference::Reference) {
     let signals: Vec<reference::RunSignals> =
         runs.iter().map(|r| reference::RunSignals { time: &r.time, motor: &r.motor, link: &r.link }).collect();
-    (reference::trivial(&signals), reference::arx_grouped(&signals, group, BLACK_BOX_MAX_ORDER))
+    let t = std::time::Instant::now();
+    let out = (reference::trivial(&signals), reference::arx_grouped(&signals, group, BLACK_BOX_MAX_ORDER));
+    search::debug(format_args!("black box: {:?}", t.elapsed()));
+    out
 }
 
 /// Highest order of the black box: two modes (motor–link resonance and one more) are what a
