@@ -181,6 +181,8 @@ pub struct Problem<'a> {
     /// frequency: the fitted K and C scale its springs, E' and E'' (so a heating run keeps the
     /// table's shape in temperature).
     pub tables: Vec<TransmissionTable>,
+    /// Savitzky–Golay-smoothed (link, motor) angles per run for the equation error, computed once.
+    smoothed: std::sync::OnceLock<Vec<(Vec<f64>, Vec<f64>)>>,
 }
 
 /// Parameter vector: [ln K_g, ln C_g for each temperature group] (the transmission's stiffness,
@@ -296,7 +298,16 @@ impl<'a> Problem<'a> {
                     .map_err(|e| format!("the FMU's transmission at {t} °C: {e}"))?,
             );
         }
-        Ok(Problem { sim, inputs, measured, group, n_groups: temperatures_c.len(), solver_tolerance: 1e-8, tables })
+        Ok(Problem {
+            sim,
+            inputs,
+            measured,
+            group,
+            n_groups: temperatures_c.len(),
+            solver_tolerance: 1e-8,
+            tables,
+            smoothed: std::sync::OnceLock::new(),
+        })
     }
 
     /// Held-out runs judged with this problem's fitted groups (nothing is fitted on them).
@@ -309,6 +320,7 @@ impl<'a> Problem<'a> {
             n_groups: self.n_groups,
             solver_tolerance: self.solver_tolerance,
             tables: self.tables.clone(),
+            smoothed: std::sync::OnceLock::new(),
         }
     }
 
@@ -405,7 +417,12 @@ impl<'a> Problem<'a> {
             acc[g].1 += lc;
             acc[g].2 += 1;
         }
-        let fallback = self.equation_error_start(law, None).unwrap_or_else(|| self.table_start());
+        // groups without a sinusoidal run take the equation error's (computed only then)
+        let fallback = if acc.iter().any(|a| a.2 == 0) {
+            self.equation_error_start(law, None).unwrap_or_else(|| self.table_start())
+        } else {
+            Vec::new()
+        };
         (0..self.n_groups)
             .flat_map(|g| {
                 let (k, c, n) = acc[g];
@@ -447,8 +464,7 @@ impl<'a> Problem<'a> {
                 _ => 1.0,
             };
             let half = (n / 100).max(5);
-            let l = super::savitzky_golay(&self.measured[r], half);
-            let m = super::savitzky_golay(&inp.motor, half);
+            let (l, m) = &self.smoothed()[r];
             let t = &inp.time;
             let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
             let mut row = DVector::<f64>::zeros(cols);
@@ -490,6 +506,21 @@ impl<'a> Problem<'a> {
         }
         out.extend((0..n_eff).map(|i| beta[2 * self.n_groups + i]));
         Some(out)
+    }
+
+    /// The equation error's smoothed (link, motor) angles of every run: a window of 2 % of the run,
+    /// at least 5 samples each side (against encoder steps).
+    fn smoothed(&self) -> &[(Vec<f64>, Vec<f64>)] {
+        self.smoothed.get_or_init(|| {
+            self.inputs
+                .iter()
+                .zip(&self.measured)
+                .map(|(inp, y)| {
+                    let half = (y.len() / 100).max(5);
+                    (super::savitzky_golay(y, half), super::savitzky_golay(&inp.motor, half))
+                })
+                .collect()
+        })
     }
 
     /// Sample counts of the runs, in order.
