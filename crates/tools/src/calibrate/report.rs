@@ -391,10 +391,10 @@ fn identified_markdown(j: &Value) -> String {
     }
     if let Some(law) = j["damping_law"].as_object() {
         s += &format!(
-            "\nDamping law: **{}** ({}). Damping is given at {} Hz.\n",
+            "\nDamping law: **{}** ({}). Damping is given at {:.4} Hz.\n",
             law["chosen"].as_str().unwrap_or("?"),
             law["reason"].as_str().unwrap_or(""),
-            j["identified"][0]["damping_reference_frequency_hz"]
+            j["identified"][0]["damping_reference_frequency_hz"].as_f64().unwrap_or(f64::NAN)
         );
     }
     s
