@@ -416,7 +416,7 @@ fn evidence_text(prob: &Problem, effect: Effect, sig: &Signatures, score: f64, d
                     .map(|r| (prob.inputs[r].frequency_hz, runs[r].fundamental_in_phase))
                     .collect();
                 if ip.len() > 1 {
-                    pairs.push(ip.iter().map(|(f, v)| format!("{f} Hz {v:+.1e}")).collect::<Vec<_>>().join(" / "));
+                    pairs.push(ip.iter().map(|(f, v)| format!("{f:.3} Hz {v:+.1e}")).collect::<Vec<_>>().join(" / "));
                 }
             }
             let text = if pairs.is_empty() { "only one frequency per temperature: cannot separate".to_string() } else { pairs.join("; ") };
