@@ -469,12 +469,12 @@ impl<'a> Problem<'a> {
             let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
             let mut row = DVector::<f64>::zeros(cols);
             for k in half + 2..n - half - 2 {
-                let v = d(&l, k);
+                let v = d(l, k);
                 let acc = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]) - (l[k] - l[k - 1]) / (t[k] - t[k - 1]))
                     / (0.5 * (t[k + 1] - t[k - 1]));
                 row.fill(0.0);
                 row[2 * g] = m[k] - l[k];
-                row[2 * g + 1] = w * (d(&m, k) - v);
+                row[2 * g + 1] = w * (d(m, k) - v);
                 match effect {
                     Some(Effect::Gravity) => {
                         row[2 * self.n_groups] = -l[k].sin();
