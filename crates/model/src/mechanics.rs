@@ -520,7 +520,7 @@ pub struct StepStart {
 impl StepStart {
     pub fn new(p: &Params, x: &State) -> Self {
         let torque = StageTorque::new(p, x[LINK_ANGLE]);
-        let n = torque.at(x);
+        let n = torque.at_theta0(x[LINK_SPEED]);
         StepStart { torque, n }
     }
 
@@ -545,7 +545,7 @@ impl StepStart {
             cos0: t.cos0 * cos_d - t.sin0 * sin_d,
             ..*t
         };
-        let n = torque.at(x1);
+        let n = torque.at_theta0(x1[LINK_SPEED]);
         StepStart { torque, n }
     }
 }
@@ -568,6 +568,17 @@ impl StageTorque {
         }
         let (sin0, cos0) = (theta0 - p.gravity_offset).sin_cos();
         StageTorque { friction, theta0, sin0, cos0, amplitude: p.gravity_torque_amplitude(), offset: p.gravity_offset }
+    }
+
+    /// [`StageTorque::at`] at the link angle θ0 itself (offset d = 0: the series give sin d = 0
+    /// and cos d = 1 exactly, so this is the same number but for the sign of a zero).
+    #[inline(always)]
+    fn at_theta0(&self, link_speed: f64) -> f64 {
+        let friction = self.friction.at(link_speed);
+        if self.amplitude == 0.0 {
+            return friction;
+        }
+        friction - self.amplitude * self.sin0
     }
 
     #[inline(always)]
