@@ -309,7 +309,7 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(263, initial_pcl_temperature, Fixed, "K", T_MIN, T_MAX, "PCL temperature at initialisation", "PAPER: room 22 °C"),
     // ---- numerics
     real_param!(270, max_internal_step, Fixed, "s", 1e-7, 10.0, "Longest internal sub-step, independent of the communication step", "NUMERICS"),
-    real_param!(271, solver_tolerance, Fixed, "", 1e-14, 1e-2, "Error tolerance of the adaptive solver (used when friction, backlash or gravity is on)", "NUMERICS"),
+    real_param!(271, solver_tolerance, Fixed, "", 1e-14, 1e-2, "Local error tolerance per step, relative to 1 + the magnitude of each state, used when friction, backlash or gravity is on: Dormand–Prince accepts an estimate ≤ tol; exponential Runge–Kutta keeps its 4th-order solution x4 when the embedded estimate x4 − x3 (the 3rd-order solution's error) is ≤ 2·tol (0.01·tol with Stribeck friction)", "NUMERICS"),
     // ---- modes (Integer)
     Variable {
         name: "material_table",

@@ -412,7 +412,14 @@ impl Model {
         if mechanics::in_play(&self.params, &self.mechanics) {
             return (Contact::Free, Coefficients::ZERO);
         }
-        // Only the two coefficients where the nodes exist (the step itself may be taken at
+        // A step that starts at level 0 (most do) interpolates the level's whole table anyway:
+        // once, here, and the step finds it prepared.
+        if etd_level(key, self.adaptive_step) == 0 {
+            let i = self.prepare_etd(t, key, 0);
+            let c = self.etd_steps[i].3.coefficients();
+            return (mechanics::contact(&self.params, &c, &self.mechanics), c);
+        }
+        // Otherwise only the two coefficients where the nodes exist (the step itself is taken at
         // another level); the same numbers the whole step would hold.
         let table = self.etd_tables.iter().find(|(k, l, _)| *k == key && *l == 0);
         let c = match table.and_then(|(_, _, tb)| tb.coefficients_at(mechanics::table_temperature(t))) {
