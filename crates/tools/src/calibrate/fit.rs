@@ -183,6 +183,10 @@ pub struct Problem<'a> {
     pub tables: Vec<TransmissionTable>,
     /// Savitzky–Golay-smoothed (link, motor) angles per run for the equation error, computed once.
     smoothed: std::sync::OnceLock<Vec<(Vec<f64>, Vec<f64>)>>,
+    /// Whether each run's motor angle is one sinusoid, computed once.
+    sinusoidal: std::sync::OnceLock<Vec<bool>>,
+    /// Each sinusoidal run's (K, C) from its frequency response when physical, computed once.
+    responses: std::sync::OnceLock<Vec<Option<(f64, f64)>>>,
 }
 
 /// Parameter vector: [ln K_g, ln C_g for each temperature group] (the transmission's stiffness,
@@ -286,10 +290,11 @@ impl<'a> Problem<'a> {
         group: Vec<usize>,
         temperatures_c: &[f64],
     ) -> Result<Self, String> {
+        let sinusoidal: Vec<bool> = inputs.iter().map(is_sinusoidal).collect();
         let mut tables = Vec::new();
         for (g, t) in temperatures_c.iter().enumerate() {
             let f = (0..inputs.len())
-                .filter(|&r| group[r] == g && is_sinusoidal(&inputs[r]))
+                .filter(|&r| group[r] == g && sinusoidal[r])
                 .map(|r| inputs[r].frequency_hz)
                 .fold(f64::INFINITY, f64::min);
             let f = if f.is_finite() { f } else { 1.0 };
@@ -307,6 +312,8 @@ impl<'a> Problem<'a> {
             solver_tolerance: 1e-8,
             tables,
             smoothed: std::sync::OnceLock::new(),
+            sinusoidal: sinusoidal.into(),
+            responses: std::sync::OnceLock::new(),
         })
     }
 
@@ -321,6 +328,8 @@ impl<'a> Problem<'a> {
             solver_tolerance: self.solver_tolerance,
             tables: self.tables.clone(),
             smoothed: std::sync::OnceLock::new(),
+            sinusoidal: std::sync::OnceLock::new(),
+            responses: std::sync::OnceLock::new(),
         }
     }
 
@@ -399,18 +408,13 @@ impl<'a> Problem<'a> {
     /// estimate keeps the table's values.
     pub fn closed_form_start(&self, law: DampingLaw) -> Vec<f64> {
         let mut acc = vec![(0.0, 0.0, 0usize); self.n_groups];
-        for (r, inp) in self.inputs.iter().enumerate() {
+        for (r, response) in self.responses().iter().enumerate() {
+            let Some((k, c)) = *response else { continue };
             let g = self.group[r];
-            let j = self.inertia(r);
-            if !is_sinusoidal(inp) {
-                continue;
-            }
-            let estimate = frequency_response(inp, &self.measured[r], j);
-            let Some((k, c)) = estimate.filter(|(k, c)| *k > 0.0 && *c > 0.0) else { continue };
             // the group's parameter is the damping at its reference frequency
             let c = match law {
-                DampingLaw::Hysteretic if is_sinusoidal(inp) => c * inp.frequency_hz / self.tables[g].frequency_hz,
-                _ => c,
+                DampingLaw::Hysteretic => c * self.inputs[r].frequency_hz / self.tables[g].frequency_hz,
+                DampingLaw::Viscous => c,
             };
             let [lk, lc] = self.clamp_transmission(g, k, c);
             acc[g].0 += lk;
@@ -460,7 +464,7 @@ impl<'a> Problem<'a> {
             let g = self.group[r];
             let j = self.inertia(r);
             let w = match law {
-                DampingLaw::Hysteretic if is_sinusoidal(inp) => self.tables[g].frequency_hz / inp.frequency_hz,
+                DampingLaw::Hysteretic if self.sinusoidal()[r] => self.tables[g].frequency_hz / inp.frequency_hz,
                 _ => 1.0,
             };
             let half = (n / 100).max(5);
@@ -518,6 +522,26 @@ impl<'a> Problem<'a> {
                 .map(|(inp, y)| {
                     let half = (y.len() / 100).max(5);
                     (super::savitzky_golay(y, half), super::savitzky_golay(&inp.motor, half))
+                })
+                .collect()
+        })
+    }
+
+    /// Whether each run's motor angle is one sinusoid at its frequency (`is_sinusoidal`).
+    pub fn sinusoidal(&self) -> &[bool] {
+        self.sinusoidal.get_or_init(|| self.inputs.iter().map(is_sinusoidal).collect())
+    }
+
+    /// Each sinusoidal run's (K, C) from its frequency response, when both come out positive.
+    fn responses(&self) -> &[Option<(f64, f64)>] {
+        self.responses.get_or_init(|| {
+            (0..self.inputs.len())
+                .map(|r| {
+                    if !self.sinusoidal()[r] {
+                        return None;
+                    }
+                    frequency_response(&self.inputs[r], &self.measured[r], self.inertia(r))
+                        .filter(|(k, c)| *k > 0.0 && *c > 0.0)
                 })
                 .collect()
         })
@@ -898,7 +922,12 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
 /// Whether a run's motor angle is one sinusoid at its frequency (the hysteretic law and the
 /// frequency-response start need it).
 pub fn is_sinusoidal(inp: &SimInput) -> bool {
-    inp.frequency_hz > 0.0 && sinusoid(&inp.time, &inp.motor, inp.frequency_hz, 0).3 >= SINUSOID_SHARE
+    is_sinusoidal_signal(&inp.time, &inp.motor, inp.frequency_hz)
+}
+
+/// Whether `x(t)` is one sinusoid at `frequency_hz` (share of variance ≥ `SINUSOID_SHARE`).
+pub fn is_sinusoidal_signal(t: &[f64], x: &[f64], frequency_hz: f64) -> bool {
+    frequency_hz > 0.0 && sinusoid(t, x, frequency_hz, 0).3 >= SINUSOID_SHARE
 }
 
 /// K and C from the frequency response at the run's frequency: H = L/M from least-squares

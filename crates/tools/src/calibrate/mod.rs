@@ -180,17 +180,11 @@ pub fn smoothing_half_width(r: &data::Run, seconds: Option<f64>) -> usize {
             if second_difference_noise(&r.motor) <= 1e-12 * swing {
                 return 0;
             }
-            let input = sim::SimInput {
-                time: r.time.clone(),
-                motor: r.motor.clone(),
-                housing_k: vec![],
-                frequency_hz: r.frequency_hz,
-                link_inertia: None,
-                link0: 0.0,
-                com_distance: 0.0,
-                initial_link_speed: 0.0,
+            let top = if fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz) {
+                r.frequency_hz
+            } else {
+                3.0 * rms_frequency(&r.time, &r.motor)
             };
-            let top = if fit::is_sinusoidal(&input) { r.frequency_hz } else { 3.0 * rms_frequency(&r.time, &r.motor) };
             if top > 0.0 {
                 0.1 / top
             } else {
@@ -328,7 +322,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     });
     // One frequency per temperature cannot tell viscous from hysteretic damping (identical fits,
     // identical in-sample predictions); held-out runs at other frequencies can.
-    if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.inputs.iter().all(fit::is_sinusoidal)) {
+    if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.sinusoidal().iter().all(|&s| s)) {
         let mut other = outcome.final_fit.spec.clone();
         other.law = fit::DampingLaw::Hysteretic;
         let sse = |spec: &fit::ModelSpec| {
@@ -479,7 +473,7 @@ const SAME_FREQUENCY: f64 = 0.05;
 fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
     use fit::DampingLaw::{Hysteretic, Viscous};
     use fit::SpringBank::{Nominal, Scaled};
-    let sinusoidal = prob.inputs.iter().all(fit::is_sinusoidal);
+    let sinusoidal = prob.sinusoidal().iter().all(|&s| s);
     let two_frequencies = (0..prob.n_groups).any(|g| {
         let f: Vec<f64> =
             (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).map(|r| prob.inputs[r].frequency_hz).collect();

@@ -39,9 +39,9 @@ pub const SCREEN_SHARE: f64 = 0.35;
 
 /// Whether `SCREEN_SHARE` of every run holds three cycles of a sinusoidal run, 3 s of any other.
 fn screening_share_fits(prob: &Problem) -> bool {
-    prob.inputs.iter().all(|i| {
+    prob.inputs.iter().zip(prob.sinusoidal()).all(|(i, &sinusoidal)| {
         let span = SCREEN_SHARE * (i.time[i.time.len() - 1] - i.time[0]);
-        let need = if super::fit::is_sinusoidal(i) { 3.0 / i.frequency_hz } else { 3.0 };
+        let need = if sinusoidal { 3.0 / i.frequency_hz } else { 3.0 };
         span >= need
     })
 }
