@@ -222,28 +222,22 @@ impl ModelSpec {
         }
         t
     }
-    pub fn lower(&self, n_groups: usize) -> Vec<Option<f64>> {
-        let mut t = Vec::new();
-        for _ in 0..n_groups {
-            t.extend([Some(STIFFNESS_RANGE.0.ln()), Some(DAMPING_RANGE.0.ln())]);
-        }
-        for e in &self.effects {
-            t.extend(e.params().iter().map(|p| p.2));
-        }
-        t
+    /// Lower bounds of the effects' parameters, in `effects` order (the transmission's bounds depend
+    /// on the data: `Problem::bounds`).
+    pub fn effect_lower(&self) -> Vec<Option<f64>> {
+        self.effects.iter().flat_map(|e| e.params().iter().map(|p| p.2)).collect()
     }
-    pub fn upper(&self, n_groups: usize) -> Vec<Option<f64>> {
-        let mut t = Vec::new();
-        for _ in 0..n_groups {
-            t.extend([Some(STIFFNESS_RANGE.1.ln()), Some(DAMPING_RANGE.1.ln())]);
-        }
-        for e in &self.effects {
-            t.extend(e.params().iter().map(|p| match p.0 {
-                "ln_relaxation_time" | "ln_velocity" => Some(10f64.ln()),
-                _ => None,
-            }));
-        }
-        t
+    /// Upper bounds of the effects' parameters, in `effects` order.
+    pub fn effect_upper(&self) -> Vec<Option<f64>> {
+        self.effects
+            .iter()
+            .flat_map(|e| {
+                e.params().iter().map(|p| match p.0 {
+                    "ln_relaxation_time" | "ln_velocity" => Some(10f64.ln()),
+                    _ => None,
+                })
+            })
+            .collect()
     }
     pub fn names(&self, group_names: &[String]) -> Vec<String> {
         let mut v = Vec::new();
@@ -356,14 +350,14 @@ impl<'a> Problem<'a> {
 
     /// Lower and upper bounds of every parameter of `spec` (log-parameters for K and C).
     pub fn bounds(&self, spec: &ModelSpec) -> (Vec<Option<f64>>, Vec<Option<f64>>) {
-        let (mut lower, mut upper) = (spec.lower(self.n_groups), spec.upper(self.n_groups));
+        let (mut lower, mut upper) = (Vec::new(), Vec::new());
         for g in 0..self.n_groups {
             let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);
-            lower[2 * g] = Some(k_lo.ln());
-            upper[2 * g] = Some(k_hi.ln());
-            lower[2 * g + 1] = Some(c_lo.ln());
-            upper[2 * g + 1] = Some(c_hi.ln());
+            lower.extend([Some(k_lo.ln()), Some(c_lo.ln())]);
+            upper.extend([Some(k_hi.ln()), Some(c_hi.ln())]);
         }
+        lower.extend(spec.effect_lower());
+        upper.extend(spec.effect_upper());
         (lower, upper)
     }
 
