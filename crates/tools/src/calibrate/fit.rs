@@ -348,6 +348,13 @@ impl<'a> Problem<'a> {
         ((STIFFNESS_RANGE.0, k_hi), (DAMPING_RANGE.0, c_hi))
     }
 
+    /// Whether group g's stiffness or damping in `p` sits on its bound.
+    pub fn transmission_at_bound(&self, g: usize, p: &[f64]) -> bool {
+        let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);
+        let on = |x: f64, lo: f64, hi: f64| x <= lo.ln() + 1e-9 || x >= hi.ln() - 1e-9;
+        on(p[2 * g], k_lo, k_hi) || on(p[2 * g + 1], c_lo, c_hi)
+    }
+
     /// Lower and upper bounds of every parameter of `spec` (log-parameters for K and C).
     pub fn bounds(&self, spec: &ModelSpec) -> (Vec<Option<f64>>, Vec<Option<f64>>) {
         let (mut lower, mut upper) = (Vec::new(), Vec::new());

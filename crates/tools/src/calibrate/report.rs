@@ -91,11 +91,6 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
     }
 }
 
-/// Whether a log-parameter sits on a bound of `range`.
-fn at_bound(ln_value: f64, range: (f64, f64)) -> bool {
-    ln_value <= range.0.ln() + 1e-9 || ln_value >= range.1.ln() - 1e-9
-}
-
 /// The paper's quantities per temperature (interfaces.md `identified`): the transmission's
 /// stiffness and damping (± block-sandwich standard errors through the log), the inertia used,
 /// natural frequency and damping ratio of the link on the transmission, and damping to ground.
@@ -112,9 +107,9 @@ pub fn identified(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
                 let runs: Vec<usize> = (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).collect();
                 let inertia = runs.iter().map(|&r| prob.inertia(r)).sum::<f64>() / runs.len().max(1) as f64;
                 let declared = runs.iter().all(|&r| prob.inputs[r].link_inertia.is_some());
-                let (lk, lc) = (fit.p[2 * g], fit.p[2 * g + 1]);
-                let (k, c) = (lk.exp(), lc.exp());
+                let (k, c) = (fit.p[2 * g].exp(), fit.p[2 * g + 1].exp());
                 let t = &prob.tables[g];
+                let ((k_lo, k_hi), (c_lo, c_hi)) = prob.transmission_range(g);
                 json!({
                     "temperature_c": temps[g],
                     "stiffness": k,
@@ -133,9 +128,9 @@ pub fn identified(prob: &Problem, fit: &Fit, temps: &[f64]) -> Value {
                     "viscous_damping": ground.0,
                     "viscous_damping_std": ground.1,
                     "identified_as": if declared { "physical values (inertia declared)" } else { "K/J and C/J only: the inertia is the FMU's default, not declared; natural frequency and damping ratio are identified, K and C scale with the true inertia" },
-                    "at_bound": at_bound(lk, prob.transmission_range(g).0) || at_bound(lc, prob.transmission_range(g).1),
-                    "stiffness_range": [prob.transmission_range(g).0 .0, prob.transmission_range(g).0 .1],
-                    "damping_range": [prob.transmission_range(g).1 .0, prob.transmission_range(g).1 .1],
+                    "at_bound": prob.transmission_at_bound(g, &fit.p),
+                    "stiffness_range": [k_lo, k_hi],
+                    "damping_range": [c_lo, c_hi],
                     "table_stiffness": t.stiffness,
                     "table_damping": t.damping,
                 })

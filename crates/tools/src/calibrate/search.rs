@@ -60,9 +60,7 @@ fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, 
 
 /// Whether some temperature group's stiffness or damping sits on its bound.
 pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
-    let (lower, upper) = prob.bounds(&fit.spec);
-    (0..2 * prob.n_groups)
-        .any(|j| lower[j].is_some_and(|b| fit.p[j] <= b + 1e-9) || upper[j].is_some_and(|b| fit.p[j] >= b - 1e-9))
+    (0..prob.n_groups).any(|g| prob.transmission_at_bound(g, &fit.p))
 }
 
 /// Predicted BIC change of removing effect `e` from `fit` (the others re-adjusted, linearised).
@@ -296,9 +294,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             None => (&*prob, &current, &sig),
         };
         let candidates = rank(rprob, rcurrent, rsig);
-        if std::env::var_os("THERMOVIA_DEBUG").is_some() {
-            eprintln!("rank took {:?}", t.elapsed());
-        }
+        debug(format_args!("rank took {:?}", t.elapsed()));
         let mut round = Round { signatures: rsig.clone(), candidates: candidates.clone(), attempts: vec![] };
         // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
         // earn their place, the one with the lowest BIC is added.
@@ -352,9 +348,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                 .expect("four starts");
             let t = std::time::Instant::now();
             let Ok(refit) = levenberg_marquardt(sprob, spec, p, SCREEN_ITERATIONS) else { continue };
-            if std::env::var_os("THERMOVIA_DEBUG").is_some() {
-                eprintln!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations);
-            }
+            debug(format_args!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations));
             let refit_sig = signatures(sprob, &refit);
             // it earns its place if BIC says so and the residual lost the structure it explained:
             // at least STRUCTURE_DROP of the low-frequency excess over white noise (BIC alone,
