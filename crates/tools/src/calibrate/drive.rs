@@ -1248,15 +1248,7 @@ pub fn report_json(
         .final_fit
         .effects
         .iter()
-        .map(|&e| {
-            let mut p = Map::new();
-            let mut se = Map::new();
-            for (k, v, s) in effect_parameters(&o.final_fit, e) {
-                p.insert(k.into(), json!(v));
-                se.insert(k.into(), json!(s));
-            }
-            json!({"effect": e.name(), "parameters": p, "std_errors": se})
-        })
+        .map(|&e| super::report::effect_entry(e.name(), &effect_parameters(&o.final_fit, e), "std_errors"))
         .collect();
     // the baseline's own effect (interfaces.md: constant_load), in the final model's value
     let baseline_effects: Vec<Value> = o

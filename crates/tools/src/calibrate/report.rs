@@ -28,6 +28,18 @@ pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
     })
 }
 
+/// One `added_effects` entry: {"effect", "parameters", and their standard errors under `errors_key`}
+/// (the device report says `standard_errors`, the drive report `std_errors`).
+pub fn effect_entry(name: &str, params: &[(&'static str, f64, f64)], errors_key: &str) -> Value {
+    let mut values = Map::new();
+    let mut errors = Map::new();
+    for &(n, v, s) in params {
+        values.insert(n.into(), json!(v));
+        errors.insert(n.into(), json!(s));
+    }
+    json!({"effect": name, "parameters": values, errors_key: errors})
+}
+
 /// (name, value, standard error) of an effect's parameters in the SI units of interfaces.md.
 pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f64)> {
     let (o, _) = fit
@@ -206,16 +218,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         .effects
         .iter()
         .filter(|&&e| !folded(e))
-        .map(|&e| {
-            let ps = effect_parameters(&o.final_fit, e);
-            let mut p = Map::new();
-            let mut u = Map::new();
-            for (n, v, s) in ps {
-                p.insert(n.into(), json!(v));
-                u.insert(n.into(), json!(s));
-            }
-            json!({"effect": e.name(), "parameters": p, "standard_errors": u})
-        })
+        .map(|&e| effect_entry(e.name(), &effect_parameters(&o.final_fit, e), "standard_errors"))
         .collect();
     let rounds: Vec<Value> = o
         .rounds
