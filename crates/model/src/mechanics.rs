@@ -1271,14 +1271,14 @@ mod tests {
         }
     }
 
+    /// Gravity and a Maxwell branch: every block of the ETD tables is non-trivial.
+    fn loaded_params() -> Params {
+        Params { gravity_link_mass: 0.91, maxwell_stiffness: 8.0, maxwell_relaxation_time: 0.05, ..Params::default() }
+    }
+
     #[test]
     fn doubled_blocks_equal_the_exponential_at_twice_the_step() {
-        let p = Params {
-            gravity_link_mass: 0.91,
-            maxwell_stiffness: 8.0,
-            maxwell_relaxation_time: 0.05,
-            ..Params::default()
-        };
+        let p = loaded_params();
         for t in [22.0, 41.3, 60.0] {
             let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
             for coupling in [Coupling::Engaged, Coupling::Free, Coupling::Clipped] {
@@ -1310,12 +1310,7 @@ mod tests {
 
     #[test]
     fn chained_blocks_equal_the_exponential_at_every_level() {
-        let p = Params {
-            gravity_link_mass: 0.91,
-            maxwell_stiffness: 8.0,
-            maxwell_relaxation_time: 0.05,
-            ..Params::default()
-        };
+        let p = loaded_params();
         for t in [22.0, 41.3, 60.0] {
             let c = Coefficients::at(&p, crate::params::ZERO_CELSIUS + t);
             let (a, b) = linear_system_with(&p, &c, Coupling::Engaged);
