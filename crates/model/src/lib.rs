@@ -10,7 +10,9 @@ pub mod thermal;
 
 use std::sync::Arc;
 
-use mechanics::{Coefficients, Contact, Coupling, Drive, EtdStep, LinearStep, PropagatorTable, State};
+use mechanics::{
+    Coefficients, Contact, Coupling, Drive, EtdStep, FineCell, LinearStep, PropagatorTable, State, Tabulated,
+};
 pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
@@ -125,6 +127,21 @@ fn on_temperature_lattice(t: f64) -> f64 {
     (t / MODULUS_TEMPERATURE_LATTICE).round() * MODULUS_TEMPERATURE_LATTICE
 }
 
+/// The last read of one propagator table: the step at PCL temperature `t` (as clamped by
+/// [`mechanics::table_temperature`]), read through the fine cell `cell`.
+#[derive(Clone, Debug)]
+struct TableRead<N: Tabulated> {
+    t: f64,
+    cell: FineCell<N>,
+    step: N,
+}
+
+impl<N: Tabulated> Default for TableRead<N> {
+    fn default() -> Self {
+        TableRead { t: f64::NAN, cell: FineCell::default(), step: N::ZERO }
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Model {
     params: Params,
@@ -140,14 +157,14 @@ pub struct Model {
     tables: Vec<Arc<PropagatorTable<LinearStep>>>,
     /// Keys of step lengths ([`mechanics::StepKeys`]).
     step_keys: mechanics::StepKeys,
-    /// The last linear step used: (PCL temperature, step key, step).
-    linear_step: Option<(f64, f64, LinearStep)>,
+    /// The last linear step used: (step key, its table's read).
+    linear_step: Option<(f64, TableRead<LinearStep>)>,
     /// Exponential Runge–Kutta coefficient tables, one per step key and level (sub-steps of
     /// key / 2^level): (key, level, table). The levels of one key share each node's exponential
     /// ([`mechanics::phi_chain`]).
     etd_tables: Vec<(f64, u32, Arc<PropagatorTable<EtdStep>>)>,
-    /// The last coefficients used at each key and level: (PCL temperature, key, level, step).
-    etd_steps: Vec<(f64, f64, u32, EtdStep)>,
+    /// The last coefficients used at each key and level: (key, level, the table's read).
+    etd_steps: Vec<(f64, u32, TableRead<EtdStep>)>,
     /// Exact steps of the backlash's free and clipped states (no transmission torque, so no
     /// dependence on the PCL temperature): (length, coupling, step).
     contact_steps: Vec<(f64, Coupling, LinearStep)>,
@@ -256,7 +273,7 @@ impl Model {
     /// in the propagator table; reused while t and key stay).
     fn prepare_linear_step(&mut self, t: f64, key: f64) {
         let t = mechanics::table_temperature(t);
-        if matches!(&self.linear_step, Some((t0, k0, _)) if *t0 == t && *k0 == key) {
+        if matches!(&self.linear_step, Some((k0, read)) if read.t == t && *k0 == key) {
             return;
         }
         let i = match self.tables.iter().position(|tb| tb.step_length() == key) {
@@ -267,26 +284,33 @@ impl Model {
                 0
             }
         };
-        let (t0, k0, step) = self.linear_step.get_or_insert((f64::NAN, key, LinearStep::ZERO));
-        if !self.tables[i].try_at(t, step) {
-            Arc::make_mut(&mut self.tables[i]).at(&self.params, t, step);
+        let (k0, read) = self.linear_step.get_or_insert_with(|| (key, TableRead::default()));
+        if *k0 != key {
+            // another table: its cells are not this one's
+            (*k0, *read) = (key, TableRead::default());
         }
-        (*t0, *k0) = (t, key);
+        if !self.tables[i].try_at(t, &mut read.cell, &mut read.step) {
+            let table = Arc::make_mut(&mut self.tables[i]);
+            table.build(&self.params, t);
+            let built = table.try_at(t, &mut read.cell, &mut read.step);
+            debug_assert!(built, "the nodes were built");
+        }
+        read.t = t;
     }
 
     /// Index in `etd_steps` of the exponential Runge–Kutta coefficients for sub-steps of
     /// key / 2^level at PCL temperature `t`.
     fn prepare_etd(&mut self, t: f64, key: f64, level: u32) -> usize {
         let t = mechanics::table_temperature(t);
-        let i = match self.etd_steps.iter().position(|(_, k, l, _)| *k == key && *l == level) {
-            Some(i) if self.etd_steps[i].0 == t => return i,
+        let i = match self.etd_steps.iter().position(|(k, l, _)| *k == key && *l == level) {
+            Some(i) if self.etd_steps[i].2.t == t => return i,
             Some(i) => i,
             None => {
                 // Bounded like the tables: a master varying h would otherwise grow it without end.
                 if self.etd_steps.len() >= 2 * (MAX_ETD_LEVEL as usize + 1) {
                     self.etd_steps.remove(0);
                 }
-                self.etd_steps.push((f64::NAN, key, level, EtdStep::ZERO));
+                self.etd_steps.push((key, level, TableRead::default()));
                 self.etd_steps.len() - 1
             }
         };
@@ -301,12 +325,14 @@ impl Model {
                 self.etd_tables.len() - 1
             }
         };
-        if !self.etd_tables[k].2.try_at(t, &mut self.etd_steps[i].3) {
+        let read = &mut self.etd_steps[i].2;
+        if !self.etd_tables[k].2.try_at(t, &mut read.cell, &mut read.step) {
             self.build_etd_nodes(key, k, t);
-            let built = self.etd_tables[k].2.try_at(t, &mut self.etd_steps[i].3);
+            let read = &mut self.etd_steps[i].2;
+            let built = self.etd_tables[k].2.try_at(t, &mut read.cell, &mut read.step);
             debug_assert!(built, "the stencil's nodes were built");
         }
-        self.etd_steps[i].0 = t;
+        self.etd_steps[i].2.t = t;
         i
     }
 
@@ -367,14 +393,14 @@ impl Model {
             (Contact::Free, Coefficients::ZERO)
         } else {
             self.prepare_linear_step(t, key);
-            let c = self.linear_step.as_ref().expect("prepared").2.coefficients();
+            let c = self.linear_step.as_ref().expect("prepared").1.step.coefficients();
             (mechanics::contact(&self.params, &c, &x), c)
         };
         let offset = mode.offset(&self.params);
         let mut shifted = x;
         shifted[mechanics::MOTOR_ANGLE] -= offset;
         let mut y = match mode {
-            Contact::Engaged { .. } => self.linear_step.as_ref().expect("prepared").2.apply(&shifted, u),
+            Contact::Engaged { .. } => self.linear_step.as_ref().expect("prepared").1.step.apply(&shifted, u),
             _ => {
                 let i = self.contact_step(key, mode.coupling());
                 self.contact_steps[i].2.apply(&shifted, u)
@@ -416,7 +442,7 @@ impl Model {
         // once, here, and the step finds it prepared.
         if etd_level(key, self.adaptive_step) == 0 {
             let i = self.prepare_etd(t, key, 0);
-            let c = self.etd_steps[i].3.coefficients();
+            let c = self.etd_steps[i].2.step.coefficients();
             return (mechanics::contact(&self.params, &c, &self.mechanics), c);
         }
         // Otherwise only the two coefficients where the nodes exist (the step itself is taken at
@@ -426,7 +452,7 @@ impl Model {
             Some(c) => c,
             None => {
                 let i = self.prepare_etd(t, key, 0);
-                self.etd_steps[i].3.coefficients()
+                self.etd_steps[i].2.step.coefficients()
             }
         };
         (mechanics::contact(&self.params, &c, &self.mechanics), c)
@@ -474,8 +500,8 @@ impl Model {
             let s0 = start.get_or_insert_with(|| mechanics::StepStart::new(&self.params, &x));
             let (mut x_new, err) = if coupling == Coupling::Engaged {
                 let i = self.prepare_etd(t, key, level);
-                coefficients = self.etd_steps[i].3.coefficients();
-                self.etd_steps[i].3.step(&self.params, &shifted, u, s0)
+                coefficients = self.etd_steps[i].2.step.coefficients();
+                self.etd_steps[i].2.step.step(&self.params, &shifted, u, s0)
             } else {
                 let i = self.contact_etd(len, coupling);
                 self.contact_etd[i].2.step(&self.params, &shifted, u, s0)
@@ -616,7 +642,7 @@ impl Model {
             if linear {
                 let key = self.step_keys.key(hs);
                 self.prepare_linear_step(t_mid, key);
-                let step = &self.linear_step.as_ref().expect("prepared").2;
+                let step = &self.linear_step.as_ref().expect("prepared").1.step;
                 let mut x = step.apply(&self.mechanics, &drive);
                 if hs != key {
                     // The last ≤ 5e-10·h: x' = A x + B u, first order (error ~ (h − key)² |A|² |x|).

@@ -314,12 +314,15 @@ impl LinearStep {
 /// What a [`PropagatorTable`] holds at each node: values built for one coefficient set and step,
 /// interpolated entry by entry.
 pub trait Tabulated: Clone + std::fmt::Debug {
+    /// Every value zero (a [`FineCell`]'s entries before its first read).
+    const ZERO: Self;
     fn build(p: &Params, c: &Coefficients, h: f64) -> Self;
     fn values(&self) -> &[f64];
     fn values_mut(&mut self) -> &mut [f64];
 }
 
 impl Tabulated for LinearStep {
+    const ZERO: Self = LinearStep::ZERO;
     fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
         LinearStep::new(p, c, h)
     }
@@ -331,18 +334,26 @@ impl Tabulated for LinearStep {
     }
 }
 
+// An ETDRK4 step needs the whole state only at its end; its stages feed the link torque alone,
+// which reads the link angle and speed. So the half-step blocks are kept for those two rows only
+// ("link rows": θl, θl'), and the second stage's e^{Ah/2}(e^{Ah/2}x + Γ(h/2)u + q n) comes from
+// e^{Ah}x + Γ(h)u and r = e^{Ah/2} q: 73 entries to interpolate instead of 98, and a third of the
+// arithmetic.
 const E_FULL: usize = 0; // e^{Ah}, 5×5
 const G_FULL: usize = 25; // Γ(h), 5×2
-const E_HALF: usize = 35; // e^{Ah/2}
-const G_HALF: usize = 60; // Γ(h/2)
-const Q_HALF: usize = 70; // (h/2) φ1(Ah/2) b
-const P1: usize = 75; // h φ1(Ah) b
-const F1: usize = 80; // h (φ1 − 3φ2 + 4φ3)(Ah) b
-const F2: usize = 85; // h (φ2 − 2φ3)(Ah) b
-const F3: usize = 90; // h (−φ2 + 4φ3)(Ah) b
-const COEFFS: usize = 95; // stiffness, damping
-const LENGTH: usize = 97; // h
-const N_ETD: usize = 98;
+const E_HALF_LINK: usize = 35; // e^{Ah/2}, link rows, 2×5
+const G_HALF_LINK: usize = 45; // Γ(h/2), link rows, 2×2
+const Q_HALF_LINK: usize = 49; // q = (h/2) φ1(Ah/2) b, link rows
+const R_HALF_LINK: usize = 51; // r = e^{Ah/2} q, link rows
+const P1_LINK: usize = 53; // h φ1(Ah) b, link rows
+const F1: usize = 55; // h (φ1 − 3φ2 + 4φ3)(Ah) b
+const F2: usize = 60; // h (φ2 − 2φ3)(Ah) b
+const F3: usize = 65; // h (−φ2 + 4φ3)(Ah) b
+const COEFFS: usize = 70; // stiffness, damping
+const LENGTH: usize = 72; // h
+const N_ETD: usize = 73;
+/// The state's link rows, in the order the link-row blocks hold them.
+const LINK_ROWS: [usize; 2] = [LINK_ANGLE, LINK_SPEED];
 
 /// Coefficients of one exponential Runge–Kutta step (Cox–Matthews ETDRK4 with the ETDRK3 of the
 /// same family as its embedded error estimate) for x' = A x + B u + b n(x), where the linear
@@ -406,6 +417,7 @@ fn doubled(half: &PhiRows) -> PhiRows {
 }
 
 impl Tabulated for EtdStep {
+    const ZERO: Self = EtdStep::ZERO;
     fn build(p: &Params, c: &Coefficients, h: f64) -> Self {
         EtdStep::with(p, c, h, Coupling::Engaged)
     }
@@ -431,18 +443,25 @@ impl EtdStep {
         for i in 0..N_STATE {
             for j in 0..N_STATE {
                 v[E_FULL + i * N_STATE + j] = full[(i, j)];
-                v[E_HALF + i * N_STATE + j] = half[(i, j)];
             }
             for j in 0..2 {
                 v[G_FULL + i * 2 + j] = full[(i, N_STATE + j)];
-                v[G_HALF + i * 2 + j] = half[(i, N_STATE + j)];
             }
             let (p1, p2, p3) = (full[(i, 7)], full[(i, 8)], full[(i, 9)]);
-            v[Q_HALF + i] = half[(i, 7)];
-            v[P1 + i] = p1;
             v[F1 + i] = p1 - 3.0 * p2 + 4.0 * p3;
             v[F2 + i] = p2 - 2.0 * p3;
             v[F3 + i] = -p2 + 4.0 * p3;
+        }
+        for (r, &i) in LINK_ROWS.iter().enumerate() {
+            for j in 0..N_STATE {
+                v[E_HALF_LINK + r * N_STATE + j] = half[(i, j)];
+            }
+            for j in 0..2 {
+                v[G_HALF_LINK + r * 2 + j] = half[(i, N_STATE + j)];
+            }
+            v[Q_HALF_LINK + r] = half[(i, 7)];
+            v[R_HALF_LINK + r] = (0..N_STATE).map(|j| half[(i, j)] * half[(j, 7)]).sum::<f64>();
+            v[P1_LINK + r] = full[(i, 7)];
         }
         v[COEFFS] = c.stiffness;
         v[COEFFS + 1] = c.damping;
@@ -581,16 +600,17 @@ impl StageTorque {
         friction - self.amplitude * self.sin0
     }
 
+    /// At the link angle and speed `[θl, θl']`.
     #[inline(always)]
-    fn at(&self, x: &State) -> f64 {
-        let friction = self.friction.at(x[LINK_SPEED]);
+    fn at(&self, [angle, speed]: [f64; 2]) -> f64 {
+        let friction = self.friction.at(speed);
         if self.amplitude == 0.0 {
             return friction;
         }
-        let d = x[LINK_ANGLE] - self.theta0;
+        let d = angle - self.theta0;
         if d.is_nan() || d.abs() >= 0.05 {
             // link_gravity
-            return friction + -self.amplitude * (x[LINK_ANGLE] - self.offset).sin();
+            return friction + -self.amplitude * (angle - self.offset).sin();
         }
         let (sin_d, cos_d) = sin_cos_small(d);
         friction - self.amplitude * (self.sin0 * cos_d + self.cos0 * sin_d)
@@ -610,49 +630,60 @@ impl EtdStep {
         Coefficients { stiffness: self.v[COEFFS], damping: self.v[COEFFS + 1], ..Coefficients::ZERO }
     }
 
-    /// M x + G u + col·s for the 5×5 block at `m`, the 5×2 block at `g` and the column at `col`.
+    /// Row `i` of M x + G u for the 5-column block at `m` and the 2-column block at `g`.
     #[inline(always)]
-    fn affine(&self, m: usize, x: &State, g: usize, u: &Drive, col: usize, s: f64) -> State {
+    fn row(&self, m: usize, g: usize, i: usize, x: &State, u: &Drive) -> f64 {
         let v = &self.v;
-        let mut y = State::zeros();
-        for i in 0..N_STATE {
-            let row = &v[m + i * N_STATE..m + (i + 1) * N_STATE];
-            let mut acc = v[g + 2 * i] * u[0] + v[g + 2 * i + 1] * u[1] + v[col + i] * s;
-            for j in 0..N_STATE {
-                acc += row[j] * x[j];
-            }
-            y[i] = acc;
+        let row = &v[m + i * N_STATE..m + (i + 1) * N_STATE];
+        let mut acc = v[g + 2 * i] * u[0] + v[g + 2 * i + 1] * u[1];
+        for j in 0..N_STATE {
+            acc += row[j] * x[j];
         }
-        y
+        acc
     }
 
     fn column(&self, col: usize) -> State {
         State::from_column_slice(&self.v[col..col + N_STATE])
     }
 
+    /// A link-row pair (θl, θl'): `base` plus the link-row column at `col` times `s`.
+    #[inline(always)]
+    fn link_plus(&self, base: [f64; 2], col: usize, s: f64) -> [f64; 2] {
+        [base[0] + self.v[col] * s, base[1] + self.v[col + 1] * s]
+    }
+
     /// One ETDRK4 step from x; returns the new state and the scaled error estimate (≤ 1: accept).
     /// `start` is [`StepStart::new`] at x (its link angle and speed: the motor angle may be shifted).
     pub fn step(&self, p: &Params, x: &State, u: &Drive, start: &StepStart) -> (State, f64) {
         let (torque, n_x) = (&start.torque, start.n);
-        let a = self.affine(E_HALF, x, G_HALF, u, Q_HALF, n_x);
-        let n_a = torque.at(&a);
+        // e^{Ah}x + Γ(h)u, every row
+        let mut ex0 = State::zeros();
+        for i in 0..N_STATE {
+            ex0[i] = self.row(E_FULL, G_FULL, i, x, u);
+        }
+        let ex0_link = [ex0[LINK_ANGLE], ex0[LINK_SPEED]];
+        // a = e^{Ah/2}x + Γ(h/2)u + q n_x
+        let a0 = [self.row(E_HALF_LINK, G_HALF_LINK, 0, x, u), self.row(E_HALF_LINK, G_HALF_LINK, 1, x, u)];
+        let a = self.link_plus(a0, Q_HALF_LINK, n_x);
+        let n_a = torque.at(a);
         // b = e^{Ah/2}x + Γ(h/2)u + q n_a: a with the forcing swapped.
-        let b = a + self.column(Q_HALF) * (n_a - n_x);
-        let n_b = torque.at(&b);
-        let c = self.affine(E_HALF, &a, G_HALF, u, Q_HALF, 2.0 * n_b - n_x);
-        let n_c = torque.at(&c);
-        let ex = self.affine(E_FULL, x, G_FULL, u, F1, n_x); // e^{Ah}x + Γu + f1 n_x
-        let x4 = ex + self.column(F2) * (2.0 * (n_a + n_b)) + self.column(F3) * n_c;
-        // ETDRK3: b3 = e^{Ah}x + Γu + hφ1 b (2 n_a − n_x); x3 = … + 4 f2 n_a + f3 n(b3)
-        let b3 = ex - self.column(F1) * n_x + self.column(P1) * (2.0 * n_a - n_x);
-        let n_b3 = torque.at(&b3);
-        let x3 = ex + self.column(F2) * (4.0 * n_a) + self.column(F3) * n_b3;
+        let b = self.link_plus(a0, Q_HALF_LINK, n_a);
+        let n_b = torque.at(b);
+        // c = e^{Ah/2}a + Γ(h/2)u + q (2n_b − n_x) = e^{Ah}x + Γ(h)u + r n_x + q (2n_b − n_x)
+        let c = self.link_plus(self.link_plus(ex0_link, R_HALF_LINK, n_x), Q_HALF_LINK, 2.0 * n_b - n_x);
+        let n_c = torque.at(c);
+        let x4 = ex0 + self.column(F1) * n_x + self.column(F2) * (2.0 * (n_a + n_b)) + self.column(F3) * n_c;
+        // ETDRK3: b3 = e^{Ah}x + Γu + hφ1 b (2 n_a − n_x); x3 = e^{Ah}x + Γu + f1 n_x + 4 f2 n_a + f3 n(b3)
+        let b3 = self.link_plus(ex0_link, P1_LINK, 2.0 * n_a - n_x);
+        let n_b3 = torque.at(b3);
+        // the embedded estimate x4 − x3
+        let diff = self.column(F2) * (2.0 * (n_b - n_a)) + self.column(F3) * (n_c - n_b3);
         // Smoothed friction is steep near zero link speed (slope (F_c + F_s)/v_s): where a stage
         // sees that zone, or the speed changes sign, the step must resolve it (h·slope/J_l ≤ ½)
         // before the embedded estimate means anything.
         if p.coulomb_friction != 0.0 || p.stribeck_friction != 0.0 {
             let zone = 20.0 * p.friction_smoothing_velocity;
-            let speeds = [x[LINK_SPEED], a[LINK_SPEED], b[LINK_SPEED], c[LINK_SPEED], x4[LINK_SPEED], b3[LINK_SPEED]];
+            let speeds = [x[LINK_SPEED], a[1], b[1], c[1], x4[LINK_SPEED], b3[1]];
             let near = speeds.iter().any(|v| v.abs() < zone) || speeds.iter().any(|v| v.signum() != speeds[0].signum());
             let slope = (p.coulomb_friction + p.stribeck_friction) / (p.friction_smoothing_velocity * p.link_inertia);
             if near && self.length() * slope > 0.1 {
@@ -664,7 +695,7 @@ impl EtdStep {
         let mut err: f64 = 0.0;
         for i in 0..N_STATE {
             let scale = tol * (1.0 + x[i].abs().max(x4[i].abs()));
-            err = err.max(((x4[i] - x3[i]) / scale).abs());
+            err = err.max((diff[i] / scale).abs());
         }
         if !err.is_finite() || !x4.iter().all(|v| v.is_finite()) {
             err = f64::INFINITY;
@@ -694,15 +725,43 @@ pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State 
 
 /// Exact linear steps of one length tabulated on a lattice of the PCL temperature
 /// ([`PROPAGATOR_LATTICE`]) between the material table's first and last rows, nodes built lazily
-/// (one matrix exponential each, never again while the parameters and the step stay), and
-/// interpolated by a cubic through four nodes of the same log-linear piece. Outside the table's
-/// rows the moduli are held, so the end nodes are exact there. The interpolation error is
-/// O(Δ⁴): below 1e-9 of the propagator's entries (tests/physics.rs measures the whole step
-/// against a fine reference while heating), far under the 10 µK lattice rounding it replaces.
+/// (one matrix exponential each, never again while the parameters and the step stay). A read
+/// evaluates a cubic through four nodes of the same log-linear piece at the two ends of the fine
+/// cell ([`FINE_CELLS_PER_NODE`] per lattice spacing) holding the temperature, and interpolates
+/// linearly between them; the two ends are kept ([`FineCell`]), so a PCL heating or cooling
+/// through a cell pays two multiply-adds per entry instead of the cubic's seven. Outside the
+/// table's rows the moduli are held, so the end nodes are exact there. The cubic's error is
+/// O(Δ⁴), below 1e-9 of the entries; the linear read's is δ²/8 times the entries' second
+/// derivative in temperature, ≈ (δ·α)²/8 relative with α ≤ 0.23/K the moduli's steepest
+/// log-slope (E'' between 50 and 60 °C, Table 2), 1.0e-7 at δ = 1/256 K: under the 10 µK lattice
+/// rounding the Dormand–Prince path takes (1.2e-6), and tests/physics.rs measures the whole step
+/// against a fine reference while heating and cooling.
 #[derive(Clone, Debug)]
 pub struct PropagatorTable<N: Tabulated> {
     h: f64,
     nodes: Vec<Option<N>>,
+}
+
+/// Fine cells per [`PROPAGATOR_LATTICE`] spacing: a power of two, so every fine node's position on
+/// the lattice (m/32) is exact and the material table's rows are fine nodes too.
+pub const FINE_CELLS_PER_NODE: usize = 32;
+
+/// One fine cell of a [`PropagatorTable`] as read last: the cubic's values at its lower and upper
+/// fine nodes and their difference. Functions of the cell index alone, so a read is the same
+/// number whatever was read before (a restored state continues bit-identically).
+#[derive(Clone, Debug)]
+pub struct FineCell<N> {
+    /// Index of the lower fine node; `usize::MAX` before the first read.
+    m: usize,
+    lo: N,
+    hi: N,
+    diff: N,
+}
+
+impl<N: Tabulated> Default for FineCell<N> {
+    fn default() -> Self {
+        FineCell { m: usize::MAX, lo: N::ZERO, hi: N::ZERO, diff: N::ZERO }
+    }
 }
 
 /// The PCL temperature clamped to the tables' range (the material table's rows, 22–60 °C): the
@@ -741,6 +800,21 @@ const ROW_NODES: [usize; 4] = {
     r
 };
 
+/// Where a [`PropagatorTable`] is read: one node (at or beyond the table's ends), or the fine cell
+/// from fine node `m` to `m + 1`, a fraction `frac` into it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Position {
+    Node(usize),
+    Fine { m: usize, frac: f64 },
+}
+
+/// A cubic through four nodes from the first, with these weights.
+#[derive(Clone, Copy, Debug)]
+struct Stencil {
+    j: usize,
+    w: [f64; 4],
+}
+
 impl<N: Tabulated> PropagatorTable<N> {
     pub fn new(h: f64) -> Self {
         PropagatorTable { h, nodes: vec![None; ROW_NODES[3] + 1] }
@@ -750,69 +824,28 @@ impl<N: Tabulated> PropagatorTable<N> {
         self.h
     }
 
-    fn node(&mut self, p: &Params, n: usize) -> &N {
-        let h = self.h;
-        self.nodes[n].get_or_insert_with(|| N::build(p, &Coefficients::at(p, node_temperature(n)), h))
-    }
-
-    /// The step at PCL temperature `t_kelvin` (parameters as the table was built with), into `out`.
-    pub fn at(&mut self, p: &Params, t_kelvin: f64, out: &mut N) {
-        let stencil = Self::stencil(t_kelvin);
-        let (j, n) = match stencil {
-            Stencil::Node(j) => (j, 1),
-            Stencil::Cubic(j, _) => (j, 4),
-        };
-        for k in j..j + n {
-            self.node(p, k);
-        }
-        self.eval(&stencil, out);
-    }
-
-    /// The nodes [`PropagatorTable::at`] reads at `t_kelvin` that are not built yet.
-    pub fn missing(&self, t_kelvin: f64) -> Vec<usize> {
-        let (j, n) = match Self::stencil(t_kelvin) {
-            Stencil::Node(j) => (j, 1),
-            Stencil::Cubic(j, _) => (j, 4),
-        };
-        (j..j + n).filter(|&k| self.nodes[k].is_none()).collect()
-    }
-
-    pub fn has(&self, n: usize) -> bool {
-        self.nodes[n].is_some()
-    }
-
-    /// Sets node `n`, built for the moduli at [`node_temperature`]`(n)` and this table's step.
-    pub fn insert(&mut self, n: usize, node: N) {
-        self.nodes[n] = Some(node);
-    }
-
-    /// [`PropagatorTable::at`] when the nodes it needs are built (false, `out` unchanged, when not):
-    /// reads the table only, so a table shared with clones is not copied.
-    pub fn try_at(&self, t_kelvin: f64, out: &mut N) -> bool {
-        let stencil = Self::stencil(t_kelvin);
-        let built = match stencil {
-            Stencil::Node(j) => self.nodes[j].is_some(),
-            Stencil::Cubic(j, _) => self.nodes[j..j + 4].iter().all(Option::is_some),
-        };
-        if built {
-            self.eval(&stencil, out);
-        }
-        built
-    }
-
-    fn stencil(t_kelvin: f64) -> Stencil {
-        let rows = ROW_NODES;
+    fn position(t_kelvin: f64) -> Position {
         let t = t_kelvin - super::params::ZERO_CELSIUS;
         let x = (t - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE;
         if x.is_nan() || x <= 0.0 {
-            return Stencil::Node(0);
+            return Position::Node(0);
         }
-        if x >= rows[3] as f64 {
-            return Stencil::Node(rows[3]);
+        if x >= ROW_NODES[3] as f64 {
+            return Position::Node(ROW_NODES[3]);
         }
-        // x > 0, so truncation is floor.
-        let i = x as usize;
-        // The log-linear piece [rows[k], rows[k+1]] holding [i, i+1]; a stencil of four nodes in it.
+        let xf = x * FINE_CELLS_PER_NODE as f64;
+        // xf > 0, so truncation is floor; m + 1 ≤ the last row's fine node since x < rows[3].
+        let m = xf as usize;
+        Position::Fine { m, frac: xf - m as f64 }
+    }
+
+    /// The cubic at fine node `m`: four nodes of the log-linear piece [rows[k], rows[k+1]] that
+    /// holds the lattice interval [i, i+1] above it (at a row, the piece above; the moduli are
+    /// continuous there, so either piece's cubic gives the row's node to rounding).
+    fn stencil(m: usize) -> Stencil {
+        let rows = ROW_NODES;
+        let x = m as f64 / FINE_CELLS_PER_NODE as f64;
+        let i = m / FINE_CELLS_PER_NODE;
         let k = if i < rows[1] {
             0
         } else if i < rows[2] {
@@ -824,23 +857,100 @@ impl<N: Tabulated> PropagatorTable<N> {
         let s = x - j as f64;
         let (s1, s2, s3) = (s - 1.0, s - 2.0, s - 3.0);
         const SIXTH: f64 = 1.0 / 6.0;
-        let w = [-s1 * s2 * s3 * SIXTH, 0.5 * s * s2 * s3, -0.5 * s * s1 * s3, s * s1 * s2 * SIXTH];
-        Stencil::Cubic(j, w)
+        Stencil { j, w: [-s1 * s2 * s3 * SIXTH, 0.5 * s * s2 * s3, -0.5 * s * s1 * s3, s * s1 * s2 * SIXTH] }
     }
 
-    /// `out` from built nodes.
+    /// The nodes a read at `t_kelvin` needs: the node itself, or both fine ends' stencils.
+    fn needed(t_kelvin: f64) -> std::ops::Range<usize> {
+        match Self::position(t_kelvin) {
+            Position::Node(j) => j..j + 1,
+            Position::Fine { m, .. } => Self::stencil(m).j..Self::stencil(m + 1).j + 4,
+        }
+    }
+
+    /// The nodes a read at `t_kelvin` needs that are not built yet.
+    pub fn missing(&self, t_kelvin: f64) -> Vec<usize> {
+        Self::needed(t_kelvin).filter(|&k| self.nodes[k].is_none()).collect()
+    }
+
+    pub fn has(&self, n: usize) -> bool {
+        self.nodes[n].is_some()
+    }
+
+    /// Sets node `n`, built for the moduli at [`node_temperature`]`(n)` and this table's step.
+    pub fn insert(&mut self, n: usize, node: N) {
+        self.nodes[n] = Some(node);
+    }
+
+    /// Builds the nodes a read at `t_kelvin` needs (parameters as the table was built with).
+    pub fn build(&mut self, p: &Params, t_kelvin: f64) {
+        let h = self.h;
+        for n in Self::needed(t_kelvin) {
+            self.nodes[n].get_or_insert_with(|| N::build(p, &Coefficients::at(p, node_temperature(n)), h));
+        }
+    }
+
+    /// The step at PCL temperature `t_kelvin` into `out`, through `cell` (the fine cell read last,
+    /// updated when the temperature has left it). False, `out` unchanged, when a node it needs is
+    /// not built: reads the table only, so a table shared with clones is not copied.
+    pub fn try_at(&self, t_kelvin: f64, cell: &mut FineCell<N>, out: &mut N) -> bool {
+        let (m, frac) = match Self::position(t_kelvin) {
+            Position::Node(j) => {
+                return match &self.nodes[j] {
+                    Some(n) => {
+                        out.clone_from(n);
+                        true
+                    }
+                    None => false,
+                };
+            }
+            Position::Fine { m, frac } => (m, frac),
+        };
+        if cell.m != m && !self.fill(m, cell) {
+            return false;
+        }
+        let out = out.values_mut();
+        let n = out.len();
+        let (lo, diff) = (&cell.lo.values()[..n], &cell.diff.values()[..n]);
+        for i in 0..n {
+            out[i] = lo[i] + frac * diff[i];
+        }
+        true
+    }
+
+    /// Sets `cell` to the fine cell from fine node `m`, reusing its shared end when it was a
+    /// neighbour; false, `cell` unchanged, when a node is missing.
+    #[inline(never)]
+    fn fill(&self, m: usize, cell: &mut FineCell<N>) -> bool {
+        let (a, b) = (Self::stencil(m), Self::stencil(m + 1));
+        if !self.nodes[a.j..b.j + 4].iter().all(Option::is_some) {
+            return false;
+        }
+        if cell.m.checked_add(1) == Some(m) {
+            std::mem::swap(&mut cell.lo, &mut cell.hi);
+            self.eval(&b, &mut cell.hi);
+        } else if m.checked_add(1) == Some(cell.m) {
+            std::mem::swap(&mut cell.lo, &mut cell.hi);
+            self.eval(&a, &mut cell.lo);
+        } else {
+            self.eval(&a, &mut cell.lo);
+            self.eval(&b, &mut cell.hi);
+        }
+        let (lo, hi, diff) = (cell.lo.values(), cell.hi.values(), cell.diff.values_mut());
+        for ((d, h), l) in diff.iter_mut().zip(hi).zip(lo) {
+            *d = h - l;
+        }
+        cell.m = m;
+        true
+    }
+
+    /// The cubic `stencil` of built nodes into `out`.
     fn eval(&self, stencil: &Stencil, out: &mut N) {
         let node = |k: usize| match &self.nodes[k] {
             Some(n) => n,
             None => unreachable!("built before"),
         };
-        let (j, w) = match *stencil {
-            Stencil::Node(j) => {
-                out.clone_from(node(j));
-                return;
-            }
-            Stencil::Cubic(j, w) => (j, w),
-        };
+        let (j, w) = (stencil.j, stencil.w);
         let out = out.values_mut();
         let n = out.len();
         // Equal lengths up front, so the loop below has no bounds checks and vectorises.
@@ -857,27 +967,25 @@ impl<N: Tabulated> PropagatorTable<N> {
 }
 
 impl PropagatorTable<EtdStep> {
-    /// The transmission coefficients the step at `t_kelvin` holds (what [`PropagatorTable::at`]
-    /// would give them, to the bit), from the built nodes alone: two entries instead of the whole
-    /// step. None when a node it needs is not built.
+    /// The transmission coefficients the step at `t_kelvin` holds (what [`PropagatorTable::try_at`]
+    /// gives them, to the bit), from the built nodes alone: two entries instead of the whole step.
+    /// None when a node it needs is not built.
     pub fn coefficients_at(&self, t_kelvin: f64) -> Option<Coefficients> {
         let entry = |k: usize, i: usize| self.nodes[k].as_ref().map(|n| n.v[i]);
-        let stencil = Self::stencil(t_kelvin);
-        let value = |i: usize| match stencil {
-            Stencil::Node(j) => entry(j, i),
-            Stencil::Cubic(j, w) => {
-                Some(w[0] * entry(j, i)? + w[1] * entry(j + 1, i)? + w[2] * entry(j + 2, i)? + w[3] * entry(j + 3, i)?)
+        let cubic = |s: &Stencil, i: usize| {
+            let (j, w) = (s.j, s.w);
+            Some(w[0] * entry(j, i)? + w[1] * entry(j + 1, i)? + w[2] * entry(j + 2, i)? + w[3] * entry(j + 3, i)?)
+        };
+        let value = |i: usize| match Self::position(t_kelvin) {
+            Position::Node(j) => entry(j, i),
+            Position::Fine { m, frac } => {
+                let lo = cubic(&Self::stencil(m), i)?;
+                let hi = cubic(&Self::stencil(m + 1), i)?;
+                Some(lo + frac * (hi - lo))
             }
         };
         Some(Coefficients { stiffness: value(COEFFS)?, damping: value(COEFFS + 1)?, ..Coefficients::ZERO })
     }
-}
-
-/// Where [`PropagatorTable`] reads a temperature: one node (at or beyond the table's ends), or a
-/// cubic through four nodes from the first with these weights.
-enum Stencil {
-    Node(usize),
-    Cubic(usize, [f64; 4]),
 }
 
 /// Transmitted torque τ_t and the Maxwell branch's rate q', with backlash when enabled.
@@ -1266,7 +1374,11 @@ mod tests {
             for d in [-0.2, -0.049, -1e-3, 0.0, 2e-6, 0.02, 0.0499, 0.07] {
                 let x = State::from([0.0, 0.0, theta0 + d, 0.3 * d, 0.0]);
                 let exact = smooth_link_torque(&p, &x);
-                assert!((torque.at(&x) - exact).abs() < 1e-15, "{theta0} {d}: {} vs {exact}", torque.at(&x));
+                assert!(
+                    (torque.at([x[LINK_ANGLE], x[LINK_SPEED]]) - exact).abs() < 1e-15,
+                    "{theta0} {d}: {} vs {exact}",
+                    torque.at([x[LINK_ANGLE], x[LINK_SPEED]])
+                );
             }
         }
     }
@@ -1349,7 +1461,8 @@ mod tests {
                 let (a, b) = (start.advanced(&p, &x1), StepStart::new(&p, &x1));
                 assert!((a.link_torque() - b.link_torque()).abs() < 1e-15, "{k} {d}");
                 let x2 = State::from([0.0, 0.0, x1[LINK_ANGLE] + 0.01, 0.1, 0.0]);
-                assert!((a.torque.at(&x2) - b.torque.at(&x2)).abs() < 1e-15, "{k} {d}");
+                let link = [x2[LINK_ANGLE], x2[LINK_SPEED]];
+                assert!((a.torque.at(link) - b.torque.at(link)).abs() < 1e-15, "{k} {d}");
             }
         }
     }
