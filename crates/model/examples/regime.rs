@@ -10,9 +10,11 @@ fn main() {
         "cooling" => (60.0, 22.0, 0.0),
         _ => (22.0, 22.0, 8.0),
     };
-    let mut p = Params::default();
-    p.initial_housing_temperature = 273.15 + start_c;
-    p.initial_pcl_temperature = 273.15 + start_c;
+    let mut p = Params {
+        initial_housing_temperature: 273.15 + start_c,
+        initial_pcl_temperature: 273.15 + start_c,
+        ..Params::default()
+    };
     if which == "all" {
         p.gravity_link_mass = 0.91;
         p.coulomb_friction = 0.05;
