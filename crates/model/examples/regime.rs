@@ -1,11 +1,9 @@
-//! The bench's "all three while heating" loop on the model alone (no FMU), for callgrind:
-//!   cargo run --release -p thermovia-model --example regime -- [steps] [all|heating|cooling]
+//! The dostep bench's regimes on the model alone (no FMU), for callgrind and quick timing:
+//!   cargo run --release -p thermovia-model --example regime -- [steps] [all|heating|cooling] [runs]
+//! Prints the median and the fastest ns per step over `runs` runs from a fresh model.
 use thermovia_model::{Model, Params};
 
-fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let steps: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(200_000);
-    let which = args.get(2).map(String::as_str).unwrap_or("all");
+fn run(which: &str, steps: usize) -> (f64, f64) {
     let (start_c, ambient_c, heater) = match which {
         "cooling" => (60.0, 22.0, 0.0),
         _ => (22.0, 22.0, 8.0),
@@ -24,13 +22,29 @@ fn main() {
     m.inputs.ambient_temperature = 273.15 + ambient_c;
     m.inputs.heater_power = heater;
     let w = 2.0 * std::f64::consts::PI * 0.5;
-    let mut sum = 0.0;
+    let start = std::time::Instant::now();
     for k in 0..steps {
         let t = k as f64 * 1e-3;
+        // fmpy's time grid, as the bench's "all three" regime
         let h = (k + 1) as f64 * 1e-3 - t;
         m.inputs.motor_torque = 2.0 * (w * t).sin();
         m.step(h).unwrap();
-        sum += m.link_angle();
     }
-    println!("{which}: link angle {} mean {}", m.link_angle(), sum / steps as f64);
+    (start.elapsed().as_secs_f64() * 1e9 / steps as f64, m.link_angle())
+}
+
+fn main() {
+    let args: Vec<String> = std::env::args().collect();
+    let steps: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(200_000);
+    let which = args.get(2).map(String::as_str).unwrap_or("all");
+    let runs: usize = args.get(3).and_then(|s| s.parse().ok()).unwrap_or(1);
+    let mut ns: Vec<f64> = Vec::new();
+    let mut angle = 0.0;
+    for _ in 0..runs {
+        let (t, a) = run(which, steps);
+        ns.push(t);
+        angle = a;
+    }
+    ns.sort_by(f64::total_cmp);
+    println!("{which}: median {:.0} ns/step, fastest {:.0} (link angle at the end {angle})", ns[ns.len() / 2], ns[0]);
 }

@@ -569,13 +569,15 @@ impl StepStart {
     }
 }
 
-/// sin d and cos d by their Taylor series to d⁹ and d¹⁰ (for |d| < 0.05 rad the next terms are
-/// < 1e-21).
+/// sin d and cos d by their Taylor series to d⁷ and d⁸: for |d| < 0.05 rad the next terms are
+/// < 6e-18 and < 3e-20, under a tenth of an ulp of the unit-sized sines and cosines they are
+/// combined with. Summed in Estrin's order (d², d⁴ side by side rather than nested): the stages of
+/// an exponential Runge–Kutta step wait on these in turn, so the chain's depth is the cost.
 fn sin_cos_small(d: f64) -> (f64, f64) {
     let d2 = d * d;
-    let sin_d = d * (1.0 + d2 * (-1.0 / 6.0 + d2 * (1.0 / 120.0 + d2 * (-1.0 / 5040.0 + d2 * (1.0 / 362_880.0)))));
-    let cos_d =
-        1.0 + d2 * (-0.5 + d2 * (1.0 / 24.0 + d2 * (-1.0 / 720.0 + d2 * (1.0 / 40_320.0 - d2 * (1.0 / 3_628_800.0)))));
+    let d4 = d2 * d2;
+    let sin_d = d * ((1.0 - d2 * (1.0 / 6.0)) + d4 * (1.0 / 120.0 - d2 * (1.0 / 5040.0)));
+    let cos_d = (1.0 - d2 * 0.5) + d4 * ((1.0 / 24.0 - d2 * (1.0 / 720.0)) + d4 * (1.0 / 40_320.0));
     (sin_d, cos_d)
 }
 
@@ -1171,6 +1173,8 @@ struct Friction {
     stribeck: f64,
     stribeck_velocity: f64,
     smoothing_velocity: f64,
+    /// 20 smoothing velocities: beyond, the smoothed sign is ±1 ([`smooth_sign`]), no division needed.
+    sign_zone: f64,
     coulomb_asymmetry: f64,
     viscous_asymmetry: f64,
     /// Some friction at all; asymmetric friction.
@@ -1185,6 +1189,11 @@ impl Friction {
             stribeck: p.stribeck_friction,
             stribeck_velocity: p.stribeck_velocity,
             smoothing_velocity: p.friction_smoothing_velocity,
+            sign_zone: if p.friction_smoothing_velocity > 0.0 {
+                SIGN_SATURATION * p.friction_smoothing_velocity
+            } else {
+                f64::INFINITY // the division's own ±inf or NaN below
+            },
             coulomb_asymmetry: p.coulomb_friction_asymmetry,
             viscous_asymmetry: p.viscous_friction_asymmetry,
             active: p.coulomb_friction != 0.0
@@ -1206,7 +1215,11 @@ impl Friction {
             let s = link_speed / self.stribeck_velocity;
             self.coulomb + self.stribeck * (-s * s).exp()
         };
-        let sign = smooth_sign(link_speed / self.smoothing_velocity);
+        let sign = if link_speed.abs() >= self.sign_zone {
+            1.0_f64.copysign(link_speed) // what smooth_sign gives there, without the division
+        } else {
+            smooth_sign(link_speed / self.smoothing_velocity)
+        };
         if !self.asymmetric {
             return -level * sign; // the terms below are +0 then
         }
@@ -1214,11 +1227,14 @@ impl Friction {
     }
 }
 
+/// |s| beyond which tanh(s) rounds to ±1 ([`smooth_sign`]).
+const SIGN_SATURATION: f64 = 20.0;
+
 /// tanh(s), the friction's smoothed sign, without the library call where it is ±1: for |s| ≥ 20,
 /// 1 − tanh|s| < 1e-17 is below half an ulp of 1, so tanh rounds to ±1 exactly there (the same
 /// number libm returns; the speeds of a moving link are thousands of smoothing velocities).
 fn smooth_sign(s: f64) -> f64 {
-    if s.abs() >= 20.0 {
+    if s.abs() >= SIGN_SATURATION {
         1.0_f64.copysign(s)
     } else {
         s.tanh()

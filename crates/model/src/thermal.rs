@@ -223,7 +223,9 @@ impl Inversion {
     fn temperature_at(&self, p: &Params, a: f64) -> f64 {
         if a.abs() <= SERIES_LIMIT {
             let c = &self.c;
-            self.t0 + a * (1.0 + a * (c[0] + a * (c[1] + a * (c[2] + a * c[3]))))
+            // Estrin's order: each Runge–Kutta stage waits on this, so its depth is the cost.
+            let a2 = a * a;
+            self.t0 + a * ((1.0 + a * c[0]) + a2 * ((c[1] + a * c[2]) + a2 * c[3]))
         } else {
             self.newton(p, a)
         }
