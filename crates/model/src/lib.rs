@@ -634,11 +634,9 @@ impl Model {
         };
         let linear = self.params.mechanics_is_linear();
         for i in 0..substeps {
-            // Thermal first, then mechanics with the moduli at the sub-step's mean PCL temperature:
-            // the thermal time scale (s) is far above the sub-step (ms).
-            let t_start = self.thermal.pcl_temperature;
-            self.thermal.advance_cached(&self.params, &thermal_inputs, hs, &mut self.inversion);
-            let t_mid = 0.5 * (t_start + self.thermal.pcl_temperature);
+            // Thermal first, then mechanics with the moduli at the sub-step's midpoint PCL
+            // temperature: the thermal time scale (s) is far above the sub-step (ms).
+            let t_mid = self.thermal.advance_cached(&self.params, &thermal_inputs, hs, &mut self.inversion);
             if linear {
                 let key = self.step_keys.key(hs);
                 self.prepare_linear_step(t_mid, key);

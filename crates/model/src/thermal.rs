@@ -257,24 +257,36 @@ impl ThermalState {
     /// Advances by `h` seconds (one classical Runge–Kutta step: the network's time constants are
     /// seconds, the internal step milliseconds).
     pub fn advance(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
-        self.advance_cached(p, u, h, &mut InversionCache::default())
+        self.advance_cached(p, u, h, &mut InversionCache::default());
     }
 
     /// [`ThermalState::advance`] keeping the enthalpy's inverse series in `cache` (same result).
-    pub fn advance_cached(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) {
+    /// Returns the PCL temperature at the step's midpoint, the one the mechanics reads its moduli
+    /// at (see [`ThermalState::advance_network`]).
+    pub fn advance_cached(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) -> f64 {
         match p.thermal_drive {
             ThermalDrive::Heater => self.advance_network(p, u, h, cache),
-            ThermalDrive::PrescribedHousing => self.advance_prescribed(p, u, h),
+            ThermalDrive::PrescribedHousing => {
+                let start = self.pcl_temperature;
+                self.advance_prescribed(p, u, h);
+                0.5 * (start + self.pcl_temperature)
+            }
         }
     }
 
-    fn advance_network(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) {
+    /// The heater network's step; returns the midpoint PCL temperature as its Runge–Kutta step's
+    /// second stage has it, h⁻¹(H_p + h/2·P_hp): a function of the step's start alone, ready before
+    /// the rest of the step, so the mechanics that waits on it need not wait for the whole
+    /// thermal step (the mean of the start and end temperatures would serialise the two). It
+    /// differs from that mean by about h²/4·T_p'': at most 1.2e-7 K at 1 ms heating at 15 W through the melt
+    /// (a unit test below), 3e-8 of the moduli.
+    fn advance_network(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) -> f64 {
         if u.heater_power == 0.0
             && self.housing_temperature == self.pcl_temperature
             && self.housing_temperature == u.ambient_temperature
         {
             // Exact equilibrium: every flux is zero, so the Runge–Kutta step would change nothing.
-            return;
+            return self.pcl_temperature;
         }
         // Classical Runge–Kutta on (T_h, H_p). The PCL temperature at a stage comes from the
         // inverse series about the anchor nearest the step's start temperature: with x the stage's
@@ -290,7 +302,8 @@ impl ThermalState {
         // Stage fluxes (into the PCL, lost to ambient), W; the housing gets P minus both.
         let flux = |t_h: f64, t_p: f64| (g_hp * (t_h - t_p), g_ha * (t_h - ambient));
         let (p1, l1) = flux(t0, self.pcl_temperature);
-        let (p2, l2) = flux(t0 + 0.5 * hc * (power - p1 - l1), pcl_at(0.5 * h * p1));
+        let midpoint = pcl_at(0.5 * h * p1);
+        let (p2, l2) = flux(t0 + 0.5 * hc * (power - p1 - l1), midpoint);
         let (p3, l3) = flux(t0 + 0.5 * hc * (power - p2 - l2), pcl_at(0.5 * h * p2));
         let (p4, l4) = flux(t0 + hc * (power - p3 - l3), pcl_at(h * p3));
         const SIXTH: f64 = 1.0 / 6.0;
@@ -304,6 +317,7 @@ impl ThermalState {
         }
         self.heater_energy += h * power;
         self.heat_lost += h * lost;
+        midpoint
     }
 
     fn advance_prescribed(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
@@ -324,6 +338,29 @@ impl ThermalState {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The midpoint the mechanics reads (the second Runge–Kutta stage's PCL temperature) against
+    /// the mean of the step's start and end, heating at 15 W from 22 °C through the melt and on.
+    #[test]
+    fn midpoint_temperature_is_the_step_mean_to_second_order() {
+        let p = Params::default();
+        let mut s = ThermalState::initial(&p);
+        let u = ThermalInputs {
+            heater_power: 15.0,
+            ambient_temperature: p.initial_pcl_temperature,
+            housing_temperature_command: p.initial_pcl_temperature,
+        };
+        let mut cache = InversionCache::default();
+        let mut worst: f64 = 0.0;
+        for _ in 0..120_000 {
+            let start = s.pcl_temperature;
+            let mid = s.advance_cached(&p, &u, 1e-3, &mut cache);
+            worst = worst.max((mid - 0.5 * (start + s.pcl_temperature)).abs());
+        }
+        println!("max |midpoint − mean| = {worst:e} K, PCL at {} °C", s.pcl_temperature - ZERO_CELSIUS);
+        assert!(s.pcl_temperature > ZERO_CELSIUS + 70.0, "the run crosses the melt");
+        assert!(worst < 2e-7, "{worst:e} K");
+    }
 
     #[test]
     fn enthalpy_inversion_round_trips_across_the_melt() {
