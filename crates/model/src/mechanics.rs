@@ -1313,7 +1313,15 @@ pub fn integrate_adaptive(
     let mut t = 0.0;
     let mut dt = if *step_guess > 0.0 { step_guess.min(h) } else { h };
     let mut k = [State::zeros(); 7];
-    k[0] = derivative(p, c, x, u);
+    // Every stage lies within h of the start: gravity's sine by angle addition from the start's
+    // (StageTorque, one sin_cos per call instead of one sine per stage; beyond its range it takes
+    // the sine itself).
+    let torque = StageTorque::new(p, x[LINK_ANGLE]);
+    let rate = |x: &State| match p.transmission {
+        Transmission::Compliant => derivative_with_link_torque(p, c, x, u, torque.at([x[LINK_ANGLE], x[LINK_SPEED]])),
+        Transmission::Rigid => derivative(p, c, x, u),
+    };
+    k[0] = rate(x);
     let mut rejected_in_a_row = 0;
     // A tolerance below what rounding allows gives endless tiny steps: the caller caps the work.
     while t < h {
@@ -1332,7 +1340,7 @@ pub fn integrate_adaptive(
                     xs += kj * (dt * A[s][j]);
                 }
             }
-            k[s + 1] = derivative(p, c, &xs, u);
+            k[s + 1] = rate(&xs);
         }
         let mut x_new = *x;
         for (j, kj) in k.iter().enumerate().take(6) {
