@@ -491,6 +491,7 @@ fn caches_do_not_change_the_trajectory() {
         b.mechanics = a.mechanics;
         b.thermal = a.thermal.clone();
         b.adaptive_step = a.adaptive_step;
+        b.sine_anchor = a.sine_anchor;
         for k in 1500..3000 {
             drive(&mut a, k);
             drive(&mut b, k);

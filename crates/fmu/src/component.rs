@@ -528,7 +528,7 @@ impl Component {
         if advance > 0.0 {
             // The states alone (the caches follow them): cheap enough for every step.
             let m = &self.s.model;
-            let before = (m.mechanics, m.thermal.clone(), m.adaptive_step);
+            let before = (m.mechanics, m.thermal.clone(), m.adaptive_step, m.sine_anchor);
             let outcome =
                 self.s.model.step(advance).map_err(|f| f.to_string()).and_then(|()| {
                     match nonfinite_after_step(&mut self.s.model) {
@@ -538,7 +538,7 @@ impl Component {
                 });
             if let Err(why) = outcome {
                 let m = &mut self.s.model;
-                (m.mechanics, m.thermal, m.adaptive_step) = before;
+                (m.mechanics, m.thermal, m.adaptive_step, m.sine_anchor) = before;
                 self.s.phase = Phase::StepFailed;
                 self.s.last_successful_time = t;
                 self.last_step_status = Status::Discard;
@@ -677,6 +677,13 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
     if !(m.adaptive_step >= 0.0 && m.adaptive_step <= step_max) {
         return Err(format!("adaptive step {} is outside [0, {step_max}]", m.adaptive_step));
     }
+    if !m.sine_anchor.is_consistent() {
+        let a = m.sine_anchor;
+        return Err(format!(
+            "gravity's sine anchor ({}, {}, {}) is not an angle with its sine and cosine",
+            a.angle, a.sin, a.cos
+        ));
+    }
     if let Some((name, x)) = nonfinite_output(&mut m.clone()) {
         return Err(format!("output {name} would be {x}"));
     }
@@ -686,7 +693,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 // ---- serialized FMU state: versioned, pointer-free, checked ----
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
-pub const STATE_FORMAT_VERSION: u32 = 1;
+pub const STATE_FORMAT_VERSION: u32 = 2;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;

@@ -109,7 +109,7 @@ fn etd_level(key: f64, last: f64) -> u32 {
 }
 
 /// Length of [`Model::state`].
-pub const STATE_LEN: usize = mechanics::N_STATE + 6;
+pub const STATE_LEN: usize = mechanics::N_STATE + 9;
 
 /// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
 /// and the outputs read the moduli, K.
@@ -152,6 +152,9 @@ pub struct Model {
     /// Last accepted step of the adaptive solver (part of the state: restoring it makes a
     /// restored run continue bit-identically).
     pub adaptive_step: f64,
+    /// Gravity's sine and cosine at an angle near the link's (part of the state
+    /// for the same reason, see [`mechanics::SineAnchor`]).
+    pub sine_anchor: mechanics::SineAnchor,
     coefficients: Option<(f64, Coefficients)>,
     /// Propagator tables of the last two step lengths (shared with clones until one adds a node).
     tables: Vec<Arc<PropagatorTable<LinearStep>>>,
@@ -184,6 +187,7 @@ impl PartialEq for Model {
             && self.mechanics == o.mechanics
             && self.thermal == o.thermal
             && self.adaptive_step == o.adaptive_step
+            && self.sine_anchor == o.sine_anchor
     }
 }
 
@@ -201,6 +205,7 @@ impl Model {
             inputs: Inputs::default(),
             mechanics: State::zeros(),
             adaptive_step: 0.0,
+            sine_anchor: mechanics::SineAnchor::NONE,
             coefficients: None,
             tables: Vec::new(),
             step_keys: mechanics::StepKeys::default(),
@@ -231,6 +236,8 @@ impl Model {
         self.contact_etd.clear();
         self.inversion = thermal::InversionCache::default();
         self.torque_bounds = None;
+        // anchored at the link angle less gravity_offset, which may change
+        self.sine_anchor = mechanics::SineAnchor::NONE;
         &mut self.params
     }
 
@@ -250,6 +257,7 @@ impl Model {
         };
         self.thermal = ThermalState::initial(p);
         self.adaptive_step = 0.0;
+        self.sine_anchor = mechanics::SineAnchor::NONE;
     }
 
     /// Transmission coefficients at the current PCL temperature (on the same lattice the
@@ -497,7 +505,8 @@ impl Model {
             let len = key / (1u64 << level) as f64;
             let mut shifted = x;
             shifted[mechanics::MOTOR_ANGLE] -= offset;
-            let s0 = start.get_or_insert_with(|| mechanics::StepStart::new(&self.params, &x));
+            let s0 =
+                start.get_or_insert_with(|| mechanics::StepStart::anchored(&self.params, &x, &mut self.sine_anchor));
             let (mut x_new, err) = if coupling == Coupling::Engaged {
                 let i = self.prepare_etd(t, key, level);
                 coefficients = self.etd_steps[i].2.step.coefficients();
@@ -617,7 +626,7 @@ impl Model {
         };
         let mut attempts_left = MAX_SOLVER_ATTEMPTS_PER_STEP;
         let hs = h / substeps as f64;
-        let before = (self.mechanics, self.thermal.clone(), self.adaptive_step);
+        let before = (self.mechanics, self.thermal.clone(), self.adaptive_step, self.sine_anchor);
         if self.params.motor_drive == MotorDrive::PrescribedAngle {
             self.mechanics[mechanics::MOTOR_ANGLE] = self.inputs.motor_angle_command;
             self.mechanics[mechanics::MOTOR_SPEED] = self.inputs.motor_speed_command;
@@ -650,7 +659,7 @@ impl Model {
                 continue;
             }
             if !self.nonlinear_substep(t_mid, hs, &drive, &mut attempts_left) {
-                (self.mechanics, self.thermal, self.adaptive_step) = before;
+                (self.mechanics, self.thermal, self.adaptive_step, self.sine_anchor) = before;
                 let at_time_in_step = i as f64 * hs;
                 return Err(if attempts_left == 0 {
                     StepFailure::SolverBudget { at_time_in_step }
@@ -663,7 +672,7 @@ impl Model {
             && self.thermal.housing_temperature.is_finite()
             && self.thermal.pcl_temperature.is_finite();
         if !finite {
-            (self.mechanics, self.thermal, self.adaptive_step) = before;
+            (self.mechanics, self.thermal, self.adaptive_step, self.sine_anchor) = before;
             return Err(StepFailure::NonFinite);
         }
         Ok(())
@@ -671,7 +680,8 @@ impl Model {
 
     /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical
     /// state [θm, θm', θl, θl', q], the thermal state [T_h, H_p, T_p, E_heater, E_lost] and the
-    /// adaptive solver's last step. Parameters and inputs are not in it.
+    /// adaptive solver's last step, and gravity's sine anchor [φa, sin φa, cos φa]
+    /// ([`mechanics::SineAnchor`]; NaN before the first sub-step). Parameters and inputs are not in it.
     pub fn state(&self) -> [f64; STATE_LEN] {
         let m = &self.mechanics;
         let th = &self.thermal;
@@ -687,6 +697,9 @@ impl Model {
             th.heater_energy,
             th.heat_lost,
             self.adaptive_step,
+            self.sine_anchor.angle,
+            self.sine_anchor.sin,
+            self.sine_anchor.cos,
         ]
     }
 
@@ -699,6 +712,7 @@ impl Model {
         self.thermal.heater_energy = x[8];
         self.thermal.heat_lost = x[9];
         self.adaptive_step = x[10];
+        self.sine_anchor = mechanics::SineAnchor { angle: x[11], sin: x[12], cos: x[13] };
     }
 
     pub fn motor_angle(&self) -> f64 {
