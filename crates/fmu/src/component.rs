@@ -325,13 +325,21 @@ impl Component {
     }
 
     /// Checks the state machine; on an illegal call logs why and returns Err(Error).
+    #[inline]
     pub fn check(&mut self, function: &str, mask: u8) -> Result<(), Status> {
         if self.s.phase as u8 & mask != 0 {
             Ok(())
         } else {
-            let phase = self.s.phase;
-            Err(self.error(&format!("{function}: not allowed in state {phase:?}")))
+            Err(self.not_allowed(function))
         }
+    }
+
+    // Error paths out of line (here and below), so the calls every step makes stay short.
+    #[cold]
+    #[inline(never)]
+    fn not_allowed(&mut self, function: &str) -> Status {
+        let phase = self.s.phase;
+        self.error(&format!("{function}: not allowed in state {phase:?}"))
     }
 
     pub fn set_debug_logging(&mut self, on: bool, categories: &[&str]) -> Status {
@@ -400,9 +408,18 @@ impl Component {
         Status::Ok
     }
 
+    #[inline]
     fn lookup(&mut self, function: &str, ty: BaseType, vr: u32) -> Result<&'static Variable, Status> {
-        by_reference(ty, vr)
-            .ok_or_else(|| self.error(&format!("{function}: unknown value reference {vr} for type {ty:?}")))
+        match by_reference(ty, vr) {
+            Some(v) => Ok(v),
+            None => Err(self.unknown_reference(function, ty, vr)),
+        }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn unknown_reference(&mut self, function: &str, ty: BaseType, vr: u32) -> Status {
+        self.error(&format!("{function}: unknown value reference {vr} for type {ty:?}"))
     }
 
     pub fn get_real(&mut self, vrs: &[u32], out: &mut [f64]) -> Status {
@@ -414,8 +431,7 @@ impl Component {
                         if !slot.is_finite() {
                             // Never reached by a state this FMU computed (fmi2DoStep discards a step
                             // that would make an output non-finite); the guard keeps the promise.
-                            let x = *slot;
-                            return self.error(&format!("fmi2GetReal: {} is {x}, not a finite number", v.name));
+                            return self.nonfinite_output(v, *slot);
                         }
                     }
                     Access::Integer { .. } => unreachable!("looked up as Real"),
@@ -424,6 +440,12 @@ impl Component {
             }
         }
         Status::Ok
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn nonfinite_output(&mut self, v: &Variable, x: f64) -> Status {
+        self.error(&format!("fmi2GetReal: {} is {x}, not a finite number", v.name))
     }
 
     pub fn get_integer(&mut self, vrs: &[u32], out: &mut [i32]) -> Status {
@@ -450,7 +472,22 @@ impl Component {
     }
 
     /// Checks that `v` may be written now, with value `x`.
+    #[inline]
     fn check_write(&mut self, function: &str, v: &Variable, x: f64) -> Result<(), Status> {
+        let writable = match v.causality {
+            Causality::Output | Causality::CalculatedParameter => false,
+            Causality::Parameter => !(v.variability == Variability::Fixed && self.s.phase == Phase::StepComplete),
+            _ => true,
+        };
+        if writable && v.check_range(x).is_ok() {
+            return Ok(());
+        }
+        Err(self.refused_write(function, v, x))
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn refused_write(&mut self, function: &str, v: &Variable, x: f64) -> Status {
         let phase = self.s.phase;
         let why = match (v.causality, v.variability, phase) {
             (Causality::Output, _, _) => Some(format!("{} is an output and cannot be set", v.name)),
@@ -464,9 +501,13 @@ impl Component {
             _ => None,
         };
         if let Some(why) = why {
-            return Err(self.error(&format!("{function}: {why}")));
+            return self.error(&format!("{function}: {why}"));
         }
-        v.check_range(x).map_err(|e| self.error(&format!("{function}: {e}; nothing was set")))
+        match v.check_range(x) {
+            Err(e) => self.error(&format!("{function}: {e}; nothing was set")),
+            // check_write's fast path and these cases agree; kept total all the same
+            Ok(()) => self.error(&format!("{function}: {} cannot be set now", v.name)),
+        }
     }
 
     /// Sets values, all or none: every value is checked before any is written.

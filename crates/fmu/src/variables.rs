@@ -106,7 +106,19 @@ impl Variable {
     }
 
     /// Checks a value against the variable's range; the error names the variable.
+    #[inline]
     pub fn check_range(&self, v: f64) -> Result<(), String> {
+        let below = matches!(self.min, Some(b) if v < b);
+        let above = matches!(self.max, Some(b) if v > b);
+        if v.is_finite() && !below && !above {
+            return Ok(());
+        }
+        self.out_of_range(v)
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn out_of_range(&self, v: f64) -> Result<(), String> {
         if !v.is_finite() {
             return Err(format!("{} = {v} is not a finite number", self.name));
         }
@@ -392,6 +404,7 @@ pub fn by_name(name: &str) -> Option<&'static Variable> {
 }
 
 /// The row with this value reference and base type.
+#[inline]
 pub fn by_reference(ty: BaseType, vr: u32) -> Option<&'static Variable> {
     use std::sync::OnceLock;
     // Read-only after first use: one dense row-index table per base type (value references are

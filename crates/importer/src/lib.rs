@@ -200,13 +200,20 @@ pub struct Instance {
 }
 
 impl Instance {
+    #[inline]
     fn check(&mut self, call: &str, status: i32) -> Result<(), HarnessError> {
         if status == FMI2_OK || status == FMI2_WARNING {
             Ok(())
         } else {
-            let log = self.raw.take_log().into_iter().map(|r: LogRecord| r.message).collect();
-            Err(HarnessError::Call { call: format!("{call} on {}", self.name), status, log })
+            Err(self.failed(call, status))
         }
+    }
+
+    #[cold]
+    #[inline(never)]
+    fn failed(&mut self, call: &str, status: i32) -> HarnessError {
+        let log = self.raw.take_log().into_iter().map(|r: LogRecord| r.message).collect();
+        HarnessError::Call { call: format!("{call} on {}", self.name), status, log }
     }
 
     pub fn handle(&self, name: &str) -> Result<Handle, HarnessError> {
