@@ -496,6 +496,7 @@ impl Model {
         // (and returned: the caller's first-order remainder uses it).
         let mut rate: Option<State> = None;
         // The stage torque at x, carried from one accepted step's end to the next step.
+        let friction = mechanics::Friction::new(&self.params);
         let mut start: Option<mechanics::StepStart> = None;
         while pos < full {
             if *attempts_left == 0 {
@@ -505,8 +506,9 @@ impl Model {
             let len = key / (1u64 << level) as f64;
             let mut shifted = x;
             shifted[mechanics::MOTOR_ANGLE] -= offset;
-            let s0 =
-                start.get_or_insert_with(|| mechanics::StepStart::anchored(&self.params, &x, &mut self.sine_anchor));
+            let s0 = start.get_or_insert_with(|| {
+                mechanics::StepStart::anchored(&self.params, &x, &mut self.sine_anchor, &friction)
+            });
             let (mut x_new, err) = if coupling == Coupling::Engaged {
                 let i = self.prepare_etd(t, key, level);
                 coefficients = self.etd_steps[i].2.step.coefficients();

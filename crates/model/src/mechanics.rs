@@ -514,11 +514,12 @@ pub fn smooth_link_torque(p: &Params, x: &State) -> f64 {
 
 /// [`smooth_link_torque`] at the stages of one step: gravity's sine by angle addition from the
 /// step's start angle θ0, sin(θ0 + d) = sin θ0 cos d + cos θ0 sin d, with Taylor series of the
-/// small offset d (to d⁹ and d¹⁰: the next terms are < 1e-21 for |d| < 0.05 rad, where the stages
-/// of a millisecond step lie), so a step takes one `sin_cos` instead of five sines.
+/// small offset d ([`sin_cos_small`], for |d| < 0.05 rad, where the stages of a millisecond step
+/// lie), so a step takes at most one `sin_cos` instead of five sines. The friction's parameters
+/// are borrowed: a start is copied from step to step, and only its angle, sine and cosine change.
 #[derive(Clone, Copy, Debug)]
-struct StageTorque {
-    friction: Friction,
+struct StageTorque<'a> {
+    friction: &'a Friction,
     theta0: f64,
     sin0: f64,
     cos0: f64,
@@ -531,22 +532,23 @@ struct StageTorque {
 /// start, so the caller builds it once for both: the next step's first stage and the contact
 /// checks' rates ([`derivative_with_link_torque`]).
 #[derive(Clone, Copy, Debug)]
-pub struct StepStart {
-    torque: StageTorque,
+pub struct StepStart<'a> {
+    torque: StageTorque<'a>,
     n: f64,
 }
 
-impl StepStart {
-    pub fn new(p: &Params, x: &State) -> Self {
-        let torque = StageTorque::new(p, x[LINK_ANGLE]);
+impl<'a> StepStart<'a> {
+    /// `friction` is [`Friction::new`] of `p`.
+    pub fn new(p: &Params, x: &State, friction: &'a Friction) -> Self {
+        let torque = StageTorque::new(p, x[LINK_ANGLE], friction);
         let n = torque.at_theta0(x[LINK_SPEED]);
         StepStart { torque, n }
     }
 
     /// [`StepStart::new`] with gravity's sine and cosine from `anchor` ([`SineAnchor::sin_cos`]),
     /// which moves to x.
-    pub fn anchored(p: &Params, x: &State, anchor: &mut SineAnchor) -> Self {
-        let mut torque = StageTorque::new_without_gravity(p, x[LINK_ANGLE]);
+    pub fn anchored(p: &Params, x: &State, anchor: &mut SineAnchor, friction: &'a Friction) -> Self {
+        let mut torque = StageTorque::new_without_gravity(x[LINK_ANGLE], friction);
         if p.gravity_link_mass != 0.0 {
             (torque.sin0, torque.cos0) = anchor.sin_cos(x[LINK_ANGLE] - p.gravity_offset);
             (torque.amplitude, torque.offset) = (p.gravity_torque_amplitude(), p.gravity_offset);
@@ -567,7 +569,7 @@ impl StepStart {
         let t = &self.torque;
         let d = x1[LINK_ANGLE] - t.theta0;
         if t.amplitude == 0.0 || d.is_nan() || d.abs() >= 0.05 {
-            return StepStart::new(p, x1);
+            return StepStart::new(p, x1, t.friction);
         }
         let (sin_d, cos_d) = sin_cos_small(d);
         let torque = StageTorque {
@@ -652,9 +654,9 @@ fn sin_cos_small(d: f64) -> (f64, f64) {
     (sin_d, cos_d)
 }
 
-impl StageTorque {
-    fn new(p: &Params, theta0: f64) -> Self {
-        let torque = StageTorque::new_without_gravity(p, theta0);
+impl<'a> StageTorque<'a> {
+    fn new(p: &Params, theta0: f64, friction: &'a Friction) -> Self {
+        let torque = StageTorque::new_without_gravity(theta0, friction);
         if p.gravity_link_mass == 0.0 {
             return torque;
         }
@@ -663,8 +665,8 @@ impl StageTorque {
     }
 
     /// Friction alone (gravity's amplitude 0), about θ0.
-    fn new_without_gravity(p: &Params, theta0: f64) -> Self {
-        StageTorque { friction: Friction::new(p), theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0, offset: 0.0 }
+    fn new_without_gravity(theta0: f64, friction: &'a Friction) -> Self {
+        StageTorque { friction, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0, offset: 0.0 }
     }
 
     /// [`StageTorque::at`] at the link angle θ0 itself (offset d = 0: the series give sin d = 0
@@ -1244,7 +1246,7 @@ pub fn link_friction(p: &Params, link_speed: f64) -> f64 {
 
 /// [`link_friction`]'s parameters, copied out of the parameter set.
 #[derive(Clone, Copy, Debug)]
-struct Friction {
+pub struct Friction {
     coulomb: f64,
     stribeck: f64,
     stribeck_velocity: f64,
@@ -1259,7 +1261,7 @@ struct Friction {
 }
 
 impl Friction {
-    fn new(p: &Params) -> Self {
+    pub fn new(p: &Params) -> Self {
         Friction {
             coulomb: p.coulomb_friction,
             stribeck: p.stribeck_friction,
@@ -1392,7 +1394,8 @@ pub fn integrate_adaptive(
     // Every stage lies within h of the start: gravity's sine by angle addition from the start's
     // (StageTorque, one sin_cos per call instead of one sine per stage; beyond its range it takes
     // the sine itself).
-    let torque = StageTorque::new(p, x[LINK_ANGLE]);
+    let friction = Friction::new(p);
+    let torque = StageTorque::new(p, x[LINK_ANGLE], &friction);
     let rate = |x: &State| match p.transmission {
         Transmission::Compliant => derivative_with_link_torque(p, c, x, u, torque.at([x[LINK_ANGLE], x[LINK_SPEED]])),
         Transmission::Rigid => derivative(p, c, x, u),
@@ -1470,7 +1473,8 @@ mod tests {
         let p = Params { gravity_link_mass: 0.91, gravity_offset: 0.3, coulomb_friction: 0.05, ..Params::default() };
         for k in 0..200 {
             let theta0 = -3.0 + 0.031 * k as f64;
-            let torque = StageTorque::new(&p, theta0);
+            let friction = Friction::new(&p);
+            let torque = StageTorque::new(&p, theta0, &friction);
             for d in [-0.2, -0.049, -1e-3, 0.0, 2e-6, 0.02, 0.0499, 0.07] {
                 let x = State::from([0.0, 0.0, theta0 + d, 0.3 * d, 0.0]);
                 let exact = smooth_link_torque(&p, &x);
@@ -1578,10 +1582,11 @@ mod tests {
         let p = Params { gravity_link_mass: 0.91, gravity_offset: 0.3, coulomb_friction: 0.05, ..Params::default() };
         for k in 0..200 {
             let x0 = State::from([0.0, 0.0, -3.0 + 0.031 * k as f64, 0.7, 0.0]);
-            let start = StepStart::new(&p, &x0);
+            let friction = Friction::new(&p);
+            let start = StepStart::new(&p, &x0, &friction);
             for d in [-0.049, -1e-3, 0.0, 2e-6, 0.02, 0.07] {
                 let x1 = State::from([0.0, 0.0, x0[LINK_ANGLE] + d, 0.3 * d, 0.0]);
-                let (a, b) = (start.advanced(&p, &x1), StepStart::new(&p, &x1));
+                let (a, b) = (start.advanced(&p, &x1), StepStart::new(&p, &x1, &friction));
                 assert!((a.link_torque() - b.link_torque()).abs() < 1e-15, "{k} {d}");
                 let x2 = State::from([0.0, 0.0, x1[LINK_ANGLE] + 0.01, 0.1, 0.0]);
                 let link = [x2[LINK_ANGLE], x2[LINK_SPEED]];
