@@ -977,6 +977,11 @@ mod tests {
                 let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
                 forge(&bytes, |p| put(p, states_at + 16, f64::NAN))
             }),
+            ("gravity's sine anchor", {
+                // [.., adaptive step, anchor angle, sine, cosine]: a sine without its angle
+                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 2), 0.5))
+            }),
         ];
         for (what, forged) in cases {
             let e = deserialize(&forged).expect_err(what);

@@ -1364,6 +1364,29 @@ pub fn derivative_with_link_torque(p: &Params, c: &Coefficients, x: &State, u: &
     State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque / p.link_inertia, q_rate])
 }
 
+/// Where, as a fraction of the step from x0 to x1, the contact function that x1 has crossed out of
+/// the state `mode` reaches zero (secant on its end values): the play's edge leaving or entering
+/// it, the unclipped torque's sign between engaged and clipped. None when x1 is in `mode`, or
+/// in a state not next to it (through the whole play in one step).
+fn event_fraction(p: &Params, c: &Coefficients, mode: Contact, x0: &State, x1: &State) -> Option<f64> {
+    let to = contact(p, c, x1);
+    let half = 0.5 * p.backlash_width;
+    let depth = |x: &State| (x[MOTOR_ANGLE] - x[LINK_ANGLE]).abs() - half; // ≤ 0 in the play
+    let (g0, g1) = match (mode, to) {
+        (Contact::Free, Contact::Engaged { .. } | Contact::Clipped { .. })
+        | (Contact::Engaged { .. } | Contact::Clipped { .. }, Contact::Free) => (depth(x0), depth(x1)),
+        (Contact::Engaged { positive: a }, Contact::Clipped { positive: b })
+        | (Contact::Clipped { positive: a }, Contact::Engaged { positive: b })
+            if a == b =>
+        {
+            (engaged_torque(p, c, x0).1, engaged_torque(p, c, x1).1)
+        }
+        _ => return None,
+    };
+    let theta = g0 / (g0 - g1);
+    (theta > 0.0 && theta < 1.0).then_some(theta)
+}
+
 /// Adaptive Dormand–Prince 5(4) over `[0, h]`; `step_guess` carries the last accepted step size
 /// from call to call; every attempted step costs one of `attempts_left` (the caller's work budget).
 /// Returns None when the error control cannot make progress or the budget runs out.
@@ -1402,6 +1425,17 @@ pub fn integrate_adaptive(
     };
     k[0] = rate(x);
     let mut rejected_in_a_row = 0;
+    // Backlash's contact events are kinks of the right-hand side: a step across one has an error
+    // estimate proportional to its length, so step-size control alone closes in on it over dozens of
+    // rejections. Where a rejected step ends in another contact state, the step is cut instead to
+    // where the contact function crosses zero (secant on its end values) to land just short of
+    // the event, then crosses it with a step of twice the remaining distance, then resumes the step
+    // size it had (the right-hand side is smooth again). At most KINK_CUTS cuts per call; then plain
+    // step-size control.
+    const KINK_CUTS: u32 = 16;
+    let kinks = p.backlash_width > 0.0 && p.transmission == Transmission::Compliant;
+    let mut mode = if kinks { Some(contact(p, c, x)) } else { None };
+    let (mut cuts, mut resume): (u32, Option<f64>) = (0, None);
     // A tolerance below what rounding allows gives endless tiny steps: the caller caps the work.
     while t < h {
         if *attempts_left == 0 {
@@ -1440,14 +1474,35 @@ pub fn integrate_adaptive(
             k[0] = k[6]; // first-same-as-last
             rejected_in_a_row = 0;
             let grow = if err == 0.0 { 5.0 } else { (0.9 * err.powf(-0.2)).clamp(0.2, 5.0) };
-            if !last {
-                *step_guess = dt * grow;
-            }
             dt *= grow;
+            if let Some(m0) = mode {
+                let m1 = contact(p, c, x);
+                if m1 != m0 {
+                    // across the event: back to the step size from before closing in on it
+                    if let Some(before) = resume.take() {
+                        dt = dt.max(before);
+                    }
+                }
+                mode = Some(m1);
+            }
+            if !last {
+                *step_guess = dt;
+            }
         } else {
             rejected_in_a_row += 1;
             if rejected_in_a_row > 60 || dt < 1e-14 * h.max(1e-300) {
                 return None;
+            }
+            if let Some(m0) = mode.filter(|_| cuts < KINK_CUTS && err.is_finite()) {
+                if let Some(theta) = event_fraction(p, c, m0, x, &x_new) {
+                    cuts += 1;
+                    resume.get_or_insert(dt);
+                    let to_event = theta * dt;
+                    // Land just short of it, or cross it once it is within 1e-9 of the step.
+                    dt = if to_event > 1e-9 * h { to_event * (1.0 - 1e-6) } else { 2.0 * to_event + 1e-9 * h };
+                    *step_guess = dt;
+                    continue;
+                }
             }
             let shrink = if err.is_finite() { (0.9 * err.powf(-0.2)).clamp(0.1, 0.9) } else { 0.1 };
             dt *= shrink;
@@ -1562,6 +1617,41 @@ mod tests {
         }
         assert!(SineAnchor::NONE.is_consistent());
         assert!(!SineAnchor { angle: 1.0, sin: 0.5, cos: 0.5 }.is_consistent());
+    }
+
+    /// Dormand–Prince through a contact event (the motor side reaching the play's edge at 2 rad/s
+    /// half-way through 1 ms) cuts its step at the event instead of closing in on the kink by
+    /// rejections, and lands where the exact solution does: the free and engaged states are
+    /// linear, so the reference is their exact propagators on either side of the event, located by
+    /// bisection.
+    #[test]
+    fn dormand_prince_steps_to_a_contact_event() {
+        let p = Params { backlash_width: 0.01, ..Params::default() };
+        let c = Coefficients::at(&p, p.initial_pcl_temperature);
+        let u = Drive::new(0.3, 0.0);
+        let x0 = State::from([0.004, 2.0, 0.0, 0.0, 0.0]);
+        let (mut x, mut guess, mut budget) = (x0, 1e-3, 10_000u64);
+        integrate_adaptive(&p, &c, &mut x, &u, 1e-3, &mut guess, &mut budget).expect("integrates");
+        let attempts = 10_000 - budget;
+        let free = |t: f64| LinearStep::with(&p, &Coefficients::ZERO, t, Coupling::Free).apply(&x0, &u);
+        let (mut lo, mut hi) = (0.0, 1e-3);
+        for _ in 0..60 {
+            let mid = 0.5 * (lo + hi);
+            if in_play(&p, &free(mid)) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let mut at_event = free(hi);
+        at_event[MOTOR_ANGLE] -= 0.5 * p.backlash_width;
+        let mut exact = LinearStep::with(&p, &c, 1e-3 - hi, Coupling::Engaged).apply(&at_event, &u);
+        exact[MOTOR_ANGLE] += 0.5 * p.backlash_width;
+        assert_eq!(contact(&p, &c, &exact), Contact::Engaged { positive: true }, "engaged to the end");
+        let worst = (0..N_STATE).map(|i| (x[i] - exact[i]).abs() / (1.0 + exact[i].abs())).fold(0.0, f64::max);
+        println!("event at {hi:e} s; {attempts} attempts; max relative difference to the exact solution {worst:e}");
+        assert!(worst < 1e-9, "{worst:e}");
+        assert!(attempts <= 40, "{attempts} attempts");
     }
 
     #[test]
