@@ -344,17 +344,23 @@ impl ThermalState {
 mod tests {
     use super::*;
 
-    /// The midpoint the mechanics reads (the second Runge–Kutta stage's PCL temperature) against
-    /// the mean of the step's start and end, heating at 15 W from 22 °C through the melt and on.
-    #[test]
-    fn midpoint_temperature_is_the_step_mean_to_second_order() {
+    /// Default parameters, heated at 15 W from ambient (22 °C), through the melt.
+    fn heating_at_15_w() -> (Params, ThermalInputs) {
         let p = Params::default();
-        let mut s = ThermalState::initial(&p);
         let u = ThermalInputs {
             heater_power: 15.0,
             ambient_temperature: p.initial_pcl_temperature,
             housing_temperature_command: p.initial_pcl_temperature,
         };
+        (p, u)
+    }
+
+    /// The midpoint the mechanics reads (the second Runge–Kutta stage's PCL temperature) against
+    /// the mean of the step's start and end, heating at 15 W from 22 °C through the melt and on.
+    #[test]
+    fn midpoint_temperature_is_the_step_mean_to_second_order() {
+        let (p, u) = heating_at_15_w();
+        let mut s = ThermalState::initial(&p);
         let mut cache = InversionCache::default();
         let mut worst: f64 = 0.0;
         for _ in 0..120_000 {
@@ -371,12 +377,7 @@ mod tests {
     /// third order) over 200 s at 15 W, from 22 °C through the melt to 266 °C.
     #[test]
     fn thermal_step_error_at_1_ms_is_below_1e10_kelvin() {
-        let p = Params::default();
-        let u = ThermalInputs {
-            heater_power: 15.0,
-            ambient_temperature: p.initial_pcl_temperature,
-            housing_temperature_command: p.initial_pcl_temperature,
-        };
+        let (p, u) = heating_at_15_w();
         let (mut coarse, mut fine) = (ThermalState::initial(&p), ThermalState::initial(&p));
         let (mut c1, mut c2) = (InversionCache::default(), InversionCache::default());
         let mut worst: f64 = 0.0;
