@@ -569,7 +569,7 @@ impl Component {
         if advance > 0.0 {
             // The states alone (the caches follow them): cheap enough for every step.
             let m = &self.s.model;
-            let before = (m.mechanics, m.thermal.clone(), m.adaptive_step, m.sine_anchor);
+            let before = m.state();
             let outcome =
                 self.s.model.step(advance).map_err(|f| f.to_string()).and_then(|()| {
                     match nonfinite_after_step(&mut self.s.model) {
@@ -579,7 +579,7 @@ impl Component {
                 });
             if let Err(why) = outcome {
                 let m = &mut self.s.model;
-                (m.mechanics, m.thermal, m.adaptive_step, m.sine_anchor) = before;
+                m.set_state(&before);
                 self.s.phase = Phase::StepFailed;
                 self.s.last_successful_time = t;
                 self.last_step_status = Status::Discard;

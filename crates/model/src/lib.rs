@@ -628,7 +628,7 @@ impl Model {
         };
         let mut attempts_left = MAX_SOLVER_ATTEMPTS_PER_STEP;
         let hs = h / substeps as f64;
-        let before = (self.mechanics, self.thermal.clone(), self.adaptive_step, self.sine_anchor);
+        let before = self.state();
         if self.params.motor_drive == MotorDrive::PrescribedAngle {
             self.mechanics[mechanics::MOTOR_ANGLE] = self.inputs.motor_angle_command;
             self.mechanics[mechanics::MOTOR_SPEED] = self.inputs.motor_speed_command;
@@ -661,7 +661,7 @@ impl Model {
                 continue;
             }
             if !self.nonlinear_substep(t_mid, hs, &drive, &mut attempts_left) {
-                (self.mechanics, self.thermal, self.adaptive_step, self.sine_anchor) = before;
+                self.set_state(&before);
                 let at_time_in_step = i as f64 * hs;
                 return Err(if attempts_left == 0 {
                     StepFailure::SolverBudget { at_time_in_step }
@@ -674,7 +674,7 @@ impl Model {
             && self.thermal.housing_temperature.is_finite()
             && self.thermal.pcl_temperature.is_finite();
         if !finite {
-            (self.mechanics, self.thermal, self.adaptive_step, self.sine_anchor) = before;
+            self.set_state(&before);
             return Err(StepFailure::NonFinite);
         }
         Ok(())

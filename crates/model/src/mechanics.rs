@@ -550,8 +550,7 @@ impl<'a> StepStart<'a> {
     pub fn anchored(p: &Params, x: &State, anchor: &mut SineAnchor, friction: &'a Friction) -> Self {
         let mut torque = StageTorque::new_without_gravity(x[LINK_ANGLE], friction);
         if p.gravity_link_mass != 0.0 {
-            (torque.sin0, torque.cos0) = anchor.sin_cos(x[LINK_ANGLE] - p.gravity_offset);
-            (torque.amplitude, torque.offset) = (p.gravity_torque_amplitude(), p.gravity_offset);
+            torque = torque.with_gravity(p, anchor.sin_cos(x[LINK_ANGLE] - p.gravity_offset));
         }
         let n = torque.at_theta0(x[LINK_SPEED]);
         StepStart { torque, n }
@@ -660,8 +659,12 @@ impl<'a> StageTorque<'a> {
         if p.gravity_link_mass == 0.0 {
             return torque;
         }
-        let (sin0, cos0) = (theta0 - p.gravity_offset).sin_cos();
-        StageTorque { sin0, cos0, amplitude: p.gravity_torque_amplitude(), offset: p.gravity_offset, ..torque }
+        torque.with_gravity(p, (theta0 - p.gravity_offset).sin_cos())
+    }
+
+    /// With gravity, given the sine and cosine of θ0 less `gravity_offset`.
+    fn with_gravity(self, p: &Params, (sin0, cos0): (f64, f64)) -> Self {
+        StageTorque { sin0, cos0, amplitude: p.gravity_torque_amplitude(), offset: p.gravity_offset, ..self }
     }
 
     /// Friction alone (gravity's amplitude 0), about θ0.
@@ -762,7 +765,7 @@ impl EtdStep {
         // sees that zone, or the speed changes sign, the step must resolve it (h·slope/J_l ≤ ½)
         // before the embedded estimate means anything.
         if p.coulomb_friction != 0.0 || p.stribeck_friction != 0.0 {
-            let zone = 20.0 * p.friction_smoothing_velocity;
+            let zone = SIGN_SATURATION * p.friction_smoothing_velocity;
             let speeds = [x[LINK_SPEED], a[1], b[1], c[1], x4[LINK_SPEED], b3[1]];
             let near = speeds.iter().any(|v| v.abs() < zone) || speeds.iter().any(|v| v.signum() != speeds[0].signum());
             let slope = (p.coulomb_friction + p.stribeck_friction) / (p.friction_smoothing_velocity * p.link_inertia);

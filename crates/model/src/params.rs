@@ -176,11 +176,6 @@ impl Params {
 
     /// True when every enabled effect is linear, so the exact exponential step applies.
     pub fn mechanics_is_linear(&self) -> bool {
-        self.coulomb_friction == 0.0
-            && self.coulomb_friction_asymmetry == 0.0
-            && self.viscous_friction_asymmetry == 0.0
-            && self.stribeck_friction == 0.0
-            && self.backlash_width == 0.0
-            && self.gravity_link_mass == 0.0
+        self.link_torque_is_linear() && self.backlash_width == 0.0
     }
 }

@@ -278,8 +278,8 @@ impl ThermalState {
     /// second stage has it, h⁻¹(H_p + h/2·P_hp): a function of the step's start alone, ready before
     /// the rest of the step, so the mechanics that waits on it need not wait for the whole
     /// thermal step (the mean of the start and end temperatures would serialise the two). It
-    /// differs from that mean by about h²/4·T_p'': at most 1.2e-7 K at 1 ms heating at 15 W through the melt
-    /// (a unit test below), 3e-8 of the moduli.
+    /// differs from that mean by about h²/4·T_p'': at most 1.2e-7 K at 1 ms heating at 15 W
+    /// through the melt (a unit test below), 3e-8 of the moduli.
     fn advance_network(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) -> f64 {
         if u.heater_power == 0.0
             && self.housing_temperature == self.pcl_temperature
@@ -295,9 +295,10 @@ impl ThermalState {
         // tenth-length steps), and splitting a communication step still changes the temperatures
         // by rounding alone (tests/fmi_conformance.rs), with three stages instead of classical RK4's
         // four on a chain every step waits on. (The explicit midpoint rule, two stages, was tried:
-        // 8.4e-8 K, and a split step moved the temperature by 1.8e-9 K.) The PCL temperature at a stage comes from the inverse series about the anchor
-        // nearest the step's start temperature: with x the stage's enthalpy offset from the stored
-        // H_p, T_p = h⁻¹(H_p + x), whose series argument is base + x/h'.
+        // 8.4e-8 K, and a split step moved the temperature by 1.8e-9 K.) The PCL temperature at a
+        // stage comes from the inverse series about the anchor nearest the step's start
+        // temperature: with x the stage's enthalpy offset from the stored H_p, T_p = h⁻¹(H_p + x),
+        // whose series argument is base + x/h'.
         let inversion = cache.about(p, self.pcl_temperature);
         let base = (self.pcl_enthalpy - inversion.h0) * inversion.inv_slope;
         let pcl_at = |offset: f64| inversion.temperature_at(p, base + offset * inversion.inv_slope);
