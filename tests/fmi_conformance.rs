@@ -422,3 +422,52 @@ fn freed_foreign_and_made_up_state_pointers_are_refused() {
         assert_eq!((api.set_fmu_state)(ca, made_up), FMI2_ERROR, "a made-up pointer");
     }
 }
+
+/// Issue 19: bytes written by fmi2SerializeFMUstate restore (FMI 2.0 §2.1.8) after the two
+/// sequences a fuzz campaign found refused, each as the campaign called it.
+fn get_serialize_deserialize(raw: &mut RawInstance) -> Result<(), String> {
+    let state = raw.get_fmu_state(None).map_err(|s| format!("get: {s:?}"))?;
+    let bytes = raw.serialize_fmu_state(&state).map_err(|s| format!("serialize: {s:?} {}", last_log(raw)))?;
+    let back = raw.deserialize_fmu_state(&bytes).map_err(|s| format!("deserialize: {s:?} {}", last_log(raw)))?;
+    assert_eq!(raw.set_fmu_state(&back), FMI2_OK, "{}", last_log(raw));
+    Ok(())
+}
+
+#[test]
+fn an_infinite_stop_time_is_no_stop_time_and_its_state_restores() {
+    let f = common::fmu();
+    let mut i = f.instantiate(None).unwrap();
+    let raw = i.raw_mut();
+    assert_eq!(raw.setup_experiment(None, 0.0, Some(f64::INFINITY)), FMI2_OK);
+    assert_eq!(raw.enter_initialization_mode(), FMI2_OK);
+    assert_eq!(raw.exit_initialization_mode(), FMI2_OK);
+    get_serialize_deserialize(raw).unwrap();
+    assert_eq!(raw.do_step(0.0, 1e6), FMI2_DISCARD, "no stop time: the work budget, not the stop, ends it");
+    assert!(!raw.get_boolean_status_terminated().1, "an infinite stop time is never reached");
+    // stopTime still refused when NaN or before the start
+    let mut j = f.instantiate(None).unwrap();
+    assert_eq!(j.raw_mut().setup_experiment(None, 1.0, Some(f64::NAN)), FMI2_ERROR);
+}
+
+#[test]
+fn a_discarded_step_at_an_offset_time_keeps_the_fmu_time_as_last_successful() {
+    let f = common::fmu();
+    let mut i = initialized(&f);
+    let raw = i.raw_mut();
+    // within the time tolerance of t = 0, and discarded by the work budget
+    assert_eq!(raw.do_step_with(1e-12, 1000.0, true), FMI2_DISCARD);
+    assert_eq!(raw.get_real_status_last_successful_time(), (FMI2_OK, 0.0), "the FMU's time, not the caller's t");
+    get_serialize_deserialize(raw).unwrap();
+    assert_eq!(raw.get_real_status_last_successful_time(), (FMI2_OK, 0.0), "after the restore");
+}
+
+#[test]
+fn a_step_too_small_to_resolve_is_discarded_with_that_reason() {
+    let f = common::fmu();
+    let mut i = initialized(&f);
+    let raw = i.raw_mut();
+    assert_eq!(raw.do_step(0.0, 1e-300), FMI2_DISCARD);
+    let log = last_log(raw);
+    assert!(log.contains("too small to resolve"), "{log}");
+    assert_eq!(raw.get_real_status_last_successful_time(), (FMI2_OK, 0.0));
+}

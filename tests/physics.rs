@@ -521,3 +521,26 @@ fn steep_friction_at_tiny_sub_steps_runs_out_of_budget_instead_of_hanging() {
     }
     assert_eq!(m.link_angle(), before, "a failed step changes nothing");
 }
+
+/// Steps shorter than the model resolves are refused by name, not as "a state became NaN" (issue
+/// 19); the shortest one accepted integrates to a finite state, the state is unchanged otherwise.
+#[test]
+fn a_step_too_small_to_resolve_is_refused_with_that_reason() {
+    let mut m = Model::new(Params::default());
+    m.initialize();
+    m.inputs.heater_power = 8.0;
+    m.inputs.motor_torque = 1.0;
+    let bits = |m: &Model| m.state().iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let before = bits(&m);
+    for h in [1e-300, 1e-200, thermovia_model::MIN_RESOLVABLE_STEP / 2.0] {
+        match m.step(h) {
+            Err(f @ thermovia_model::StepFailure::StepTooSmall { .. }) => {
+                assert!(f.to_string().contains("too small to resolve"), "{f}")
+            }
+            other => panic!("h = {h:e}: expected StepTooSmall, got {other:?}"),
+        }
+        assert_eq!(bits(&m), before, "h = {h:e}: a refused step changes nothing");
+    }
+    m.step(thermovia_model::MIN_RESOLVABLE_STEP).expect("the shortest resolvable step");
+    assert!([m.link_angle(), m.link_speed(), m.thermal.pcl_temperature].iter().all(|x| x.is_finite()));
+}

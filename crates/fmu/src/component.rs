@@ -364,6 +364,9 @@ impl Component {
                 return self.error(&format!("fmi2SetupExperiment: stopTime {t} is before startTime {start}"));
             }
         }
+        // A stopTime of +inf bounds nothing: it is kept as "no stop time", so every state the FMU
+        // saves has a finite (or no) stop time and restores (FMI 2.0 §2.1.8).
+        let stop = stop.filter(|t| t.is_finite());
         if let Some(tol) = tolerance {
             if !(tol > 0.0 && tol.is_finite()) {
                 return self.error(&format!("fmi2SetupExperiment: tolerance {tol} is not positive"));
@@ -566,7 +569,9 @@ impl Component {
                 status = Status::Discard;
             }
         }
-        if advance > 0.0 {
+        // A stop time closer than the model resolves is reached without integrating.
+        let stop_within_resolution = status == Status::Discard && advance < thermovia_model::MIN_RESOLVABLE_STEP;
+        if advance > 0.0 && !stop_within_resolution {
             // The states alone (the caches follow them): cheap enough for every step.
             let m = &self.s.model;
             let before = m.state();
@@ -581,13 +586,15 @@ impl Component {
                 let m = &mut self.s.model;
                 m.set_state(&before);
                 self.s.phase = Phase::StepFailed;
-                self.s.last_successful_time = t;
+                // FMI 2.0: the end of the last successful step, i.e. the FMU's own time (the
+                // caller's t may differ from it within the tolerance above)
+                self.s.last_successful_time = now;
                 self.last_step_status = Status::Discard;
                 self.emit(
                     Status::Discard,
                     "logStatusDiscard",
                     LOG_DISCARD,
-                    &format!("fmi2DoStep: step from t = {t} by {h} discarded: {why}; state kept at t = {t}"),
+                    &format!("fmi2DoStep: step from t = {t} by {h} discarded: {why}; state kept at t = {now}"),
                 );
                 return Status::Discard;
             }
