@@ -34,9 +34,9 @@ fn final_param(j: &Value, name: &str) -> f64 {
     f(&p.unwrap_or_else(|| panic!("no {name} in {}", j["parameters"]["final"]))["value"])
 }
 
-/// The EMPS benchmark, nothing declared beyond the files: the targets of issue 11.
+/// The EMPS benchmark, nothing declared beyond the files: the targets of issues 11 and 19.
 #[test]
-fn emps_estimation_and_validation_beat_the_published_closed_loop_errors() {
+fn emps_estimation_and_validation_beat_the_published_parameters_simulated_the_same_way() {
     let est = format!("{ROOT}/data/emps/emps_estimation.csv");
     let val = format!("{ROOT}/data/emps/emps_validation.csv");
     let published = format!("{ROOT}/data/emps/published.json");
@@ -50,9 +50,21 @@ fn emps_estimation_and_validation_beat_the_published_closed_loop_errors() {
     );
     assert_eq!(j["units"]["position"], "m");
     assert_eq!(added(&j)[0], "coulomb_friction", "{}", j["diagnosis"]);
-    // published IDIM-LS model simulated in the closed loop: 0.0138 % and 0.0080 %
-    assert!(est_final <= 0.0138, "estimation {est_final} %");
-    assert!(val_final <= 0.0080, "validation {val_final} %");
+    // the published IDIM-LS parameters simulated by this loop on the same runs (issue 19): an
+    // independent re-simulation on the log's 1 ms grid without delay gives 0.00109 % and 0.00137 %
+    // (pulses at their logged 35.64 N per unit), 0.00159 % at the declared gain; ours uses the
+    // FMU's tanh-smoothed friction sign, hence the 10 % allowance
+    let same = &j["published_same_simulation"]["relerr_percent"];
+    let (same_est, same_val) = (f(&same["estimation"]), f(&same["validation"]));
+    eprintln!("published parameters, same simulation: {same_est:.5} %, {same_val:.5} % ({same})");
+    for (ours, independent) in [(same_est, 0.00109), (same_val, 0.00137)] {
+        assert!((ours / independent - 1.0).abs() < 0.1, "same simulation {ours} % vs independent {independent} %");
+    }
+    let at_declared = f(&same["validation_at_declared_drive_gain"]);
+    assert!((at_declared / 0.00159 - 1.0).abs() < 0.1, "at the declared gain {at_declared} %");
+    // the final model beats them on both sets; the printed 0.0138 % / 0.0080 % are no target
+    assert!(est_final < same_est, "estimation {est_final} % vs {same_est} %");
+    assert!(val_final < same_val, "validation {val_final} % vs {same_val} %");
     // the baseline without friction is clearly worse on the held-out set
     assert!(val_base >= 2.0 * val_final, "baseline {val_base} % vs final {val_final} %");
     // the model of the published structure lands on the published parameters
@@ -67,9 +79,13 @@ fn emps_estimation_and_validation_beat_the_published_closed_loop_errors() {
     }
     let (o, p) = ours("offset");
     assert!((o - p).abs() <= 0.5, "offset: ours {o}, published {p}");
-    // the held-out load column was read as drive volts (declared gain), and said so
+    // the held-out load column is applied at the gain the force log shows (35.64 N per unit, not
+    // the declared 35.15), never at the one fitted to the held-out positions (reported only)
     let lc = &j["validation"]["load_column"];
-    assert!((f(&lc["applied_gain"]) - 35.15065188).abs() < 1e-6, "{lc}");
+    assert_eq!(lc["source"], "force_log", "{lc}");
+    assert_eq!(f(&lc["applied_gain"]), f(&lc["force_log_gain"]), "{lc}");
+    assert!((f(&lc["applied_gain"]) - 35.64).abs() < 0.01, "{lc}");
+    assert_ne!(f(&lc["applied_gain"]), f(&lc["fitted_gain"]), "{lc}");
     assert!(f(&lc["as_recorded"]["final"]["relerr_percent"]) > val_final);
 }
 
@@ -182,6 +198,40 @@ fn reference_drive_on_a_linear_axis_finds_coulomb_friction_and_its_parameters() 
     assert!(f(&j["validation"]["final"]["relerr_percent"]) < 0.5 * f(&j["validation"]["baseline"]["relerr_percent"]));
     // no drive gain declared: the pulses are taken as recorded, in newtons
     assert_eq!(f(&j["validation"]["load_column"]["applied_gain"]), 1.0);
+}
+
+/// Issue 19: without a force log, the held-out load column is applied × the declared drive gain
+/// on the file's word, never × the gain that best fits the held-out positions. The truth's pulses
+/// are 25 N; the file logs them as 10 "volts" with `drive_gain_n_per_v=2.5` and no force column.
+#[test]
+fn without_a_force_log_the_load_column_takes_the_declared_gain() {
+    let truth = Body { m: 20.0, b: 50.0, fc: 8.0, load: -2.0 };
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("drive-declared-gain");
+    let est = write(&dir, "est.csv", &closed_loop_file(truth, 4.0, false));
+    let mut volts = String::new();
+    for line in closed_loop_file(truth, 4.0, true).lines() {
+        let line = match line.split(',').collect::<Vec<_>>().as_slice() {
+            _ if line.starts_with('#') => line.to_string(),
+            [t, r, q, _force, _load] if line.starts_with("time_s") => format!("{t},{r},{q},load_force_n"),
+            [t, r, q, _force, load] => format!("{t},{r},{q},{}", load.parse::<f64>().unwrap() / 2.5),
+            other => panic!("{other:?}"),
+        };
+        volts += &line;
+        volts += "\n";
+        if line.starts_with("# drive=") {
+            volts += "# drive_gain_n_per_v=2.5\n";
+        }
+    }
+    let val = write(&dir, "val.csv", &volts);
+    let j = run_calibrate(&[&est, "--validate", &val]);
+    let lc = &j["validation"]["load_column"];
+    assert_eq!(lc["source"], "declared", "{lc}");
+    assert_eq!(f(&lc["applied_gain"]), 2.5, "{lc}");
+    assert!(lc["note"].as_str().unwrap().contains("on the file's word"), "{lc}");
+    // applied at the declared gain the held-out set is predicted as well as the fitting set
+    let (val_final, as_recorded) =
+        (f(&j["validation"]["final"]["relerr_percent"]), f(&lc["as_recorded"]["final"]["relerr_percent"]));
+    assert!(val_final < 0.5 * as_recorded, "declared gain {val_final} %, as recorded {as_recorded} %");
 }
 
 /// Torque drive on a rotary rigid axis: the measured torque drives the FMU (motor_drive 0) and the
@@ -354,12 +404,14 @@ fn calibrate_help_teaches_the_drive_modes_with_examples() {
 }
 
 /// Runs driven by the measured motor angle (the device loop) take a held-out set too: simulated
-/// with the fitted moduli of the nearest temperature, reported under "validation".
+/// with the fitted moduli of the nearest temperature, reported under "validation". Held-out runs
+/// judge the model and never choose it: at another frequency they favour the truth's hysteretic
+/// damping, which one frequency in the fitting set cannot identify, and the law stays viscous.
 #[test]
 fn device_runs_report_their_held_out_error() {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("device-validate");
     let fmu = common::fmu_path();
-    for (name, freq, seed) in [("est", "0.5", "1"), ("val", "1", "2")] {
+    for (name, freq, seed) in [("est", "0.5", "1"), ("val", "0.5", "2"), ("val1hz", "1", "3")] {
         let out = dir.join(name);
         let status = std::process::Command::new(env!("CARGO_BIN_EXE_thermovia"))
             .args(["synth", "--out", out.to_str().unwrap(), "--temperatures", "40", "--frequencies", freq])
@@ -368,12 +420,18 @@ fn device_runs_report_their_held_out_error() {
             .unwrap();
         assert!(status.status.success(), "{}", String::from_utf8_lossy(&status.stderr));
     }
-    let (est, val) = (dir.join("est"), dir.join("val"));
-    let j = run_calibrate(&[est.to_str().unwrap(), "--validate", val.to_str().unwrap()]);
+    let est = dir.join("est");
+    let j = run_calibrate(&[est.to_str().unwrap(), "--validate", dir.join("val").to_str().unwrap()]);
     let v = &j["validation"];
     assert_eq!(v["runs"].as_array().unwrap().len(), 1);
     // clean truth (0.8 E', 1.25 E'', noise 1e-4 rad + quantisation): the held-out error is near the noise
     let rmse = f(&v["final"]["rmse_rad"]);
     assert!(rmse < 1e-3, "held-out RMSE {rmse}");
     assert!(f(&v["final"]["relerr_percent"]) > 0.0 && f(&j["final"]["relerr_percent"]) > 0.0);
+
+    let j = run_calibrate(&[est.to_str().unwrap(), "--validate", dir.join("val1hz").to_str().unwrap()]);
+    assert_eq!(j["damping_law"]["chosen"], "viscous", "{}", j["damping_law"]);
+    let notes = j["held_out"]["notes"].to_string();
+    assert!(notes.contains("they favour hysteretic"), "{notes}");
+    assert!(j["held_out"]["method"].as_str().unwrap().starts_with("a blocked fold"), "{}", j["held_out"]);
 }

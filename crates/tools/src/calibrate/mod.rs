@@ -43,13 +43,15 @@ pub struct CalibrateArgs {
     /// Run files (CSV, docs: interfaces.md) or folders of them.
     pub inputs: Vec<std::path::PathBuf>,
     /// Held-out runs (a file or folder; repeat the option for more): simulated with the parameters
-    /// fitted on INPUTS and reported under "validation"; for drive runs (`# drive=motor_torque` or
-    /// `reference`) an effect is also kept only if it lowers their position error.
+    /// fitted on INPUTS and reported under "validation". For drive runs (`# drive=motor_torque` or
+    /// `reference`) they are only scored, never used to choose an effect or a load gain.
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE_OR_DIR"))]
     pub validate: Vec<std::path::PathBuf>,
     /// A published reference to compare with (JSON: {"parameters": {"inertia": …, "viscous_friction": …,
     /// "coulomb_friction": …, "offset": …}, "position_relerr_percent": {"estimation": …, "validation": …}});
-    /// it is only reported, never used by the fit.
+    /// never used by the fit. Its parameters are simulated by this loop on the same runs
+    /// ("published_same_simulation"): the figures to compare with, since printed ones may come from
+    /// another simulation of the same model.
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE"))]
     pub published: Option<std::path::PathBuf>,
     /// Folder for report.json, the Markdown report and plots (written atomically).
@@ -321,7 +323,8 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         )
     });
     // One frequency per temperature cannot tell viscous from hysteretic damping (identical fits,
-    // identical in-sample predictions); held-out runs at other frequencies can.
+    // identical in-sample predictions). Held-out runs at other frequencies can, but they judge the
+    // model and never choose it: their verdict is reported, the law stays viscous.
     if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.sinusoidal().iter().all(|&s| s)) {
         let mut other = outcome.final_fit.spec.clone();
         other.law = fit::DampingLaw::Hysteretic;
@@ -330,31 +333,18 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         };
         let (v, hy) = (sse(&outcome.final_fit.spec), sse(&other));
         notes.push(format!(
-            "damping law chosen on the held-out runs (the fitting runs have one frequency per temperature): held-out SSE \
-             viscous {v:.4e}, hysteretic {hy:.4e}"
+            "the fitting runs have one frequency per temperature, so the damping law cannot be chosen from them; the \
+             held-out runs judge it (SSE viscous {v:.4e}, hysteretic {hy:.4e}: they favour {}), but do not choose it: \
+             add runs at a second frequency to the fitting set",
+            if hy < v { "hysteretic" } else { "viscous" }
         ));
-        if hy < v {
-            outcome.final_fit.spec.law = fit::DampingLaw::Hysteretic;
-            outcome.baseline.spec.law = fit::DampingLaw::Hysteretic;
-        }
     }
-    // The held-out check (issue 10, item 5): on --validate runs, else on a blocked fold (fitted on
-    // the first half of every run, scored on the second). Effects stay only if they lower it.
-    let (held_base, held_final, method) = match &held_prob {
-        Some(h) => {
-            let rmse = |f: &fit::Fit| {
-                h.outputs(&f.spec, &f.p)
-                    .map(|o| (h.residual(&o).iter().map(|e| e * e).sum::<f64>() / h.n_samples() as f64).sqrt())
-                    .ok_or("the FMU could not simulate a held-out run")
-            };
-            (rmse(&outcome.baseline)?, rmse(&outcome.final_fit)?, "the --validate runs, simulated with the parameters fitted on the others")
-        }
-        None => (
-            blocked_fold_rmse(&prob, &outcome.baseline)?,
-            blocked_fold_rmse(&prob, &outcome.final_fit)?,
-            "a blocked fold: refitted on the first half of every run, scored on the second half (no --validate runs were given)",
-        ),
-    };
+    // The held-out check that may drop the added effects (issue 10, item 5) is a blocked fold on
+    // the fitting runs (fitted on the first half of every run, scored on the second); --validate
+    // runs are only scored.
+    let (held_base, held_final) =
+        (blocked_fold_rmse(&prob, &outcome.baseline)?, blocked_fold_rmse(&prob, &outcome.final_fit)?);
+    let method = "a blocked fold: refitted on the first half of every run, scored on the second half (the --validate runs, if any, are scored under validation and choose nothing)";
     search::debug(format_args!("held-out: {:?}", t0.elapsed()));
     let reverted = !outcome.final_fit.spec.effects.is_empty() && held_final >= held_base;
     if reverted {
@@ -601,7 +591,11 @@ fn calibrate_drive(
     };
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;
     let seconds = t0.elapsed().as_secs_f64();
-    let report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
+    let mut report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
+    if let Some(same) = published.as_ref().and_then(|p| drive::published_same_simulation(&prob, held_prob.as_ref(), p))
+    {
+        report["published_same_simulation"] = same;
+    }
     let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
         ("report.md".to_string(), drive::report_markdown(&report).into_bytes()),
