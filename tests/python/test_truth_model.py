@@ -1,6 +1,6 @@
 """The independent truth model (tests/truth/truth_model.py) is right before anything is judged by
 it: its linear steady state matches the analytic transfer function, RK4 converges at its default
-step, and its backlash is Modelica's ElastoBacklash (dead zone, a damper that never pulls); the other
+step, and its backlash is a clipped spring–damper (dead zone, a damper that never pulls; Modelica's ElastoBacklash also caps the damping by the spring torque); the other
 effects, excitations, initial speed and timestamp jitter do what truth.json says they do."""
 import json
 import math

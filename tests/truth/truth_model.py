@@ -4,7 +4,7 @@ inertia J hangs on a transmission of stiffness K and damping C (per temperature,
 not from the FMU's material table), and effects act on the link as the Modelica Standard Library
 defines them:
 
-- backlash: ElastoBacklash. With the relative angle φ = θm − θl and half-play b = width/2, the
+- backlash: the clipped spring–damper (Modelica's ElastoBacklash without its cap |τ_d| ≤ |τ_c|). With the relative angle φ = θm − θl and half-play b = width/2, the
   spring acts on the part of φ beyond ±b; the damper acts only while in contact and never pulls:
   τ = K(φ − b) + C φ' for φ > b, clipped at ≥ 0 (and symmetric for φ < −b), τ = 0 inside the play.
 - Coulomb friction: BearingFriction with a smooth sign, τ_f = Fc tanh(θl'/v_s) (v_s small);

@@ -1072,8 +1072,8 @@ impl PropagatorTable<EtdStep> {
 }
 
 /// Transmitted torque τ_t and the Maxwell branch's rate q', with backlash when enabled.
-/// Backlash follows Modelica's ElastoBacklash: no torque inside the play, and the
-/// spring–damper never pulls at its edges.
+/// Backlash: no torque inside the play, and the spring–damper never pulls at its edges. Unlike
+/// Modelica's ElastoBacklash, the damping torque is not capped by the spring torque (docs/physics.md §10).
 pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
     let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
@@ -1096,7 +1096,7 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     (tau, (engaged - q) / lam)
 }
 
-/// The backlash's state at x (ElastoBacklash, as [`transmission`] computes it): free inside the
+/// The backlash's state at x (as [`transmission`] computes it): free inside the
 /// play (|Δ| ≤ b/2), engaged beyond it while the spring–damper pushes (τ ≥ 0 on the positive side,
 /// ≤ 0 on the negative), clipped while it would pull. Engaged and clipped are linear in
 /// x̃ = x − [`Contact::offset`]·e_θm (Δ̃ = Δ ∓ b/2 is then θ̃m − θl), so between contact events a
