@@ -29,6 +29,59 @@ pub enum Effect {
 /// while K_M = 0), s.
 pub const MAXWELL_TIME_GRID: [f64; 3] = [0.03, 0.1, 0.3];
 
+/// Effects whose torque on the link is linear in their parameters: the equation error can
+/// carry them as regressors (the rest need a simulation).
+pub const EQUATION_ERROR_EFFECTS: [Effect; 5] =
+    [Effect::Gravity, Effect::CoulombFriction, Effect::LinkDamping, Effect::ConstantLoad, Effect::AsymmetricFriction];
+
+/// One equation-error regression (`Problem::equation_error`).
+#[derive(Clone, Debug)]
+pub struct EquationError {
+    /// [ln K, ln C per group] ++ the effects' parameters.
+    pub p: Vec<f64>,
+    /// Residual sum of squares (torque², N²·m²) over `samples` rows.
+    pub sse: f64,
+    pub samples: usize,
+    /// About how many of the rows are independent (one per smoothing window).
+    pub independent: f64,
+    /// Groups whose K or C came out unphysical and took the table's value instead.
+    pub repaired: Vec<usize>,
+}
+
+/// AᵀA, Aᵀb and bᵀb of an equation error: any subset of its columns is solved from them alone.
+#[derive(Clone, Debug)]
+pub struct NormalEquations {
+    pub ata: DMatrix<f64>,
+    pub atb: DVector<f64>,
+    pub btb: f64,
+    pub samples: usize,
+    pub independent: f64,
+}
+
+impl NormalEquations {
+    /// Least squares on `columns` only: (β over those columns, SSE).
+    pub fn solve(&self, columns: &[usize]) -> Option<(DVector<f64>, f64)> {
+        let k = columns.len();
+        let a = DMatrix::from_fn(k, k, |i, j| self.ata[(columns[i], columns[j])]);
+        let b = DVector::from_fn(k, |i, _| self.atb[columns[i]]);
+        let beta = spd_inverse(&a) * &b;
+        if beta.iter().any(|x| !x.is_finite()) {
+            return None;
+        }
+        // SSE = bᵀb − 2βᵀAᵀb + βᵀAᵀAβ
+        let sse = (self.btb - 2.0 * beta.dot(&b) + (beta.transpose() * &a * &beta)[(0, 0)]).max(0.0);
+        Some((beta, sse))
+    }
+}
+
+impl EquationError {
+    /// BIC on the independent rows (the smoothing correlates the rest).
+    pub fn bic(&self, parameters: usize) -> f64 {
+        let n = self.independent.max(1.0);
+        n * (self.sse / self.samples as f64).max(1e-300).ln() + parameters as f64 * n.ln()
+    }
+}
+
 impl Effect {
     pub const ALL: [Effect; 9] = [
         Effect::CoulombFriction,
@@ -443,20 +496,56 @@ impl<'a> Problem<'a> {
     /// Equation error over every run at once: J θl'' = K_g φ + C_g w φ' + Σ θ_i x_i, with φ = θm − θl,
     /// w = f_ref/f_run under the hysteretic law (else 1), and x_i the torque regressors of `effect`
     /// (gravity −sin θl and cos θl, Coulomb −sign θl', link damping −θl'; effects that are not
-    /// linear in their parameters have none). Derivatives are central differences of
-    /// Savitzky–Golay-smoothed angles (a window of 2 % of the run, at least 5 samples each side).
-    /// Returns [ln K, ln C per group] ++ the effect's parameters, or None when a group's K or C
-    /// comes out unphysical. Cheap (no simulation): a start for Levenberg–Marquardt, not a fit.
+    /// linear in their parameters have none). Returns [ln K, ln C per group] ++ the effect's
+    /// parameters, or None when a group's K or C comes out unphysical. Cheap (no simulation): a
+    /// start for Levenberg–Marquardt, not a fit.
     pub fn equation_error_start(&self, law: DampingLaw, effect: Option<Effect>) -> Option<Vec<f64>> {
-        let n_eff = match effect {
-            None => 0,
-            Some(Effect::Gravity | Effect::AsymmetricFriction) => 2,
-            Some(Effect::CoulombFriction | Effect::LinkDamping | Effect::ConstantLoad) => 1,
-            Some(_) => return None,
-        };
+        let e = self.equation_error(law, effect.as_slice())?;
+        e.repaired.is_empty().then_some(e.p)
+    }
+
+    /// The equation error above with the regressors of several effects at once (each in
+    /// [`EQUATION_ERROR_EFFECTS`]; None for any other). A group whose K or C comes out unphysical
+    /// (≤ 0: an effect the regression lacks, absorbed by that group) is repaired on its own: it
+    /// takes the material table's value for it, and the start is kept. Derivatives are central
+    /// differences of Savitzky–Golay-smoothed angles (a window of 2 % of the run, at least 5
+    /// samples each side).
+    pub fn equation_error(&self, law: DampingLaw, effects: &[Effect]) -> Option<EquationError> {
+        let normal = self.normal_equations(law, effects)?;
+        let (beta, sse) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
+        Some(self.equation_error_from(&normal, beta, sse))
+    }
+
+    /// An [`EquationError`] from a solution of `normal` (over all its columns), with unphysical
+    /// groups repaired.
+    pub fn equation_error_from(&self, normal: &NormalEquations, beta: DVector<f64>, sse: f64) -> EquationError {
+        let table = self.table_start();
+        let mut p = Vec::with_capacity(beta.len());
+        let mut repaired = Vec::new();
+        for g in 0..self.n_groups {
+            let (k, c) = (beta[2 * g], beta[2 * g + 1]);
+            let [lk, lc] = self.clamp_transmission(g, k.max(f64::MIN_POSITIVE), c.max(f64::MIN_POSITIVE));
+            if !(k > 0.0 && c > 0.0) {
+                repaired.push(g);
+            }
+            p.push(if k > 0.0 { lk } else { table[2 * g] });
+            p.push(if c > 0.0 { lc } else { table[2 * g + 1] });
+        }
+        p.extend(beta.iter().skip(2 * self.n_groups));
+        EquationError { p, sse, samples: normal.samples, independent: normal.independent, repaired }
+    }
+
+    /// The equation error's normal equations with the regressors of `effects` (each in
+    /// [`EQUATION_ERROR_EFFECTS`]; None for any other): columns [K, C per group] ++ the effects'.
+    pub fn normal_equations(&self, law: DampingLaw, effects: &[Effect]) -> Option<NormalEquations> {
+        if effects.iter().any(|e| !EQUATION_ERROR_EFFECTS.contains(e)) {
+            return None;
+        }
+        let n_eff: usize = effects.iter().map(|e| e.params().len()).sum();
         let cols = 2 * self.n_groups + n_eff;
         let mut ata = DMatrix::<f64>::zeros(cols, cols);
         let mut atb = DVector::<f64>::zeros(cols);
+        let (mut btb, mut samples, mut independent) = (0.0, 0usize, 0.0);
         for (r, inp) in self.inputs.iter().enumerate() {
             let n = inp.time.len();
             if n < 40 {
@@ -473,44 +562,46 @@ impl<'a> Problem<'a> {
             let t = &inp.time;
             let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
             let mut row = DVector::<f64>::zeros(cols);
-            for k in half + 2..n - half - 2 {
+            let range = half + 2..n - half - 2;
+            // the smoothing correlates the residual over its window: about one independent
+            // sample per window
+            independent += range.len() as f64 / (2 * half + 1) as f64;
+            for k in range {
                 let v = d(l, k);
                 let acc = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]) - (l[k] - l[k - 1]) / (t[k] - t[k - 1]))
                     / (0.5 * (t[k + 1] - t[k - 1]));
                 row.fill(0.0);
                 row[2 * g] = m[k] - l[k];
                 row[2 * g + 1] = w * (d(m, k) - v);
-                match effect {
-                    Some(Effect::Gravity) => {
-                        row[2 * self.n_groups] = -l[k].sin();
-                        row[2 * self.n_groups + 1] = l[k].cos();
+                let mut c = 2 * self.n_groups;
+                // the model's smooth sign s = tanh(v / 1 mm/s)
+                let sign = (v / 1e-3).tanh();
+                for e in effects {
+                    match e {
+                        Effect::Gravity => {
+                            row[c] = -l[k].sin();
+                            row[c + 1] = l[k].cos();
+                        }
+                        Effect::CoulombFriction => row[c] = -sign,
+                        Effect::LinkDamping => row[c] = -v,
+                        Effect::ConstantLoad => row[c] = 1.0,
+                        Effect::AsymmetricFriction => {
+                            // −a_c s² − a_v s v
+                            row[c] = -sign * sign;
+                            row[c + 1] = -sign * v;
+                        }
+                        _ => unreachable!("checked above"),
                     }
-                    Some(Effect::CoulombFriction) => row[2 * self.n_groups] = -(v / 1e-3).tanh(),
-                    Some(Effect::LinkDamping) => row[2 * self.n_groups] = -v,
-                    Some(Effect::ConstantLoad) => row[2 * self.n_groups] = 1.0,
-                    Some(Effect::AsymmetricFriction) => {
-                        // the model's −a_c s² − a_v s v with s = tanh(v/1 mm/s)
-                        let sign = (v / 1e-3).tanh();
-                        row[2 * self.n_groups] = -sign * sign;
-                        row[2 * self.n_groups + 1] = -sign * v;
-                    }
-                    _ => {}
+                    c += e.params().len();
                 }
+                let b = j * acc;
                 ata += &row * row.transpose();
-                atb += &row * (j * acc);
+                atb += &row * b;
+                btb += b * b;
+                samples += 1;
             }
         }
-        let beta = spd_inverse(&ata) * atb;
-        let mut out = Vec::with_capacity(cols);
-        for g in 0..self.n_groups {
-            let (k, c) = (beta[2 * g], beta[2 * g + 1]);
-            if !(k > 0.0 && c > 0.0) {
-                return None;
-            }
-            out.extend(self.clamp_transmission(g, k, c));
-        }
-        out.extend((0..n_eff).map(|i| beta[2 * self.n_groups + i]));
-        Some(out)
+        (samples > cols).then_some(NormalEquations { ata, atb, btb, samples, independent })
     }
 
     /// The equation error's smoothed (link, motor) angles of every run: a window of 2 % of the run,

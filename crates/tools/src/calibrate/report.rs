@@ -251,6 +251,9 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         },
         "identified_baseline": identified(prob, &o.baseline, temps),
         "rounds": rounds,
+        "combinations": o.combinations.iter().map(|c| json!({"stage": c.stage, "effects": c.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
+            "bic_before": c.before.0, "bic_after": c.after.0, "structure_before": c.before.1, "structure_after": c.after.1, "kept": c.kept,
+            "what": "the equation error's best subset of linear effects (transmission per temperature fitted beside them), refitted at once through the FMU"})).collect::<Vec<_>>(),
         "signatures": {"baseline": signature_json(&o.baseline_signatures), "final": signature_json(&o.final_signatures)},
         "method": {
             "fit": "per temperature the transmission's stiffness K and damping C (log-parameters; springs and PCL scaled together), plus the effects' parameters; the baseline starts from the best of a closed form (frequency response K* = Jω²H/(H−1) for sinusoidal runs, equation error otherwise), the material table and a mix, then Levenberg–Marquardt on every sample, the FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians",
@@ -315,6 +318,18 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         }
     }
     s += "\n## Chain of evidence\n\n";
+    for c in &o.combinations {
+        s += &format!(
+            "Combination ({}) from the equation error's best subset, refitted at once: **{}**: BIC {:.0} → {:.0}, structure {:.1} → {:.1}: {}.\n\n",
+            c.stage,
+            c.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(" + "),
+            c.before.0,
+            c.after.0,
+            c.before.1,
+            c.after.1,
+            if c.kept { "kept" } else { "rejected" }
+        );
+    }
     for (i, r) in o.rounds.iter().enumerate() {
         s += &format!("### Round {} (residual structure {:.1}× white noise)\n\n| effect | score | predicted ΔBIC | evidence |\n|---|---|---|---|\n", i + 1, r.signatures.structure_ratio);
         for c in &r.candidates {

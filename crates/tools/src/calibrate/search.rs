@@ -2,7 +2,9 @@
 //! keep it only if it earns its place, repeat until nothing in the library helps.
 
 use super::diagnose::{rank, signatures, Candidate, Signatures};
-use super::fit::{levenberg_marquardt, DampingLaw, Effect, Fit, ModelSpec, Problem, SpringBank};
+use super::fit::{
+    levenberg_marquardt, DampingLaw, Effect, EquationError, Fit, ModelSpec, Problem, SpringBank, EQUATION_ERROR_EFFECTS,
+};
 
 /// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
 /// on the Kass & Raftery (1995) scale (ΔBIC > 10).
@@ -16,6 +18,10 @@ pub const MAX_ITERATIONS: usize = 25;
 /// Levenberg–Marquardt iterations a shortlisted candidate gets before the comparison; the
 /// winner then runs to convergence (speed: most of a search is spent on losers).
 pub const SCREEN_ITERATIONS: usize = 4;
+
+/// Times the equation error's combination is tried after the one-at-a-time rounds (each accepted
+/// one is followed by rounds again).
+pub const COMBINATION_PASSES: usize = 2;
 
 /// A candidate is refitted only if its linearised score is at least this share of the best one's.
 pub const SHORTLIST_SHARE: f64 = 0.25;
@@ -84,7 +90,20 @@ pub struct Round {
     pub attempts: Vec<(Effect, f64, f64, f64, f64, bool)>,
 }
 
+/// A combination of effects proposed by the equation error's best subset and refitted at once.
+#[derive(Clone, Debug)]
+pub struct CombinationAttempt {
+    /// When it was tried: "baseline" (before the one-at-a-time rounds) or "after the rounds".
+    pub stage: &'static str,
+    pub effects: Vec<Effect>,
+    /// (BIC, structure ratio) of the model it was compared with, and of the refit.
+    pub before: (f64, f64),
+    pub after: (f64, f64),
+    pub kept: bool,
+}
+
 pub struct Outcome {
+    pub combinations: Vec<CombinationAttempt>,
     pub baseline: Fit,
     pub baseline_signatures: Signatures,
     pub final_fit: Fit,
@@ -137,6 +156,187 @@ fn fit_from_best(prob: &Problem, spec: ModelSpec, starts: Vec<Vec<f64>>, max_ite
 pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String> {
     let starts = baseline_starts(prob, law).into_iter().map(|s| s.1).collect();
     fit_from_best(prob, ModelSpec { effects: vec![], law, springs }, starts, MAX_ITERATIONS)
+}
+
+/// The combination of linear effects ([`EQUATION_ERROR_EFFECTS`]) the equation error supports,
+/// with the transmission of every temperature group fitted beside them (so neither absorbs the
+/// other, and no bound pins it): of every subset (asymmetric friction only with Coulomb
+/// friction), the lowest BIC on the regression's independent rows among those in which each
+/// effect's removal costs more than `BIC_MARGIN`. The regression is formed once; every subset is
+/// solved from its normal equations.
+pub fn equation_error_subset(prob: &Problem, law: DampingLaw) -> Option<(Vec<Effect>, EquationError)> {
+    let all = EQUATION_ERROR_EFFECTS;
+    let normal = prob.normal_equations(law, &all)?;
+    let n_t = 2 * prob.n_groups;
+    let mut offsets = Vec::with_capacity(all.len());
+    let mut next = n_t;
+    for e in all {
+        offsets.push(next);
+        next += e.params().len();
+    }
+    let bit = |e: Effect| 1u32 << all.iter().position(|&x| x == e).expect("in the list");
+    let valid = |mask: u32| mask & bit(Effect::AsymmetricFriction) == 0 || mask & bit(Effect::CoulombFriction) != 0;
+    let n = normal.independent.max(1.0);
+    let bic: Vec<Option<f64>> = (0..1u32 << all.len())
+        .map(|mask| {
+            if !valid(mask) {
+                return None;
+            }
+            let columns: Vec<usize> = (0..n_t)
+                .chain(
+                    (0..all.len())
+                        .filter(|i| mask >> i & 1 == 1)
+                        .flat_map(|i| offsets[i]..offsets[i] + all[i].params().len()),
+                )
+                .collect();
+            let (_, sse) = normal.solve(&columns)?;
+            Some(n * (sse / normal.samples as f64).max(1e-300).ln() + columns.len() as f64 * n.ln())
+        })
+        .collect();
+    let needed = |mask: u32| {
+        (0..all.len()).filter(|i| mask >> i & 1 == 1).all(|i| {
+            match (bic[(mask & !(1 << i)) as usize], bic[mask as usize]) {
+                (Some(without), Some(with)) => without > with + BIC_MARGIN,
+                // removing Coulomb friction from under its asymmetry: judged with both removed
+                _ => bic[(mask & !(1 << i) & !bit(Effect::AsymmetricFriction)) as usize]
+                    .zip(bic[mask as usize])
+                    .is_none_or(|(without, with)| without > with + BIC_MARGIN),
+            }
+        })
+    };
+    let best = (0..1u32 << all.len()).filter(|&m| bic[m as usize].is_some() && needed(m)).min_by(|&a, &b| {
+        bic[a as usize].unwrap_or(f64::INFINITY).total_cmp(&bic[b as usize].unwrap_or(f64::INFINITY))
+    })?;
+    let effects: Vec<Effect> = (0..all.len()).filter(|i| best >> i & 1 == 1).map(|i| all[i]).collect();
+    debug(format_args!(
+        "equation error subsets (BIC on {n:.0} independent rows): best {effects:?} {:.1}; none {:.1}; all {:.1}",
+        bic[best as usize].unwrap_or(f64::NAN),
+        bic[0].unwrap_or(f64::NAN),
+        bic[(1usize << all.len()) - 1].unwrap_or(f64::NAN)
+    ));
+    let e = prob.equation_error(law, &effects)?;
+    Some((effects, e))
+}
+
+/// The equation error's combination refitted at once through the FMU: its linear effects with the
+/// current fit's other effects (backlash, thermal lag, ...) at their values, from the equation
+/// error's transmission, the current one and the closed form. Screened, then run to convergence;
+/// kept only if it earns its place against `current` on the screening share and on every sample.
+/// None when the equation error proposes nothing new (or `min_new` more linear effects than
+/// `current` has are not on offer).
+fn try_combination(
+    prob: &Problem,
+    screen: &Option<(Problem, Fit, Signatures)>,
+    current: &Fit,
+    sig: &Signatures,
+    stage: &'static str,
+    min_effects: usize,
+) -> Option<(CombinationAttempt, Option<(Fit, Signatures)>)> {
+    let (subset, ee) = equation_error_subset(prob, current.spec.law)?;
+    let n_t = 2 * prob.n_groups;
+    let mut effects: Vec<Effect> =
+        current.spec.effects.iter().copied().filter(|e| !EQUATION_ERROR_EFFECTS.contains(e)).collect();
+    let mut others = Vec::new();
+    for (o, e) in current.spec.offsets(prob.n_groups) {
+        if !EQUATION_ERROR_EFFECTS.contains(&e) {
+            others.extend_from_slice(&current.p[o..o + e.params().len()]);
+        }
+    }
+    let same = subset.len() + effects.len() == current.spec.effects.len()
+        && subset.iter().all(|e| current.spec.effects.contains(e));
+    if subset.len() < min_effects || same {
+        return None;
+    }
+    effects.extend_from_slice(&subset);
+    let spec = ModelSpec { effects: effects.clone(), law: current.spec.law, springs: current.spec.springs };
+    let closed = prob.closed_form_start(spec.law);
+    let starts: Vec<Vec<f64>> = [&ee.p[..n_t], &current.p[..n_t], &closed[..n_t]]
+        .into_iter()
+        .map(|transmission| {
+            let mut q = transmission.to_vec();
+            q.extend_from_slice(&others);
+            q.extend_from_slice(&ee.p[n_t..]);
+            q
+        })
+        .collect();
+    let (sprob, scurrent, ssig) = match screen {
+        Some((sp, sc, ss)) => (sp, sc, ss),
+        None => (prob, current, sig),
+    };
+    let t = std::time::Instant::now();
+    // every start is refitted (a transmission that absorbed an effect, or sits at a bound, is a
+    // valley of its own); the lowest BIC wins
+    let fits: Vec<Fit> = starts
+        .into_iter()
+        .filter_map(|q| levenberg_marquardt(sprob, spec.clone(), q, SCREEN_ITERATIONS).ok())
+        .collect();
+    let mut screened = fits.iter().min_by(|a, b| a.bic().total_cmp(&b.bic()))?.clone();
+    // the groups' transmissions are nearly separable: each group takes the start that fits its
+    // own runs best (one group pinned at a bound need not sink the others)
+    let hybrid = per_group_best(sprob, &fits, &screened);
+    if hybrid != screened.p {
+        if let Ok(f) = levenberg_marquardt(sprob, spec, hybrid, SCREEN_ITERATIONS) {
+            if f.bic() < screened.bic() {
+                screened = f;
+            }
+        }
+    }
+    let screened_sig = signatures(sprob, &screened);
+    let mut attempt = CombinationAttempt {
+        stage,
+        effects,
+        before: (scurrent.bic(), ssig.structure_ratio),
+        after: (screened.bic(), screened_sig.structure_ratio),
+        kept: earns_its_place(scurrent, ssig, &screened, &screened_sig),
+    };
+    debug(format_args!("combination {:?} screened in {:?}: kept {}", attempt.effects, t.elapsed(), attempt.kept));
+    if !attempt.kept {
+        return Some((attempt, None));
+    }
+    let done = if screen.is_some() {
+        levenberg_marquardt(prob, screened.spec.clone(), screened.p.clone(), MAX_ITERATIONS).ok()?
+    } else {
+        screened
+    };
+    let s = signatures(prob, &done);
+    attempt.before = (current.bic(), sig.structure_ratio);
+    attempt.after = (done.bic(), s.structure_ratio);
+    attempt.kept = earns_its_place(current, sig, &done, &s);
+    let accepted = attempt.kept.then_some((done, s));
+    Some((attempt, accepted))
+}
+
+/// `best`'s parameters with each temperature group's [ln K, ln C] taken from the fit in `fits`
+/// whose residual on that group's runs is smallest.
+fn per_group_best(prob: &Problem, fits: &[Fit], best: &Fit) -> Vec<f64> {
+    let lengths = prob.lengths();
+    let group_sse = |f: &Fit| {
+        let mut sse = vec![0.0; prob.n_groups];
+        let mut offset = 0;
+        for (r, &n) in lengths.iter().enumerate() {
+            sse[prob.group[r]] += f.residual[offset..offset + n].iter().map(|e| e * e).sum::<f64>();
+            offset += n;
+        }
+        sse
+    };
+    let sses: Vec<Vec<f64>> = fits.iter().map(group_sse).collect();
+    let mut p = best.p.clone();
+    for g in 0..prob.n_groups {
+        if let Some(i) = (0..fits.len()).min_by(|&a, &b| sses[a][g].total_cmp(&sses[b][g])) {
+            p[2 * g..2 * g + 2].copy_from_slice(&fits[i].p[2 * g..2 * g + 2]);
+        }
+    }
+    p
+}
+
+/// Re-evaluates the screening share at `current` (after `current` changed).
+fn refresh_screen(screen: &mut Option<(Problem, Fit, Signatures)>, current: &Fit) {
+    if let Some((sp, sc, ss)) = screen.as_mut() {
+        if let Some(f) = Fit::evaluate_with_jacobian(sp, current.spec.clone(), current.p.clone()) {
+            *ss = signatures(sp, &f);
+            *sc = f;
+        }
+    }
 }
 
 /// A damping law and a spring-bank share: the structure choices the data decide between.
@@ -283,145 +483,185 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
     let mut rounds = Vec::new();
+    // A baseline at a bound is infeasible: linearised rankings around it are blind (a rigid link
+    // does not feel a small probe). The equation error's best subset is refitted at once first
+    // (issue 18), several effects together where one at a time each would be judged against a
+    // baseline that absorbed the others.
+    let mut combinations = Vec::new();
+    if !sig.white() && at_bound(prob, &current) {
+        if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 2) {
+            combinations.push(attempt);
+            if let Some((f, s)) = accepted {
+                current = f;
+                sig = s;
+                refresh_screen(&mut screen, &current);
+            }
+        }
+    }
     // until the residual is white at the noise floor, or nothing in the library earns its place
     // The baseline is always diagnosed (the ranking and its evidence are reported even for a
     // white residual); refits happen only while structure remains.
-    while current.spec.effects.len() < MAX_EFFECTS && (rounds.is_empty() || !sig.white()) {
-        let t = std::time::Instant::now();
-        // ranked on the screening share too (the linearised projections need no more)
-        let (rprob, rcurrent, rsig) = match &screen {
-            Some((sp, sc, ss)) => (sp, sc, ss),
-            None => (&*prob, &current, &sig),
-        };
-        let candidates = rank(rprob, rcurrent, rsig);
-        debug(format_args!("rank took {:?}", t.elapsed()));
-        let mut round = Round { signatures: rsig.clone(), candidates: candidates.clone(), attempts: vec![] };
-        // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
-        // earn their place, the one with the lowest BIC is added.
-        let mut accepted: Option<(Fit, Signatures)> = None;
-        let shortlist = if sig.white() { 0 } else { TRIES_PER_ROUND };
-        // refits are for candidates the linearised ranking cannot tell apart from the best: a
-        // score below SHORTLIST_SHARE of the best one's is not worth a refit
-        // (unless the fit sits at a bound, where the linearisation is blind: a rigid fit does not
-        // feel a small gravity probe)
-        let best_score = if at_bound(prob, &current) { 0.0 } else { candidates.first().map_or(0.0, |c| c.score) };
-        for c in candidates
-            .iter()
-            .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
-            .take(shortlist)
-        {
-            let mut spec = current.spec.clone();
-            spec.effects.push(c.effect);
-            // Starts: the current transmission and the closed-form one (the transmission fitted
-            // without the effect may have absorbed it: friction mimicked by a softer, more damped
-            // link; gravity by a rigid one), each with the linearised effect value and with the
-            // effect's typical size (a linearisation at a rigid or bounded fit can be absurd).
-            let typical: Vec<f64> = c.effect.params().iter().map(|p| p.1).collect();
-            let closed = prob.closed_form_start(spec.law);
-            let n_t = 2 * prob.n_groups;
-            let mut starts = Vec::new();
-            for transmission in [&current.p[..n_t], &closed[..]] {
-                for effect in [&c.start, &typical] {
-                    let mut q = transmission.to_vec();
-                    q.extend_from_slice(&current.p[n_t..]);
-                    q.extend_from_slice(effect);
-                    starts.push(q);
-                }
-            }
-            // equation error with the effect's torque as a regressor (transmission and effect
-            // estimated together, so neither absorbs the other)
-            if let Some(e) = prob.equation_error_start(spec.law, Some(c.effect)) {
-                let mut q = e[..n_t].to_vec();
-                q.extend_from_slice(&current.p[n_t..]);
-                q.extend_from_slice(&e[n_t..]);
-                starts.push(q);
-            }
-            let (sprob, scurrent, ssig) = match &screen {
+    // One-at-a-time rounds, then the equation error's combination with what they found (a partial
+    // effect found first can hide the rest); rounds again after an accepted combination.
+    let mut passes = 0;
+    loop {
+        while current.spec.effects.len() < MAX_EFFECTS && (rounds.is_empty() || !sig.white()) {
+            let t = std::time::Instant::now();
+            // ranked on the screening share too (the linearised projections need no more)
+            let (rprob, rcurrent, rsig) = match &screen {
                 Some((sp, sc, ss)) => (sp, sc, ss),
                 None => (&*prob, &current, &sig),
             };
-            let p = starts
-                .into_iter()
-                .map(|q| (cost(sprob, &spec, &q), q))
-                .min_by(|a, b| a.0.total_cmp(&b.0))
-                .map(|(_, q)| q)
-                .expect("four starts");
-            let t = std::time::Instant::now();
-            let Ok(refit) = levenberg_marquardt(sprob, spec, p, SCREEN_ITERATIONS) else { continue };
-            debug(format_args!("refit {} took {:?}, {} iterations", c.effect.name(), t.elapsed(), refit.iterations));
-            let refit_sig = signatures(sprob, &refit);
-            // it earns its place if BIC says so and the residual lost the structure it explained:
-            // at least STRUCTURE_DROP of the low-frequency excess over white noise (BIC alone,
-            // with N = every sample, over-rewards small effects fitting correlated leftovers)
-            let keep = earns_its_place(scurrent, ssig, &refit, &refit_sig);
-            round.attempts.push((
-                c.effect,
-                scurrent.bic(),
-                refit.bic(),
-                ssig.structure_ratio,
-                refit_sig.structure_ratio,
-                keep,
-            ));
-            if keep && accepted.as_ref().is_none_or(|a| refit.bic() < a.0.bic()) {
-                accepted = Some((refit, refit_sig));
-            }
-        }
-        if let Some((f, _)) = &accepted {
-            for a in round.attempts.iter_mut() {
-                a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
-            }
-        }
-        debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
-        // the winner runs to convergence on every sample, and must earn its place there too
-        if let Some((f, fs)) = accepted.take() {
-            // an effect can change which damping law the data favour (friction read as frequency-
-            // dependent loss before it was in): re-chosen on the screening share with it, so only
-            // the chosen structure is fitted on every sample
-            let f = match &screen {
-                Some((sp, _, _)) => {
-                    let stage = format!("round {} (screening share)", rounds.len() + 1);
-                    best_law(sp, None, f, &laws.allowed, &stage, &mut rows)
-                }
-                None => f,
-            };
-            if screen.is_none() && f.iterations < SCREEN_ITERATIONS {
-                accepted = Some((f, fs));
-            } else if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
-                debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
-                let s = signatures(prob, &done);
-                if earns_its_place(&current, &sig, &done, &s) {
-                    accepted = Some((done, s));
-                } else if let Some(a) = round.attempts.iter_mut().find(|a| a.5) {
-                    a.5 = false;
-                }
-            }
-        }
-        debug(format_args!("winner converged: {:?}, {} simulations", t.elapsed(), sims(prob)));
-        rounds.push(round);
-        match accepted {
-            Some((f, s)) => {
-                // (without a screening share the structure is re-chosen here, on every sample)
-                if screen.is_none() {
-                    let before = (f.spec.law, f.spec.springs);
-                    current = best_law(prob, None, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
-                    sig =
-                        if (current.spec.law, current.spec.springs) == before { s } else { signatures(prob, &current) };
-                } else {
-                    current = f;
-                    sig = s;
-                }
-                debug(format_args!(
-                    "law re-checked: {:?}, {} simulations, {:?}",
-                    t.elapsed(),
-                    sims(prob),
-                    current.spec.law
-                ));
-                if let Some((sp, sc, ss)) = screen.as_mut() {
-                    if let Some(f) = Fit::evaluate_with_jacobian(sp, current.spec.clone(), current.p.clone()) {
-                        *ss = signatures(sp, &f);
-                        *sc = f;
+            let candidates = rank(rprob, rcurrent, rsig);
+            debug(format_args!("rank took {:?}", t.elapsed()));
+            let mut round = Round { signatures: rsig.clone(), candidates: candidates.clone(), attempts: vec![] };
+            // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
+            // earn their place, the one with the lowest BIC is added.
+            let mut accepted: Option<(Fit, Signatures)> = None;
+            let shortlist = if sig.white() { 0 } else { TRIES_PER_ROUND };
+            // refits are for candidates the linearised ranking cannot tell apart from the best: a
+            // score below SHORTLIST_SHARE of the best one's is not worth a refit
+            // (unless the fit sits at a bound, where the linearisation is blind: a rigid fit does not
+            // feel a small gravity probe)
+            let best_score = if at_bound(prob, &current) { 0.0 } else { candidates.first().map_or(0.0, |c| c.score) };
+            for c in candidates
+                .iter()
+                .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
+                .take(shortlist)
+            {
+                let mut spec = current.spec.clone();
+                spec.effects.push(c.effect);
+                // Starts: the current transmission and the closed-form one (the transmission fitted
+                // without the effect may have absorbed it: friction mimicked by a softer, more damped
+                // link; gravity by a rigid one), each with the linearised effect value and with the
+                // effect's typical size (a linearisation at a rigid or bounded fit can be absurd).
+                let typical: Vec<f64> = c.effect.params().iter().map(|p| p.1).collect();
+                let closed = prob.closed_form_start(spec.law);
+                let n_t = 2 * prob.n_groups;
+                let mut starts = Vec::new();
+                for transmission in [&current.p[..n_t], &closed[..]] {
+                    for effect in [&c.start, &typical] {
+                        let mut q = transmission.to_vec();
+                        q.extend_from_slice(&current.p[n_t..]);
+                        q.extend_from_slice(effect);
+                        starts.push(q);
                     }
                 }
+                // equation error with the effect's torque as a regressor (transmission and effect
+                // estimated together, so neither absorbs the other)
+                if let Some(e) = prob.equation_error_start(spec.law, Some(c.effect)) {
+                    let mut q = e[..n_t].to_vec();
+                    q.extend_from_slice(&current.p[n_t..]);
+                    q.extend_from_slice(&e[n_t..]);
+                    starts.push(q);
+                }
+                let (sprob, scurrent, ssig) = match &screen {
+                    Some((sp, sc, ss)) => (sp, sc, ss),
+                    None => (&*prob, &current, &sig),
+                };
+                let p = starts
+                    .into_iter()
+                    .map(|q| (cost(sprob, &spec, &q), q))
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .map(|(_, q)| q)
+                    .expect("four starts");
+                let t = std::time::Instant::now();
+                let Ok(refit) = levenberg_marquardt(sprob, spec, p, SCREEN_ITERATIONS) else { continue };
+                debug(format_args!(
+                    "refit {} took {:?}, {} iterations",
+                    c.effect.name(),
+                    t.elapsed(),
+                    refit.iterations
+                ));
+                let refit_sig = signatures(sprob, &refit);
+                // it earns its place if BIC says so and the residual lost the structure it explained:
+                // at least STRUCTURE_DROP of the low-frequency excess over white noise (BIC alone,
+                // with N = every sample, over-rewards small effects fitting correlated leftovers)
+                let keep = earns_its_place(scurrent, ssig, &refit, &refit_sig);
+                round.attempts.push((
+                    c.effect,
+                    scurrent.bic(),
+                    refit.bic(),
+                    ssig.structure_ratio,
+                    refit_sig.structure_ratio,
+                    keep,
+                ));
+                if keep && accepted.as_ref().is_none_or(|a| refit.bic() < a.0.bic()) {
+                    accepted = Some((refit, refit_sig));
+                }
+            }
+            if let Some((f, _)) = &accepted {
+                for a in round.attempts.iter_mut() {
+                    a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
+                }
+            }
+            debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
+            // the winner runs to convergence on every sample, and must earn its place there too
+            if let Some((f, fs)) = accepted.take() {
+                // an effect can change which damping law the data favour (friction read as frequency-
+                // dependent loss before it was in): re-chosen on the screening share with it, so only
+                // the chosen structure is fitted on every sample
+                let f = match &screen {
+                    Some((sp, _, _)) => {
+                        let stage = format!("round {} (screening share)", rounds.len() + 1);
+                        best_law(sp, None, f, &laws.allowed, &stage, &mut rows)
+                    }
+                    None => f,
+                };
+                if screen.is_none() && f.iterations < SCREEN_ITERATIONS {
+                    accepted = Some((f, fs));
+                } else if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
+                    debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
+                    let s = signatures(prob, &done);
+                    if earns_its_place(&current, &sig, &done, &s) {
+                        accepted = Some((done, s));
+                    } else if let Some(a) = round.attempts.iter_mut().find(|a| a.5) {
+                        a.5 = false;
+                    }
+                }
+            }
+            debug(format_args!("winner converged: {:?}, {} simulations", t.elapsed(), sims(prob)));
+            rounds.push(round);
+            match accepted {
+                Some((f, s)) => {
+                    // (without a screening share the structure is re-chosen here, on every sample)
+                    if screen.is_none() {
+                        let before = (f.spec.law, f.spec.springs);
+                        current = best_law(prob, None, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
+                        sig = if (current.spec.law, current.spec.springs) == before {
+                            s
+                        } else {
+                            signatures(prob, &current)
+                        };
+                    } else {
+                        current = f;
+                        sig = s;
+                    }
+                    debug(format_args!(
+                        "law re-checked: {:?}, {} simulations, {:?}",
+                        t.elapsed(),
+                        sims(prob),
+                        current.spec.law
+                    ));
+                    refresh_screen(&mut screen, &current);
+                }
+                None => break,
+            }
+        }
+        passes += 1;
+        if sig.white() || passes > COMBINATION_PASSES {
+            break;
+        }
+        match try_combination(prob, &screen, &current, &sig, "after the rounds", 1) {
+            Some((attempt, Some((f, s)))) => {
+                combinations.push(attempt);
+                current = f;
+                sig = s;
+                refresh_screen(&mut screen, &current);
+            }
+            Some((attempt, None)) => {
+                combinations.push(attempt);
+                break;
             }
             None => break,
         }
@@ -478,6 +718,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let unexplained = !sig.white();
     Ok(Outcome {
+        combinations,
         baseline,
         baseline_signatures,
         final_fit: current,
