@@ -23,6 +23,10 @@ pub const SCREEN_ITERATIONS: usize = 4;
 /// one is followed by rounds again).
 pub const COMBINATION_PASSES: usize = 2;
 
+/// Candidates (by score, each predicting a BIC gain) refitted in pairs when no single one earns
+/// its place: 4 give 6 pairs.
+pub const PAIR_POOL: usize = 4;
+
 /// A candidate is refitted only if its linearised score is at least this share of the best one's.
 pub const SHORTLIST_SHARE: f64 = 0.25;
 
@@ -306,6 +310,36 @@ fn try_combination(
     Some((attempt, accepted))
 }
 
+/// Starting points for refitting `current` with the candidates' effects added: the current
+/// transmission and the closed-form one (the transmission fitted without an effect may have
+/// absorbed it: friction mimicked by a softer, more damped link; gravity by a rigid one), each with
+/// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
+/// bounded fit can be absurd); and the equation error with the effects' torques as regressors
+/// (transmission and effects estimated together, so neither absorbs the other).
+fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Candidate], law: DampingLaw) -> Vec<Vec<f64>> {
+    let n_t = 2 * prob.n_groups;
+    let closed = prob.closed_form_start(law);
+    let linearised: Vec<f64> = added.iter().flat_map(|c| c.start.iter().copied()).collect();
+    let typical: Vec<f64> = added.iter().flat_map(|c| c.effect.params().iter().map(|p| p.1)).collect();
+    let mut starts = Vec::new();
+    for transmission in [&current.p[..n_t], &closed[..]] {
+        for effect in [&linearised, &typical] {
+            let mut q = transmission.to_vec();
+            q.extend_from_slice(&current.p[n_t..]);
+            q.extend_from_slice(effect);
+            starts.push(q);
+        }
+    }
+    let effects: Vec<Effect> = added.iter().map(|c| c.effect).collect();
+    if let Some(e) = prob.equation_error(law, &effects).filter(|e| e.repaired.is_empty()) {
+        let mut q = e.p[..n_t].to_vec();
+        q.extend_from_slice(&current.p[n_t..]);
+        q.extend_from_slice(&e.p[n_t..]);
+        starts.push(q);
+    }
+    starts
+}
+
 /// `best`'s parameters with each temperature group's [ln K, ln C] taken from the fit in `fits`
 /// whose residual on that group's runs is smallest.
 fn per_group_best(prob: &Problem, fits: &[Fit], best: &Fit) -> Vec<f64> {
@@ -531,30 +565,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             {
                 let mut spec = current.spec.clone();
                 spec.effects.push(c.effect);
-                // Starts: the current transmission and the closed-form one (the transmission fitted
-                // without the effect may have absorbed it: friction mimicked by a softer, more damped
-                // link; gravity by a rigid one), each with the linearised effect value and with the
-                // effect's typical size (a linearisation at a rigid or bounded fit can be absurd).
-                let typical: Vec<f64> = c.effect.params().iter().map(|p| p.1).collect();
-                let closed = prob.closed_form_start(spec.law);
-                let n_t = 2 * prob.n_groups;
-                let mut starts = Vec::new();
-                for transmission in [&current.p[..n_t], &closed[..]] {
-                    for effect in [&c.start, &typical] {
-                        let mut q = transmission.to_vec();
-                        q.extend_from_slice(&current.p[n_t..]);
-                        q.extend_from_slice(effect);
-                        starts.push(q);
-                    }
-                }
-                // equation error with the effect's torque as a regressor (transmission and effect
-                // estimated together, so neither absorbs the other)
-                if let Some(e) = prob.equation_error_start(spec.law, Some(c.effect)) {
-                    let mut q = e[..n_t].to_vec();
-                    q.extend_from_slice(&current.p[n_t..]);
-                    q.extend_from_slice(&e[n_t..]);
-                    starts.push(q);
-                }
+                let starts = candidate_starts(prob, &current, &[c], spec.law);
                 let (sprob, scurrent, ssig) = match &screen {
                     Some((sp, sc, ss)) => (sp, sc, ss),
                     None => (&*prob, &current, &sig),
@@ -564,7 +575,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                     .map(|q| (cost(sprob, &spec, &q), q))
                     .min_by(|a, b| a.0.total_cmp(&b.0))
                     .map(|(_, q)| q)
-                    .expect("four starts");
+                    .expect("four starts at least");
                 let t = std::time::Instant::now();
                 let Ok(refit) = levenberg_marquardt(sprob, spec, p, SCREEN_ITERATIONS) else { continue };
                 debug(format_args!(
@@ -595,6 +606,45 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                     a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
                 }
             }
+            // No single effect earned its place while structure remains: a partial effect is
+            // judged against a model that lacks its partner (friction with backlash), so the
+            // BIC-improving candidates are refitted in pairs.
+            let mut pair_index = None;
+            if accepted.is_none() && shortlist > 0 {
+                let (sprob, scurrent, ssig) = match &screen {
+                    Some((sp, sc, ss)) => (sp, sc, ss),
+                    None => (&*prob, &current, &sig),
+                };
+                let pool: Vec<&Candidate> =
+                    candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(PAIR_POOL).collect();
+                for (i, a) in pool.iter().enumerate() {
+                    for b in &pool[i + 1..] {
+                        let mut spec = current.spec.clone();
+                        spec.effects.extend([a.effect, b.effect]);
+                        let starts = candidate_starts(prob, &current, &[a, b], spec.law);
+                        let Ok(refit) = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS) else { continue };
+                        let refit_sig = signatures(sprob, &refit);
+                        let keep = earns_its_place(scurrent, ssig, &refit, &refit_sig);
+                        debug(format_args!("pair {} + {}: kept {keep}", a.effect.name(), b.effect.name()));
+                        combinations.push(CombinationAttempt {
+                            stage: "pair after a round",
+                            effects: vec![a.effect, b.effect],
+                            before: (scurrent.bic(), ssig.structure_ratio),
+                            after: (refit.bic(), refit_sig.structure_ratio),
+                            kept: keep,
+                        });
+                        if keep && accepted.as_ref().is_none_or(|x: &(Fit, Signatures)| refit.bic() < x.0.bic()) {
+                            accepted = Some((refit, refit_sig));
+                            pair_index = Some(combinations.len() - 1);
+                        }
+                    }
+                }
+                for (k, c) in combinations.iter_mut().enumerate() {
+                    if c.stage == "pair after a round" && Some(k) != pair_index {
+                        c.kept = false;
+                    }
+                }
+            }
             debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
             // the winner runs to convergence on every sample, and must earn its place there too
             if let Some((f, fs)) = accepted.take() {
@@ -617,6 +667,8 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
                         accepted = Some((done, s));
                     } else if let Some(a) = round.attempts.iter_mut().find(|a| a.5) {
                         a.5 = false;
+                    } else if let Some(k) = pair_index {
+                        combinations[k].kept = false;
                     }
                 }
             }
