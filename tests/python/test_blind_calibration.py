@@ -92,16 +92,80 @@ LIBRARY = {
 def test_each_library_effect_is_found_with_its_parameters(tmp_path, name):
     truth_args, expected = LIBRARY[name]
     truth, report, ratio = calibrate(tmp_path, truth_args)
+    check_found(report, expected)
+    assert ratio <= 1.2, f"final {ratio:.2f}× the noise floor"
+    # the "before" is a converged baseline and the held-out check agrees with the effect
+    assert report["held_out"]["final_rmse_rad"] < report["held_out"]["baseline_rmse_rad"]
+    assert report["held_out"]["effects_reverted"] is False
+
+
+# Issue 18: several effects at once, as real rigs have them (gravity with a nonzero offset among
+# them). Each was missed or mistaken before: nothing added at 80× the floor (Coulomb + gravity),
+# 1.8 N·m of friction "found" (gravity with an offset + Coulomb).
+COMBINATIONS = {
+    "gravity + Coulomb": (
+        ["--effect", "gravity_mgl=1.25", "--effect", "coulomb_friction=0.03"],
+        {"gravity": {"mgl_nm": 1.25}, "coulomb_friction": {"torque_nm": 0.03}},
+    ),
+    "gravity with an offset + Coulomb": (
+        ["--effect", "gravity_mgl=1.25", "--effect", "gravity_offset=0.15", "--effect", "coulomb_friction=0.03"],
+        {"gravity": {"mgl_nm": 1.25, "offset_rad": 0.15}, "coulomb_friction": {"torque_nm": 0.03}},
+    ),
+    "link damping + gravity": (
+        ["--effect", "link_damping=0.02", "--effect", "gravity_mgl=1.25"],
+        {"gravity": {"mgl_nm": 1.25}, "link_damping": {"damping_nms": 0.02}},
+    ),
+    "backlash + gravity": (
+        ["--effect", "backlash=0.02", "--effect", "gravity_mgl=1.25"],
+        {"gravity": {"mgl_nm": 1.25}, "backlash": {"width_rad": 0.02}},
+    ),
+    "Coulomb + link damping": (
+        ["--effect", "coulomb_friction=0.03", "--effect", "link_damping=0.02"],
+        {"coulomb_friction": {"torque_nm": 0.03}, "link_damping": {"damping_nms": 0.02}},
+    ),
+    "gravity + constant load": (
+        ["--effect", "gravity_mgl=1.25", "--effect", "constant_load=0.1"],
+        {"gravity": {"mgl_nm": 1.25}, "constant_load": {"torque_nm": 0.1}},
+    ),
+    "gravity + Coulomb + backlash": (
+        ["--effect", "gravity_mgl=1.25", "--effect", "coulomb_friction=0.03", "--effect", "backlash=0.02"],
+        {"gravity": {"mgl_nm": 1.25}, "coulomb_friction": {"torque_nm": 0.03}, "backlash": {"width_rad": 0.02}},
+    ),
+    "gravity with an offset + link damping + Coulomb": (
+        ["--effect", "gravity_mgl=1.25", "--effect", "gravity_offset=0.15", "--effect", "link_damping=0.02",
+         "--effect", "coulomb_friction=0.03"],
+        {"gravity": {"mgl_nm": 1.25, "offset_rad": 0.15}, "link_damping": {"damping_nms": 0.02},
+         "coulomb_friction": {"torque_nm": 0.03}},
+    ),
+}
+
+
+def check_found(report, expected):
     found = added(report)
     assert set(found) == set(expected), report["added_effects"]
     for effect, params in expected.items():
         for key, value in params.items():
             got = found[effect][key]
             assert abs(got - value) <= 0.1 * abs(value), f"{effect}.{key} = {got}, truth {value}"
+
+
+@pytest.mark.parametrize("name", COMBINATIONS)
+def test_combinations_of_effects_are_found_together(tmp_path, name):
+    truth_args, expected = COMBINATIONS[name]
+    truth, report, ratio = calibrate(tmp_path, truth_args)
+    check_found(report, expected)
     assert ratio <= 1.2, f"final {ratio:.2f}× the noise floor"
-    # the "before" is a converged baseline and the held-out check agrees with the effect
-    assert report["held_out"]["final_rmse_rad"] < report["held_out"]["baseline_rmse_rad"]
-    assert report["held_out"]["effects_reverted"] is False
+    assert report["unexplained"] is False
+
+
+def test_backlash_with_coulomb_friction_is_found_but_not_yet_at_the_noise_floor(tmp_path):
+    """Both effects and their sizes are found (before: nothing added, 40× the floor). The final
+    error is 3.3× the floor, not issue 18's 1.2×: K and C at 22 °C come out 2 % and 33 % high,
+    an open gap the README states. What holds is asserted; the floor ratio is not."""
+    truth, report, ratio = calibrate(
+        tmp_path, ["--effect", "backlash=0.02", "--effect", "coulomb_friction=0.03"])
+    check_found(report, {"backlash": {"width_rad": 0.02}, "coulomb_friction": {"torque_nm": 0.03}})
+    assert ratio < 40, f"final {ratio:.2f}× the noise floor"
 
 
 def test_an_effect_outside_the_library_is_flagged_and_nothing_spurious_is_kept(tmp_path):

@@ -254,8 +254,12 @@ fn try_combination(
     effects.extend_from_slice(&subset);
     let spec = ModelSpec { effects: effects.clone(), law: current.spec.law, springs: current.spec.springs };
     let closed = prob.closed_form_start(spec.law);
-    let starts: Vec<Vec<f64>> = [&ee.p[..n_t], &current.p[..n_t], &closed[..n_t]]
+    // (the current transmission only when it is off its bounds: a rigid or limp link is no start,
+    // and a stiff one with friction is slow to simulate)
+    let feasible = !at_bound(prob, current);
+    let starts: Vec<Vec<f64>> = [Some(&ee.p[..n_t]), feasible.then_some(&current.p[..n_t]), Some(&closed[..n_t])]
         .into_iter()
+        .flatten()
         .map(|transmission| {
             let mut q = transmission.to_vec();
             q.extend_from_slice(&others);
@@ -523,7 +527,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     // baseline that absorbed the others.
     let mut combinations = Vec::new();
     if !sig.white() && at_bound(prob, &current) {
-        if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 2) {
+        if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 1) {
             combinations.push(attempt);
             if let Some((f, s)) = accepted {
                 current = f;
@@ -610,7 +614,8 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             // judged against a model that lacks its partner (friction with backlash), so the
             // BIC-improving candidates are refitted in pairs.
             let mut pair_index = None;
-            if accepted.is_none() && shortlist > 0 {
+            // (not from a fit at a bound, whose linearised ranking is blind)
+            if accepted.is_none() && shortlist > 0 && !at_bound(prob, &current) {
                 let (sprob, scurrent, ssig) = match &screen {
                     Some((sp, sc, ss)) => (sp, sc, ss),
                     None => (&*prob, &current, &sig),
