@@ -38,6 +38,19 @@ SCENARIOS = {
     "constant load 0.1 N·m": ["--effect", "constant_load=0.1"],
     "hardening spring α 100 /rad² (out of library)": ["--effect", "hardening=100"],
     "jitter 2e-5 of a step": ["--jitter", "2e-5"],
+    "gravity 1.25 + coulomb 0.03": ["--effect", "gravity_mgl=1.25", "--effect", "coulomb_friction=0.03"],
+    "gravity 1.25 at 0.15 rad + coulomb 0.03": ["--effect", "gravity_mgl=1.25", "--effect", "gravity_offset=0.15",
+                                                "--effect", "coulomb_friction=0.03"],
+    "link damping 0.02 + gravity 1.25": ["--effect", "link_damping=0.02", "--effect", "gravity_mgl=1.25"],
+    "backlash 0.02 + gravity 1.25": ["--effect", "backlash=0.02", "--effect", "gravity_mgl=1.25"],
+    "backlash 0.02 + coulomb 0.03": ["--effect", "backlash=0.02", "--effect", "coulomb_friction=0.03"],
+    "coulomb 0.03 + link damping 0.02": ["--effect", "coulomb_friction=0.03", "--effect", "link_damping=0.02"],
+    "gravity 1.25 + constant load 0.1": ["--effect", "gravity_mgl=1.25", "--effect", "constant_load=0.1"],
+    "gravity 1.25 + coulomb 0.03 + backlash 0.02": ["--effect", "gravity_mgl=1.25", "--effect", "coulomb_friction=0.03",
+                                                    "--effect", "backlash=0.02"],
+    "gravity 1.25 at 0.15 rad + link damping 0.02 + coulomb 0.03": [
+        "--effect", "gravity_mgl=1.25", "--effect", "gravity_offset=0.15", "--effect", "link_damping=0.02",
+        "--effect", "coulomb_friction=0.03"],
 }
 
 
