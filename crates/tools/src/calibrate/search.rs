@@ -19,6 +19,9 @@ pub const MAX_ITERATIONS: usize = 25;
 /// winner then runs to convergence (speed: most of a search is spent on losers).
 pub const SCREEN_ITERATIONS: usize = 4;
 
+/// The equation error's best subsets refitted through the FMU when combinations are tried.
+pub const SUBSETS_REFITTED: usize = 3;
+
 /// Times the equation error's combination is tried after the one-at-a-time rounds (each accepted
 /// one is followed by rounds again).
 pub const COMBINATION_PASSES: usize = 2;
@@ -162,15 +165,15 @@ pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String
     fit_from_best(prob, ModelSpec { effects: vec![], law, springs }, starts, MAX_ITERATIONS)
 }
 
-/// The combination of linear effects ([`EQUATION_ERROR_EFFECTS`]) the equation error supports,
+/// The combinations of linear effects ([`EQUATION_ERROR_EFFECTS`]) the equation error supports,
 /// with the transmission of every temperature group fitted beside them (so neither absorbs the
 /// other, and no bound pins it): of every subset (asymmetric friction only with Coulomb
 /// friction), the lowest BIC on the regression's independent rows among those in which each
-/// effect's removal costs more than `BIC_MARGIN`. The regression is formed once; every subset is
-/// solved from its normal equations.
-pub fn equation_error_subset(prob: &Problem, law: DampingLaw) -> Option<(Vec<Effect>, EquationError)> {
+/// effect's removal costs more than `BIC_MARGIN`: the best `count` of them, best first. The
+/// regression is formed once; every subset is solved from its normal equations.
+pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> Vec<(Vec<Effect>, EquationError)> {
     let all = EQUATION_ERROR_EFFECTS;
-    let normal = prob.normal_equations(law, &all)?;
+    let Some(normal) = prob.normal_equations(law, &all) else { return Vec::new() };
     let n_t = 2 * prob.n_groups;
     let mut offsets = Vec::with_capacity(all.len());
     let mut next = n_t;
@@ -208,18 +211,24 @@ pub fn equation_error_subset(prob: &Problem, law: DampingLaw) -> Option<(Vec<Eff
             }
         })
     };
-    let best = (0..1u32 << all.len()).filter(|&m| bic[m as usize].is_some() && needed(m)).min_by(|&a, &b| {
+    let mut ranked: Vec<u32> = (0..1u32 << all.len()).filter(|&m| bic[m as usize].is_some() && needed(m)).collect();
+    ranked.sort_by(|&a, &b| {
         bic[a as usize].unwrap_or(f64::INFINITY).total_cmp(&bic[b as usize].unwrap_or(f64::INFINITY))
-    })?;
-    let effects: Vec<Effect> = (0..all.len()).filter(|i| best >> i & 1 == 1).map(|i| all[i]).collect();
+    });
+    let effects_of = |m: u32| -> Vec<Effect> { (0..all.len()).filter(|i| m >> i & 1 == 1).map(|i| all[i]).collect() };
     debug(format_args!(
-        "equation error subsets (BIC on {n:.0} independent rows): best {effects:?} {:.1}; none {:.1}; all {:.1}",
-        bic[best as usize].unwrap_or(f64::NAN),
+        "equation error subsets (BIC on {n:.0} independent rows): {:?}; none {:.1}",
+        ranked.iter().take(count).map(|&m| (effects_of(m), bic[m as usize].unwrap_or(f64::NAN))).collect::<Vec<_>>(),
         bic[0].unwrap_or(f64::NAN),
-        bic[(1usize << all.len()) - 1].unwrap_or(f64::NAN)
     ));
-    let e = prob.equation_error(law, &effects)?;
-    Some((effects, e))
+    ranked
+        .into_iter()
+        .take(count)
+        .filter_map(|m| {
+            let effects = effects_of(m);
+            prob.equation_error(law, &effects).map(|e| (effects, e))
+        })
+        .collect()
 }
 
 /// The equation error's combination refitted at once through the FMU: its linear effects with the
@@ -235,10 +244,10 @@ fn try_combination(
     sig: &Signatures,
     stage: &'static str,
     min_effects: usize,
+    structures: &[Structure],
 ) -> Option<(CombinationAttempt, Option<(Fit, Signatures)>)> {
-    let (subset, ee) = equation_error_subset(prob, current.spec.law)?;
     let n_t = 2 * prob.n_groups;
-    let mut effects: Vec<Effect> =
+    let mut kept_effects: Vec<Effect> =
         current.spec.effects.iter().copied().filter(|e| !EQUATION_ERROR_EFFECTS.contains(e)).collect();
     let mut others = Vec::new();
     for (o, e) in current.spec.offsets(prob.n_groups) {
@@ -246,49 +255,78 @@ fn try_combination(
             others.extend_from_slice(&current.p[o..o + e.params().len()]);
         }
     }
-    let same = subset.len() + effects.len() == current.spec.effects.len()
-        && subset.iter().all(|e| current.spec.effects.contains(e));
-    if subset.len() < min_effects || same {
+    // under the current structure and every other the data allow (which damping law is right
+    // shows only once the effects are in)
+    let first = (current.spec.law, current.spec.springs);
+    let laws: Vec<Structure> =
+        std::iter::once(first).chain(structures.iter().copied().filter(|&s| s != first)).collect();
+    let proposals: Vec<(Structure, Vec<Effect>, EquationError)> = laws
+        .iter()
+        .flat_map(|&structure| {
+            equation_error_subsets(prob, structure.0, SUBSETS_REFITTED)
+                .into_iter()
+                .map(move |(e, ee)| (structure, e, ee))
+        })
+        .filter(|(_, subset, _)| {
+            let same = subset.len() + kept_effects.len() == current.spec.effects.len()
+                && subset.iter().all(|e| current.spec.effects.contains(e));
+            subset.len() >= min_effects && !same
+        })
+        .collect();
+    if proposals.is_empty() {
         return None;
     }
-    effects.extend_from_slice(&subset);
-    let spec = ModelSpec { effects: effects.clone(), law: current.spec.law, springs: current.spec.springs };
-    let closed = prob.closed_form_start(spec.law);
     // (the current transmission only when it is off its bounds: a rigid or limp link is no start,
     // and a stiff one with friction is slow to simulate)
     let feasible = !at_bound(prob, current);
-    let starts: Vec<Vec<f64>> = [Some(&ee.p[..n_t]), feasible.then_some(&current.p[..n_t]), Some(&closed[..n_t])]
-        .into_iter()
-        .flatten()
-        .map(|transmission| {
-            let mut q = transmission.to_vec();
-            q.extend_from_slice(&others);
-            q.extend_from_slice(&ee.p[n_t..]);
-            q
-        })
-        .collect();
     let (sprob, scurrent, ssig) = match screen {
         Some((sp, sc, ss)) => (sp, sc, ss),
         None => (prob, current, sig),
     };
     let t = std::time::Instant::now();
-    // every start is refitted (a transmission that absorbed an effect, or sits at a bound, is a
-    // valley of its own); the lowest BIC wins
-    let fits: Vec<Fit> = starts
-        .into_iter()
-        .filter_map(|q| levenberg_marquardt(sprob, spec.clone(), q, SCREEN_ITERATIONS).ok())
-        .collect();
+    // The equation error ranks close structures unreliably (link damping or Coulomb friction under
+    // a damping law that is only approximately right): its best few subsets are each refitted
+    // through the FMU. Each structure's best from every start (a transmission that absorbed an
+    // effect, or sits at a bound, is a valley of its own), the others from their cheapest start.
+    let mut fits: Vec<Fit> = Vec::new();
+    let mut first_of: Vec<Structure> = Vec::new();
+    for ((law, springs), subset, ee) in &proposals {
+        let mut effects = kept_effects.clone();
+        effects.extend_from_slice(subset);
+        let spec = ModelSpec { effects, law: *law, springs: *springs };
+        let closed = prob.closed_form_start(*law);
+        let starts: Vec<Vec<f64>> = [Some(&ee.p[..n_t]), feasible.then_some(&current.p[..n_t]), Some(&closed[..n_t])]
+            .into_iter()
+            .flatten()
+            .map(|transmission| {
+                let mut q = transmission.to_vec();
+                q.extend_from_slice(&others);
+                q.extend_from_slice(&ee.p[n_t..]);
+                q
+            })
+            .collect();
+        if !first_of.contains(&(*law, *springs)) {
+            first_of.push((*law, *springs));
+            fits.extend(
+                starts.into_iter().filter_map(|q| levenberg_marquardt(sprob, spec.clone(), q, SCREEN_ITERATIONS).ok()),
+            );
+        } else if let Ok(f) = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS) {
+            fits.push(f);
+        }
+    }
     let mut screened = fits.iter().min_by(|a, b| a.bic().total_cmp(&b.bic()))?.clone();
-    // the groups' transmissions are nearly separable: each group takes the start that fits its
-    // own runs best (one group pinned at a bound need not sink the others)
+    // the groups' transmissions are nearly separable: each group takes the fit that suits its own
+    // runs best (one group pinned at a bound need not sink the others)
     let hybrid = per_group_best(sprob, &fits, &screened);
     if hybrid != screened.p {
-        if let Ok(f) = levenberg_marquardt(sprob, spec, hybrid, SCREEN_ITERATIONS) {
+        if let Ok(f) = levenberg_marquardt(sprob, screened.spec.clone(), hybrid, SCREEN_ITERATIONS) {
             if f.bic() < screened.bic() {
                 screened = f;
             }
         }
     }
+    kept_effects = screened.spec.effects.clone();
+    let effects = kept_effects;
     let screened_sig = signatures(sprob, &screened);
     let mut attempt = CombinationAttempt {
         stage,
@@ -527,7 +565,8 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     // baseline that absorbed the others.
     let mut combinations = Vec::new();
     if !sig.white() && at_bound(prob, &current) {
-        if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 1) {
+        if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 1, &laws.allowed)
+        {
             combinations.push(attempt);
             if let Some((f, s)) = accepted {
                 current = f;
@@ -709,7 +748,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
         if sig.white() || passes > COMBINATION_PASSES {
             break;
         }
-        match try_combination(prob, &screen, &current, &sig, "after the rounds", 1) {
+        match try_combination(prob, &screen, &current, &sig, "after the rounds", 1, &laws.allowed) {
             Some((attempt, Some((f, s)))) => {
                 combinations.push(attempt);
                 current = f;
