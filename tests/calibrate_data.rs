@@ -72,6 +72,23 @@ fn a_run_without_a_temperature_is_an_error_naming_the_file() {
     assert!(e.to_string().contains("temperature"), "{e}");
 }
 
+/// Issue 18: a run that cannot support a fit gets a one-line reason naming the file.
+#[test]
+fn a_run_that_does_not_move_is_an_error_naming_the_file() {
+    let still = "# temperature_c=40\ntime_s,motor_angle_rad,link_angle_rad\n0,0.1,0.1\n0.001,0.1,0.1\n0.002,0.1,0.1\n";
+    let e = err(still).to_string();
+    assert!(e.starts_with("bad.csv: "), "{e}");
+    assert!(e.contains("does not move"), "{e}");
+    assert_eq!(e.lines().count(), 1, "{e}");
+    // the motor moving and the link at rest is motion (a link stuck behind friction or play)
+    let motor_only = still
+        .replace("0.002,0.1,0.1", "0.002,0.2,0.1")
+        .replace("# temperature_c=40", "# temperature_c=40\n# frequency_hz=0.5");
+    if let Err(e) = parse_run(Path::new("ok.csv"), &motor_only) {
+        panic!("{e}");
+    }
+}
+
 #[test]
 fn an_empty_file_is_an_error() {
     let e = err("");
