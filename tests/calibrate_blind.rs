@@ -217,3 +217,46 @@ fn a_defaulted_inertia_and_a_factor_at_its_bound_are_warned_about() {
     assert!(md.contains("## Warnings") && md.contains("stopped at a bound"), "{md}");
     assert_eq!(c.report["identified"][0]["inertia_declared"], false);
 }
+
+/// Issue 18, bad input: a search that runs out of its time budget says so and keeps the best
+/// model found (here the budget is gone before the first refit: the baseline is kept, whole).
+#[test]
+fn a_search_out_of_budget_says_so_and_keeps_the_best_model_found() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("blind-budget");
+    let out = dir.join("data");
+    let out_s = out.to_str().unwrap().to_string();
+    let synth = SynthArgs::from_cli(&[
+        "--temperatures",
+        "40",
+        "--duration",
+        "4",
+        "--seed",
+        "7",
+        "--coulomb-friction",
+        "0.05",
+        "--out",
+        &out_s,
+    ])
+    .unwrap();
+    let files = generate(&synth, common::fmu()).unwrap();
+    write_atomically(&out, &files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect::<Vec<_>>()).unwrap();
+    let report = dir.join("report");
+    let args =
+        CalibrateArgs::from_cli(&[&out_s, "--out", report.to_str().unwrap(), "--no-plots", "--search-budget", "0"])
+            .unwrap();
+    let c = calibrate(&args).unwrap();
+    let b = &c.report["search_budget"];
+    assert_eq!(b["exhausted"], true, "{b}");
+    assert!(b["skipped"].as_str().unwrap().contains("round"), "{b}");
+    assert!(added(&c).is_empty(), "{:?}", added(&c));
+    assert_eq!(c.report["final"]["rmse_rad"], c.report["baseline"]["rmse_rad"]);
+    let md =
+        c.files.iter().find(|(n, _)| n == "report.md").map(|(_, t)| String::from_utf8_lossy(t).to_string()).unwrap();
+    assert!(md.contains("ran out of its 0 s budget"), "{md}");
+    assert!(!md.contains("already white"), "{md}");
+    // with the default budget the same data get their effect
+    let args = CalibrateArgs::from_cli(&[&out_s, "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
+    let c = calibrate(&args).unwrap();
+    assert!(c.report["search_budget"].is_null());
+    assert_eq!(added(&c), vec!["coulomb_friction"]);
+}

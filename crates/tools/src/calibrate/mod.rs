@@ -76,6 +76,10 @@ pub struct CalibrateArgs {
     /// Skip the SVG plots (report.json and report.md only).
     #[cfg_attr(feature = "cli", arg(long))]
     pub no_plots: bool,
+    /// Seconds the effect search may take (device runs). When it runs out, the search stops
+    /// between refits, keeps the best model found and says so in the report (`search_budget`).
+    #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS", default_value_t = 300.0))]
+    pub search_budget: f64,
 }
 
 #[cfg(feature = "cli")]
@@ -309,7 +313,8 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let groups = prob.group.clone();
     let (outcome, references) = std::thread::scope(|scope| {
         let refs = scope.spawn(|| black_box_references(&runs, &groups));
-        (search::calibrate(&mut prob, &laws), refs.join())
+        let budget = search::Budget::seconds(args.search_budget);
+        (search::calibrate(&mut prob, &laws, &budget), refs.join())
     });
     let mut outcome = outcome?;
     search::debug(format_args!("search and reference: {:?}", t0.elapsed()));

@@ -251,6 +251,8 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         },
         "identified_baseline": identified(prob, &o.baseline, temps),
         "rounds": rounds,
+        "search_budget": o.budget_exhausted.map(|(seconds, what)| json!({"seconds": seconds, "exhausted": true,
+            "skipped": what, "note": "the search stopped when its time budget ran out (--search-budget) and kept the best model found so far"})),
         "combinations": o.combinations.iter().map(|c| json!({"stage": c.stage, "effects": c.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
             "bic_before": c.before.0, "bic_after": c.after.0, "structure_before": c.before.1, "structure_after": c.after.1, "kept": c.kept,
             "what": "the equation error's best subset of linear effects (transmission per temperature fitted beside them), refitted at once through the FMU"})).collect::<Vec<_>>(),
@@ -317,6 +319,9 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
             s += &format!("- {}\n", n.as_str().unwrap_or_default());
         }
     }
+    if let Some((seconds, what)) = o.budget_exhausted {
+        s += &format!("\n**The search ran out of its {seconds} s budget** before {what}: the model below is the best found by then (`--search-budget`).\n");
+    }
     s += "\n## Chain of evidence\n\n";
     for c in &o.combinations {
         s += &format!(
@@ -354,7 +359,7 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         }
         s += "\n";
     }
-    if o.rounds.is_empty() {
+    if o.rounds.is_empty() && o.budget_exhausted.is_none() {
         s += "The baseline residual is already white at the noise floor: no effect searched for.\n\n";
     }
     for p in &o.pruned {

@@ -97,6 +97,31 @@ pub struct Round {
     pub attempts: Vec<(Effect, f64, f64, f64, f64, bool)>,
 }
 
+/// The time the effect search may take. Checked between refits: a refit under way finishes.
+pub struct Budget {
+    pub start: std::time::Instant,
+    pub seconds: f64,
+    /// Set when the search stopped because the budget ran out: what it was about to do.
+    pub exhausted: std::cell::Cell<Option<&'static str>>,
+}
+
+impl Budget {
+    pub fn seconds(seconds: f64) -> Budget {
+        Budget { start: std::time::Instant::now(), seconds, exhausted: std::cell::Cell::new(None) }
+    }
+    /// Whether the search may go on to `next`; records the first refusal.
+    pub fn allows(&self, next: &'static str) -> bool {
+        if self.exhausted.get().is_some() {
+            return false;
+        }
+        if self.start.elapsed().as_secs_f64() > self.seconds {
+            self.exhausted.set(Some(next));
+            return false;
+        }
+        true
+    }
+}
+
 /// A combination of effects proposed by the equation error's best subset and refitted at once.
 #[derive(Clone, Debug)]
 pub struct CombinationAttempt {
@@ -110,6 +135,8 @@ pub struct CombinationAttempt {
 }
 
 pub struct Outcome {
+    /// Set when the search budget ran out: (seconds allowed, what was skipped).
+    pub budget_exhausted: Option<(f64, &'static str)>,
     pub combinations: Vec<CombinationAttempt>,
     pub baseline: Fit,
     pub baseline_signatures: Signatures,
@@ -543,7 +570,7 @@ fn sims(prob: &Problem) -> usize {
     prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed)
 }
 
-pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String> {
+pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Result<Outcome, String> {
     let mut rows = Vec::new();
     let t = std::time::Instant::now();
     let first = baseline(prob, laws.allowed[0])?;
@@ -564,7 +591,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     // (issue 18), several effects together where one at a time each would be judged against a
     // baseline that absorbed the others.
     let mut combinations = Vec::new();
-    if !sig.white() && at_bound(prob, &current) {
+    if !sig.white() && at_bound(prob, &current) && budget.allows("the equation error's combination at the baseline") {
         if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 1, &laws.allowed)
         {
             combinations.push(attempt);
@@ -582,7 +609,10 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     // effect found first can hide the rest); rounds again after an accepted combination.
     let mut passes = 0;
     loop {
-        while current.spec.effects.len() < MAX_EFFECTS && (rounds.is_empty() || !sig.white()) {
+        while current.spec.effects.len() < MAX_EFFECTS
+            && (rounds.is_empty() || !sig.white())
+            && budget.allows("a round of one-at-a-time refits")
+        {
             let t = std::time::Instant::now();
             // ranked on the screening share too (the linearised projections need no more)
             let (rprob, rcurrent, rsig) = match &screen {
@@ -654,7 +684,8 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             // BIC-improving candidates are refitted in pairs.
             let mut pair_index = None;
             // (not from a fit at a bound, whose linearised ranking is blind)
-            if accepted.is_none() && shortlist > 0 && !at_bound(prob, &current) {
+            if accepted.is_none() && shortlist > 0 && !at_bound(prob, &current) && budget.allows("pairs of candidates")
+            {
                 let (sprob, scurrent, ssig) = match &screen {
                     Some((sp, sc, ss)) => (sp, sc, ss),
                     None => (&*prob, &current, &sig),
@@ -745,7 +776,10 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
             }
         }
         passes += 1;
-        if sig.white() || passes > COMBINATION_PASSES {
+        if sig.white()
+            || passes > COMBINATION_PASSES
+            || !budget.allows("the equation error's combination after the rounds")
+        {
             break;
         }
         match try_combination(prob, &screen, &current, &sig, "after the rounds", 1, &laws.allowed) {
@@ -766,7 +800,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     // branch standing in for link damping). Drop any whose removal does not cost BIC_MARGIN.
     let mut pruned = Vec::new();
     let mut changed = current.spec.effects.len() > 1;
-    while changed {
+    while changed && budget.allows("the backward check") {
         changed = false;
         for &e in current.spec.effects.clone().iter() {
             let spec = ModelSpec {
@@ -814,6 +848,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice) -> Result<Outcome, String
     debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let unexplained = !sig.white();
     Ok(Outcome {
+        budget_exhausted: budget.exhausted.get().map(|what| (budget.seconds, what)),
         combinations,
         baseline,
         baseline_signatures,
