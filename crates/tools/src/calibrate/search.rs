@@ -258,12 +258,12 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
         .collect()
 }
 
-/// The equation error's combination refitted at once through the FMU: its linear effects with the
-/// current fit's other effects (backlash, thermal lag, ...) at their values, from the equation
-/// error's transmission, the current one and the closed form. Screened, then run to convergence;
-/// kept only if it earns its place against `current` on the screening share and on every sample.
-/// None when the equation error proposes nothing new (or `min_new` more linear effects than
-/// `current` has are not on offer).
+/// The equation error's combinations refitted at once through the FMU: their linear effects with
+/// the current fit's other effects (backlash, thermal lag, ...) at their values, from the equation
+/// error's transmission, the current one and the closed form, under every allowed structure.
+/// Screened, then the best run to convergence; kept only if it earns its place against `current`
+/// on the screening share and on every sample. None when the equation error proposes nothing new
+/// with at least `min_effects` linear effects.
 fn try_combination(
     prob: &Problem,
     screen: &Option<(Problem, Fit, Signatures)>,
@@ -274,7 +274,7 @@ fn try_combination(
     structures: &[Structure],
 ) -> Option<(CombinationAttempt, Option<(Fit, Signatures)>)> {
     let n_t = 2 * prob.n_groups;
-    let mut kept_effects: Vec<Effect> =
+    let kept_effects: Vec<Effect> =
         current.spec.effects.iter().copied().filter(|e| !EQUATION_ERROR_EFFECTS.contains(e)).collect();
     let mut others = Vec::new();
     for (o, e) in current.spec.offsets(prob.n_groups) {
@@ -352,8 +352,7 @@ fn try_combination(
             }
         }
     }
-    kept_effects = screened.spec.effects.clone();
-    let effects = kept_effects;
+    let effects = screened.spec.effects.clone();
     let screened_sig = signatures(sprob, &screened);
     let mut attempt = CombinationAttempt {
         stage,
