@@ -168,6 +168,17 @@ def test_backlash_with_coulomb_friction_is_found_but_not_yet_at_the_noise_floor(
     assert ratio < 40, f"final {ratio:.2f}× the noise floor"
 
 
+def test_a_stiffness_that_depends_on_the_link_angle_is_flagged_and_nothing_spurious_is_kept(tmp_path):
+    """Issue 18: K(θl) = K (1 + 5 θl²) is outside the library, and a linear black box cannot beat the
+    model on it; the harmonics it leaves at 3ω flag it."""
+    truth, report, ratio = calibrate(tmp_path, ["--effect", "angle_stiffness=5"])
+    assert added(report) == {}, report["added_effects"]
+    assert report["unexplained"] is True
+    assert ratio > 2.0
+    nonlinear = report["reference"]["nonlinear"]
+    assert nonlinear["leftover_harmonics_over_noise"] > nonlinear["limit"], nonlinear
+
+
 def test_an_effect_outside_the_library_is_flagged_and_nothing_spurious_is_kept(tmp_path):
     truth, report, ratio = calibrate(tmp_path, ["--effect", "hardening=100"])
     assert added(report) == {}, report["added_effects"]

@@ -14,7 +14,8 @@ defines them:
 - gravity: τ_g = −mgl sin(θl − offset);
 - link damping to ground: τ = −B θl'; constant load: τ = τ_0;
 - hardening spring (outside the calibration's effect library): the spring part of the transmission is
-  K φ (1 + α φ²) (secant stiffness K(1 + α φ²)), on the excess beyond the play when there is backlash.
+  K φ (1 + α φ²) (secant stiffness K(1 + α φ²)), on the excess beyond the play when there is backlash;
+- a stiffness that depends on the link's angle (outside the library too): K(θl) = K (1 + β θl²).
 
 Excitation of the motor angle (`--excitation`): `sine` (one run per temperature and frequency, the
 default), `multisine` (a few sines 0.2–3 Hz, random phases, amplitudes ∝ 1/√f scaled to the sine's rms),
@@ -44,6 +45,8 @@ ENCODER_QUANTUM = 2 * math.pi / 10000  # 2500 lines × 4 edges per revolution
 def link_torque(phi, dphi, v, p):
     """Torque on the link from the transmission and the effects (v = link speed)."""
     k, c = p["stiffness"], p["damping"]
+    # a stiffness that depends on the link's angle (a cam-like transmission; outside the library)
+    k *= 1.0 + p.get("angle_stiffness_beta", 0.0) * p.get("theta_l", 0.0) ** 2
     b = 0.5 * p.get("backlash", 0.0)
     alpha = p.get("hardening_alpha", 0.0)
     if b > 0.0:
@@ -119,6 +122,7 @@ COMPOUND_EFFECTS = {
     "asymmetric_friction": ("asym_coulomb_positive", "asym_coulomb_negative", "asym_viscous_positive",
                             "asym_viscous_negative"),
     "hardening": ("hardening_alpha",),
+    "angle_stiffness": ("angle_stiffness_beta",),
 }
 MULTISINE_FREQUENCIES = (0.2, 0.4, 0.8, 1.6, 3.0)  # multiples of 0.2 Hz: 5 s hold whole cycles of each
 STEP_SMOOTHING = 0.05  # s, tanh time scale of each step
@@ -164,6 +168,8 @@ def effects_json(flat):
         out["link_damping"] = {"damping_nms": flat["link_damping"]}
     if flat.get("hardening_alpha", 0.0) != 0.0:
         out["hardening_spring"] = {"alpha_per_rad2": flat["hardening_alpha"], "out_of_library": True}
+    if flat.get("angle_stiffness_beta", 0.0) != 0.0:
+        out["angle_dependent_stiffness"] = {"beta_per_rad2": flat["angle_stiffness_beta"], "out_of_library": True}
     return out
 
 

@@ -260,26 +260,6 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
     let time = cols[0].take().unwrap_or_default();
     let motor = cols[1].take().unwrap_or_default();
     let link = cols[2].take().unwrap_or_else(|| motor.clone());
-    // the transmission and every effect show only while something moves: a still run supports no fit
-    let span = |x: &[f64]| {
-        let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        (hi - lo, lo.abs().max(hi.abs()))
-    };
-    let still = |x: &[f64]| {
-        let (range, size) = span(x);
-        range <= 1e-12 * size.max(1.0)
-    };
-    if still(&motor) && still(&link) {
-        return Err(file_error(
-            path,
-            format!(
-                "the run does not move: every position column is constant over its {n} samples (at {} {}); a fit \
-                 needs motion, since the transmission and every effect show only while something moves",
-                motor[0],
-                axis.units().0
-            ),
-        ));
-    }
     let mut run = Run {
         file: path.to_path_buf(),
         time,
@@ -382,6 +362,26 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
             ));
         }
         run.controller = Some(controller);
+    }
+    // the transmission and every effect show only while something moves: a still run supports no fit
+    let span = |x: &[f64]| {
+        let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        (hi - lo, lo.abs().max(hi.abs()))
+    };
+    let still = |x: &[f64]| {
+        let (range, size) = span(x);
+        range <= 1e-12 * size.max(1.0)
+    };
+    if still(&run.motor) && still(&run.link) {
+        return Err(file_error(
+            path,
+            format!(
+                "the run does not move: every position column is constant over its {n} samples (at {} {}); a fit \
+                 needs motion, since the transmission and every effect show only while something moves",
+                run.motor[0],
+                run.axis.units().0
+            ),
+        ));
     }
     if run.rigid || drive != DriveKind::MotorAngle {
         // no harmonic excitation to measure; the PCL's hysteretic damping reads it (compliant only)

@@ -54,7 +54,36 @@ pub struct Signatures {
     pub runs: Vec<RunResidual>,
 }
 
+/// A residual harmonic at 2ω, 3ω or 5ω this many times what white noise at the floor leaves in a
+/// least-squares harmonic over the run's samples (σ √(2/N)) is structure, not noise.
+pub const NONLINEAR_HARMONIC_LIMIT: f64 = 10.0;
+
 impl Signatures {
+    /// The nonlinear reference (issue 18): the harmonics at 2ω, 3ω and 5ω left in the residual of
+    /// the sinusoidal runs, over what white noise at the floor would leave (σ √(2/N) for N samples),
+    /// the median over those runs; None without a sinusoidal run. The transmission's K and C are
+    /// linear and leave the 1ω alone: what remains above at the harmonics is a nonlinearity the
+    /// model lacks, the library's or another (a hardening spring, a stiffness that depends on the
+    /// link angle).
+    pub fn leftover_harmonics(&self, lengths: &[usize], sinusoidal: &[bool]) -> Option<f64> {
+        let mut ratios: Vec<f64> = self
+            .runs
+            .iter()
+            .zip(lengths)
+            .zip(sinusoidal)
+            .filter(|(_, &s)| s)
+            .map(|((r, &n), _)| {
+                let noise = self.noise_floor * (2.0 / n.max(1) as f64).sqrt();
+                r.harmonics[2..].iter().fold(0.0_f64, |m, &h| m.max(h)) / noise.max(1e-300)
+            })
+            .collect();
+        if ratios.is_empty() {
+            return None;
+        }
+        ratios.sort_by(f64::total_cmp);
+        Some(ratios[ratios.len() / 2])
+    }
+
     pub fn white(&self) -> bool {
         self.structure_ratio < STRUCTURE_LIMIT
     }
