@@ -161,7 +161,8 @@ def test_combinations_of_effects_are_found_together(tmp_path, name):
 def test_backlash_with_coulomb_friction_is_found_but_not_yet_at_the_noise_floor(tmp_path):
     """Both effects and their sizes are found (before: nothing added, 40× the floor). The final
     error is 3.3× the floor, not issue 18's 1.2×: K and C at 22 °C come out 2 % and 33 % high,
-    an open gap the README states. What holds is asserted; the floor ratio is not."""
+    an open gap the README states (noise-free, the same loop recovers everything: the noisy motor
+    angle driving the model is the cause). What holds is asserted; the floor ratio is not."""
     truth, report, ratio = calibrate(
         tmp_path, ["--effect", "backlash=0.02", "--effect", "coulomb_friction=0.03"])
     check_found(report, {"backlash": {"width_rad": 0.02}, "coulomb_friction": {"torque_nm": 0.03}})
