@@ -691,6 +691,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
                 };
                 let pool: Vec<&Candidate> =
                     candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(PAIR_POOL).collect();
+                let first_pair = combinations.len();
                 for (i, a) in pool.iter().enumerate() {
                     for b in &pool[i + 1..] {
                         let mut spec = current.spec.clone();
@@ -713,8 +714,9 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
                         }
                     }
                 }
-                for (k, c) in combinations.iter_mut().enumerate() {
-                    if c.stage == "pair after a round" && Some(k) != pair_index {
+                // only this round's winner stays marked kept (earlier rounds' records are final)
+                for (k, c) in combinations.iter_mut().enumerate().skip(first_pair) {
+                    if Some(k) != pair_index {
                         c.kept = false;
                     }
                 }
