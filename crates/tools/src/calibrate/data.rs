@@ -364,13 +364,9 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
         run.controller = Some(controller);
     }
     // the transmission and every effect show only while something moves: a still run supports no fit
-    let span = |x: &[f64]| {
-        let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
-        (hi - lo, lo.abs().max(hi.abs()))
-    };
     let still = |x: &[f64]| {
-        let (range, size) = span(x);
-        range <= 1e-12 * size.max(1.0)
+        let (lo, hi) = x.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+        hi - lo <= 1e-12 * lo.abs().max(hi.abs()).max(1.0)
     };
     if still(&run.motor) && still(&run.link) {
         return Err(file_error(

@@ -39,11 +39,6 @@ pub const EQUATION_ERROR_EFFECTS: [Effect; 5] =
 pub struct EquationError {
     /// [ln K, ln C per group] ++ the effects' parameters.
     pub p: Vec<f64>,
-    /// Residual sum of squares (torque², N²·m²) over `samples` rows.
-    pub sse: f64,
-    pub samples: usize,
-    /// About how many of the rows are independent (one per smoothing window).
-    pub independent: f64,
     /// Groups whose K or C came out unphysical and took the table's value instead.
     pub repaired: Vec<usize>,
 }
@@ -55,6 +50,7 @@ pub struct NormalEquations {
     pub atb: DVector<f64>,
     pub btb: f64,
     pub samples: usize,
+    /// About how many of the rows are independent (one per smoothing window).
     pub independent: f64,
 }
 
@@ -72,13 +68,12 @@ impl NormalEquations {
         let sse = (self.btb - 2.0 * beta.dot(&b) + (beta.transpose() * &a * &beta)[(0, 0)]).max(0.0);
         Some((beta, sse))
     }
-}
 
-impl EquationError {
-    /// BIC on the independent rows (the smoothing correlates the rest).
-    pub fn bic(&self, parameters: usize) -> f64 {
+    /// BIC of a solution with residual `sse` and `parameters` columns, on the independent rows
+    /// (the smoothing correlates the rest).
+    pub fn bic(&self, sse: f64, parameters: usize) -> f64 {
         let n = self.independent.max(1.0);
-        n * (self.sse / self.samples as f64).max(1e-300).ln() + parameters as f64 * n.ln()
+        n * (sse / self.samples as f64).max(1e-300).ln() + parameters as f64 * n.ln()
     }
 }
 
@@ -512,13 +507,7 @@ impl<'a> Problem<'a> {
     /// samples each side).
     pub fn equation_error(&self, law: DampingLaw, effects: &[Effect]) -> Option<EquationError> {
         let normal = self.normal_equations(law, effects)?;
-        let (beta, sse) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
-        Some(self.equation_error_from(&normal, beta, sse))
-    }
-
-    /// An [`EquationError`] from a solution of `normal` (over all its columns), with unphysical
-    /// groups repaired.
-    pub fn equation_error_from(&self, normal: &NormalEquations, beta: DVector<f64>, sse: f64) -> EquationError {
+        let (beta, _) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
         let table = self.table_start();
         let mut p = Vec::with_capacity(beta.len());
         let mut repaired = Vec::new();
@@ -532,7 +521,7 @@ impl<'a> Problem<'a> {
             p.push(if c > 0.0 { lc } else { table[2 * g + 1] });
         }
         p.extend(beta.iter().skip(2 * self.n_groups));
-        EquationError { p, sse, samples: normal.samples, independent: normal.independent, repaired }
+        Some(EquationError { p, repaired })
     }
 
     /// The equation error's normal equations with the regressors of `effects` (each in

@@ -210,7 +210,6 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
     }
     let bit = |e: Effect| 1u32 << all.iter().position(|&x| x == e).expect("in the list");
     let valid = |mask: u32| mask & bit(Effect::AsymmetricFriction) == 0 || mask & bit(Effect::CoulombFriction) != 0;
-    let n = normal.independent.max(1.0);
     let bic: Vec<Option<f64>> = (0..1u32 << all.len())
         .map(|mask| {
             if !valid(mask) {
@@ -224,7 +223,7 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
                 )
                 .collect();
             let (_, sse) = normal.solve(&columns)?;
-            Some(n * (sse / normal.samples as f64).max(1e-300).ln() + columns.len() as f64 * n.ln())
+            Some(normal.bic(sse, columns.len()))
         })
         .collect();
     let needed = |mask: u32| {
@@ -244,7 +243,8 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
     });
     let effects_of = |m: u32| -> Vec<Effect> { (0..all.len()).filter(|i| m >> i & 1 == 1).map(|i| all[i]).collect() };
     debug(format_args!(
-        "equation error subsets (BIC on {n:.0} independent rows): {:?}; none {:.1}",
+        "equation error subsets (BIC on {:.0} independent rows): {:?}; none {:.1}",
+        normal.independent,
         ranked.iter().take(count).map(|&m| (effects_of(m), bic[m as usize].unwrap_or(f64::NAN))).collect::<Vec<_>>(),
         bic[0].unwrap_or(f64::NAN),
     ));
@@ -306,10 +306,7 @@ fn try_combination(
     // (the current transmission only when it is off its bounds: a rigid or limp link is no start,
     // and a stiff one with friction is slow to simulate)
     let feasible = !at_bound(prob, current);
-    let (sprob, scurrent, ssig) = match screen {
-        Some((sp, sc, ss)) => (sp, sc, ss),
-        None => (prob, current, sig),
-    };
+    let (sprob, scurrent, ssig) = screened(screen, prob, current, sig);
     let t = std::time::Instant::now();
     // The equation error ranks close structures unreliably (link damping or Coulomb friction under
     // a damping law that is only approximately right): its best few subsets are each refitted
@@ -429,6 +426,20 @@ fn per_group_best(prob: &Problem, fits: &[Fit], best: &Fit) -> Vec<f64> {
         }
     }
     p
+}
+
+/// The problem, fit and signatures to screen on: the screening share when there is one, else
+/// the whole problem with `current`.
+fn screened<'s, 'a>(
+    screen: &'s Option<(Problem<'a>, Fit, Signatures)>,
+    prob: &'s Problem<'a>,
+    current: &'s Fit,
+    sig: &'s Signatures,
+) -> (&'s Problem<'a>, &'s Fit, &'s Signatures) {
+    match screen {
+        Some((sp, sc, ss)) => (sp, sc, ss),
+        None => (prob, current, sig),
+    }
 }
 
 /// Re-evaluates the screening share at `current` (after `current` changed).
@@ -614,10 +625,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         {
             let t = std::time::Instant::now();
             // ranked on the screening share too (the linearised projections need no more)
-            let (rprob, rcurrent, rsig) = match &screen {
-                Some((sp, sc, ss)) => (sp, sc, ss),
-                None => (&*prob, &current, &sig),
-            };
+            let (rprob, rcurrent, rsig) = screened(&screen, prob, &current, &sig);
             let candidates = rank(rprob, rcurrent, rsig);
             debug(format_args!("rank took {:?}", t.elapsed()));
             let mut round = Round { signatures: rsig.clone(), candidates: candidates.clone(), attempts: vec![] };
@@ -638,18 +646,9 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
                 let mut spec = current.spec.clone();
                 spec.effects.push(c.effect);
                 let starts = candidate_starts(prob, &current, &[c], spec.law);
-                let (sprob, scurrent, ssig) = match &screen {
-                    Some((sp, sc, ss)) => (sp, sc, ss),
-                    None => (&*prob, &current, &sig),
-                };
-                let p = starts
-                    .into_iter()
-                    .map(|q| (cost(sprob, &spec, &q), q))
-                    .min_by(|a, b| a.0.total_cmp(&b.0))
-                    .map(|(_, q)| q)
-                    .expect("four starts at least");
+                let (sprob, scurrent, ssig) = screened(&screen, prob, &current, &sig);
                 let t = std::time::Instant::now();
-                let Ok(refit) = levenberg_marquardt(sprob, spec, p, SCREEN_ITERATIONS) else { continue };
+                let Ok(refit) = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS) else { continue };
                 debug(format_args!(
                     "refit {} took {:?}, {} iterations",
                     c.effect.name(),
@@ -685,10 +684,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
             // (not from a fit at a bound, whose linearised ranking is blind)
             if accepted.is_none() && shortlist > 0 && !at_bound(prob, &current) && budget.allows("pairs of candidates")
             {
-                let (sprob, scurrent, ssig) = match &screen {
-                    Some((sp, sc, ss)) => (sp, sc, ss),
-                    None => (&*prob, &current, &sig),
-                };
+                let (sprob, scurrent, ssig) = screened(&screen, prob, &current, &sig);
                 let pool: Vec<&Candidate> =
                     candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(PAIR_POOL).collect();
                 let first_pair = combinations.len();
