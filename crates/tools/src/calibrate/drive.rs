@@ -1421,6 +1421,37 @@ fn load_column_note(d: &LoadColumnDiagnosis) -> String {
     )
 }
 
+/// Our parameter for a published one (`--published` names: inertia, viscous_friction,
+/// coulomb_friction, offset).
+fn published_param(name: &str) -> Option<Param> {
+    match name {
+        "inertia" => Some(Param::LnInertia),
+        "viscous_friction" => Some(Param::Viscous),
+        "coulomb_friction" => Some(Param::Coulomb),
+        "offset" => Some(Param::ConstantLoad),
+        _ => None,
+    }
+}
+
+/// Our internal value of `q` in the published convention: the inertia is fitted as its log, and a
+/// published offset sits on the motor side (τ = … + offset), so our constant load is its negative.
+fn to_published(q: Param, x: f64) -> f64 {
+    match q {
+        Param::LnInertia => x.exp(),
+        Param::ConstantLoad => -x,
+        _ => x,
+    }
+}
+
+/// The inverse of [`to_published`] (None for a non-positive inertia).
+fn from_published(q: Param, x: f64) -> Option<f64> {
+    match q {
+        Param::LnInertia => (x > 0.0).then(|| x.ln()),
+        Param::ConstantLoad => Some(-x),
+        _ => Some(x),
+    }
+}
+
 /// The published parameters simulated by this loop on the same runs (`published_same_simulation`,
 /// docs/interfaces.md): the reference a model's errors are compared with. Published-as-printed
 /// figures may come from another simulation of the same model (another time base, a delay).
@@ -1434,16 +1465,9 @@ pub fn published_same_simulation(prob: &DriveProblem, held: Option<&DriveProblem
             ignored.push(name.clone());
             continue;
         };
-        // a published offset sits on the motor side (τ = … + offset): our constant load is its negative
-        let (q, value) = match name.as_str() {
-            "inertia" if x > 0.0 => (Param::LnInertia, x.ln()),
-            "viscous_friction" => (Param::Viscous, x),
-            "coulomb_friction" => (Param::Coulomb, x),
-            "offset" => (Param::ConstantLoad, -x),
-            _ => {
-                ignored.push(name.clone());
-                continue;
-            }
+        let Some((q, value)) = published_param(name).and_then(|q| from_published(q, x).map(|v| (q, v))) else {
+            ignored.push(name.clone());
+            continue;
         };
         spec.push(q);
         p.push(value);
@@ -1474,24 +1498,12 @@ pub fn published_same_simulation(prob: &DriveProblem, held: Option<&DriveProblem
 /// relative errors on the estimation and validation sets).
 fn comparison(o: &DriveOutcome, p: &Value) -> Value {
     // a published offset sits on the motor side (τ = … + offset): our constant load is its negative
-    let ours = |f: &DriveFit, name: &str| -> Option<f64> {
-        match name {
-            "inertia" => f.value(Param::LnInertia).map(|v| v.0.exp()),
-            "viscous_friction" => f.value(Param::Viscous).map(|v| v.0),
-            "coulomb_friction" => f.value(Param::Coulomb).map(|v| v.0),
-            "offset" => f.value(Param::ConstantLoad).map(|v| -v.0),
-            _ => None,
-        }
+    let value = |f: &DriveFit, name: &str| {
+        let q = published_param(name)?;
+        f.value(q).map(|(x, se)| (to_published(q, x), if q == Param::LnInertia { x.exp() * se } else { se }))
     };
-    let se = |f: &DriveFit, name: &str| -> Option<f64> {
-        match name {
-            "inertia" => f.value(Param::LnInertia).map(|v| v.0.exp() * v.1),
-            "viscous_friction" => f.value(Param::Viscous).map(|v| v.1),
-            "coulomb_friction" => f.value(Param::Coulomb).map(|v| v.1),
-            "offset" => f.value(Param::ConstantLoad).map(|v| v.1),
-            _ => None,
-        }
-    };
+    let ours = |f: &DriveFit, name: &str| value(f, name).map(|v| v.0);
+    let se = |f: &DriveFit, name: &str| value(f, name).map(|v| v.1);
     // the model of the published structure (inertia, viscous, Coulomb, offset), when the loop built it
     let same = o.path.iter().find(|f| f.effects == [DriveEffect::CoulombFriction]);
     let rows: Vec<Value> = p["parameters"]
