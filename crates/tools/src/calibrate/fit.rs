@@ -29,10 +29,57 @@ pub enum Effect {
 /// while K_M = 0), s.
 pub const MAXWELL_TIME_GRID: [f64; 3] = [0.03, 0.1, 0.3];
 
-/// Effects whose torque on the link is linear in their parameters: the equation error can
-/// carry them as regressors (the rest need a simulation).
-pub const EQUATION_ERROR_EFFECTS: [Effect; 5] =
-    [Effect::Gravity, Effect::CoulombFriction, Effect::LinkDamping, Effect::ConstantLoad, Effect::AsymmetricFriction];
+/// Effects the equation error can estimate (the rest need a simulation): those whose torque on the
+/// link is linear in their parameters, as regressors, and backlash, whose width is profiled (for a
+/// given width the transmission's torque is linear in K and C again).
+pub const EQUATION_ERROR_EFFECTS: [Effect; 6] = [
+    Effect::Gravity,
+    Effect::CoulombFriction,
+    Effect::LinkDamping,
+    Effect::ConstantLoad,
+    Effect::AsymmetricFriction,
+    Effect::Backlash,
+];
+
+/// One sample of the equation error: the smoothed link angle, relative angle φ = θm − θl and its
+/// rate, the link speed, the inertial torque J θl'', and the damping column's weight w.
+struct EquationSample {
+    group: usize,
+    w: f64,
+    angle: f64,
+    phi: f64,
+    dphi: f64,
+    v: f64,
+    inertial: f64,
+}
+
+/// What the runs can show of a torque on the link (`Problem::torque_scale`).
+#[derive(Clone, Copy, Debug)]
+pub struct TorqueScale {
+    pub transmission_nm: f64,
+    pub inertial_nm: f64,
+    pub speed: f64,
+    pub relative_angle: f64,
+}
+
+/// An effect's torque on the link may reach this multiple of the largest transmission plus inertial
+/// torque the runs show (`Problem::plausible_limits`): a loose physical bound, not a prior.
+pub const PLAUSIBLE_TORQUE_FACTOR: f64 = 2.0;
+
+/// Regression columns an equation-error effect takes (a profiled width takes none).
+pub fn regressor_columns(e: Effect) -> usize {
+    if e == Effect::Backlash {
+        0
+    } else {
+        e.params().len()
+    }
+}
+
+/// Points of the coarse backlash-width grid of the equation error, log-spaced over fractions of the
+/// largest relative angle the runs show (`Problem::backlash_width_grid`).
+pub const BACKLASH_GRID_POINTS: usize = 12;
+/// Golden-section steps that refine the best grid width between its neighbours.
+pub const BACKLASH_REFINE_STEPS: usize = 10;
 
 /// One equation-error regression (`Problem::equation_error`).
 #[derive(Clone, Debug)]
@@ -231,6 +278,8 @@ pub struct Problem<'a> {
     pub tables: Vec<TransmissionTable>,
     /// Savitzky–Golay-smoothed (link, motor) angles per run for the equation error, computed once.
     smoothed: std::sync::OnceLock<Vec<(Vec<f64>, Vec<f64>)>>,
+    /// What the runs show of torques on the link, computed once (`Problem::torque_scale`).
+    torque_scale: std::sync::OnceLock<Option<TorqueScale>>,
     /// Whether each run's motor angle is one sinusoid, computed once.
     sinusoidal: std::sync::OnceLock<Vec<bool>>,
     /// Each sinusoidal run's (K, C) from its frequency response when physical, computed once.
@@ -248,6 +297,13 @@ pub struct ModelSpec {
 }
 
 impl ModelSpec {
+    /// The effects as the report names them: with an asymmetry in, Coulomb friction and link
+    /// damping are part of its four levels.
+    pub fn reported_effects(&self) -> Vec<Effect> {
+        let asymmetric = self.effects.contains(&Effect::AsymmetricFriction);
+        let folded = |e: &Effect| asymmetric && matches!(e, Effect::CoulombFriction | Effect::LinkDamping);
+        self.effects.iter().copied().filter(|e| !folded(e)).collect()
+    }
     pub fn n_params(&self, n_groups: usize) -> usize {
         2 * n_groups + self.effects.iter().map(|e| e.params().len()).sum::<usize>()
     }
@@ -354,6 +410,7 @@ impl<'a> Problem<'a> {
             solver_tolerance: 1e-8,
             tables,
             smoothed: std::sync::OnceLock::new(),
+            torque_scale: std::sync::OnceLock::new(),
             sinusoidal: sinusoidal.into(),
             responses: std::sync::OnceLock::new(),
         })
@@ -370,6 +427,7 @@ impl<'a> Problem<'a> {
             solver_tolerance: self.solver_tolerance,
             tables: self.tables.clone(),
             smoothed: std::sync::OnceLock::new(),
+            torque_scale: std::sync::OnceLock::new(),
             sinusoidal: std::sync::OnceLock::new(),
             responses: std::sync::OnceLock::new(),
         }
@@ -411,8 +469,13 @@ impl<'a> Problem<'a> {
             lower.extend([Some(k_lo.ln()), Some(c_lo.ln())]);
             upper.extend([Some(k_hi.ln()), Some(c_hi.ln())]);
         }
-        lower.extend(spec.effect_lower());
-        upper.extend(spec.effect_upper());
+        let plausible = self.plausible_limits(spec);
+        // a signed parameter is bounded both ways by its plausible size
+        lower.extend(spec.effect_lower().into_iter().zip(&plausible).map(|(lo, lim)| lo.or(lim.map(|l| -l))));
+        upper.extend(spec.effect_upper().into_iter().zip(&plausible).map(|(hi, lim)| match (hi, lim) {
+            (Some(h), Some(l)) => Some(h.min(*l)),
+            (h, l) => h.or(*l),
+        }));
         (lower, upper)
     }
 
@@ -506,8 +569,16 @@ impl<'a> Problem<'a> {
     /// differences of Savitzky–Golay-smoothed angles (a window of 2 % of the run, at least 5
     /// samples each side).
     pub fn equation_error(&self, law: DampingLaw, effects: &[Effect]) -> Option<EquationError> {
-        let normal = self.normal_equations(law, effects)?;
-        let (beta, _) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
+        let solve = |width: f64| {
+            let normal = self.normal_equations(law, effects, width)?;
+            normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())
+        };
+        let width = if effects.contains(&Effect::Backlash) {
+            self.profile_backlash_width(|w| solve(w).map_or(f64::INFINITY, |(_, sse)| sse))?
+        } else {
+            0.0
+        };
+        let (beta, _) = solve(width)?;
         let table = self.table_start();
         let mut p = Vec::with_capacity(beta.len());
         let mut repaired = Vec::new();
@@ -520,21 +591,116 @@ impl<'a> Problem<'a> {
             p.push(if k > 0.0 { lk } else { table[2 * g] });
             p.push(if c > 0.0 { lc } else { table[2 * g + 1] });
         }
-        p.extend(beta.iter().skip(2 * self.n_groups));
+        let mut column = 2 * self.n_groups;
+        for &e in effects {
+            if e == Effect::Backlash {
+                p.push(width);
+            } else {
+                p.extend(beta.iter().skip(column).take(regressor_columns(e)));
+            }
+            column += regressor_columns(e);
+        }
         Some(EquationError { p, repaired })
+    }
+
+    /// Backlash widths worth trying: log-spaced from 2 % to 90 % of twice the largest |θm − θl| of
+    /// the smoothed runs (a play wider than the relative motion would never engage).
+    pub fn backlash_width_grid(&self) -> Vec<f64> {
+        let reach =
+            self.smoothed().iter().flat_map(|(l, m)| l.iter().zip(m).map(|(a, b)| (b - a).abs())).fold(0.0, f64::max);
+        let (lo, hi) = (0.04 * reach, 1.8 * reach);
+        let n = BACKLASH_GRID_POINTS;
+        (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
+    }
+
+    /// The width of least `sse` over the grid, refined by golden section between its neighbours;
+    /// None when the runs show no relative motion.
+    pub fn profile_backlash_width(&self, sse: impl Fn(f64) -> f64) -> Option<f64> {
+        let grid = self.backlash_width_grid();
+        if !(grid[0] > 0.0) {
+            return None;
+        }
+        let values: Vec<f64> = grid.iter().map(|&w| sse(w)).collect();
+        let best = (0..grid.len()).min_by(|&a, &b| values[a].total_cmp(&values[b]))?;
+        if !values[best].is_finite() {
+            return None;
+        }
+        let (mut a, mut b) = (grid[best.saturating_sub(1)], grid[(best + 1).min(grid.len() - 1)]);
+        let phi = 0.5 * (5f64.sqrt() - 1.0);
+        let (mut x1, mut x2) = (b - phi * (b - a), a + phi * (b - a));
+        let (mut f1, mut f2) = (sse(x1), sse(x2));
+        for _ in 0..BACKLASH_REFINE_STEPS {
+            if f1 < f2 {
+                (b, x2, f2) = (x2, x1, f1);
+                x1 = b - phi * (b - a);
+                f1 = sse(x1);
+            } else {
+                (a, x1, f1) = (x1, x2, f2);
+                x2 = a + phi * (b - a);
+                f2 = sse(x2);
+            }
+        }
+        let (x, f) = if f1 < f2 { (x1, f1) } else { (x2, f2) };
+        Some(if f < values[best] { x } else { grid[best] })
     }
 
     /// The equation error's normal equations with the regressors of `effects` (each in
     /// [`EQUATION_ERROR_EFFECTS`]; None for any other): columns [K, C per group] ++ the effects'.
-    pub fn normal_equations(&self, law: DampingLaw, effects: &[Effect]) -> Option<NormalEquations> {
+    /// With a backlash `width` > 0, the transmission's columns are the FMU's clipped spring–damper
+    /// without its clip: the spring on the relative angle beyond ±width/2, the damper in contact only.
+    pub fn normal_equations(&self, law: DampingLaw, effects: &[Effect], width: f64) -> Option<NormalEquations> {
         if effects.iter().any(|e| !EQUATION_ERROR_EFFECTS.contains(e)) {
             return None;
         }
-        let n_eff: usize = effects.iter().map(|e| e.params().len()).sum();
+        let half_play = 0.5 * width;
+        let n_eff: usize = effects.iter().map(|&e| regressor_columns(e)).sum();
         let cols = 2 * self.n_groups + n_eff;
         let mut ata = DMatrix::<f64>::zeros(cols, cols);
         let mut atb = DVector::<f64>::zeros(cols);
-        let (mut btb, mut samples, mut independent) = (0.0, 0usize, 0.0);
+        let (mut btb, mut samples) = (0.0, 0usize);
+        let mut row = DVector::<f64>::zeros(cols);
+        let independent = self.for_each_sample(law, |s| {
+            row.fill(0.0);
+            let g = s.group;
+            let beyond = s.phi - s.phi.clamp(-half_play, half_play);
+            row[2 * g] = beyond;
+            row[2 * g + 1] = if beyond != 0.0 || half_play == 0.0 { s.w * s.dphi } else { 0.0 };
+            let mut c = 2 * self.n_groups;
+            // the model's smooth sign s = tanh(v / 1 mm/s)
+            let sign = (s.v / 1e-3).tanh();
+            for e in effects {
+                match e {
+                    Effect::Gravity => {
+                        row[c] = -s.angle.sin();
+                        row[c + 1] = s.angle.cos();
+                    }
+                    Effect::CoulombFriction => row[c] = -sign,
+                    Effect::LinkDamping => row[c] = -s.v,
+                    Effect::ConstantLoad => row[c] = 1.0,
+                    Effect::AsymmetricFriction => {
+                        // −a_c s² − a_v s v
+                        row[c] = -sign * sign;
+                        row[c + 1] = -sign * s.v;
+                    }
+                    Effect::Backlash => {}
+                    _ => unreachable!("checked above"),
+                }
+                c += regressor_columns(*e);
+            }
+            let b = s.inertial;
+            ata += &row * row.transpose();
+            atb += &row * b;
+            btb += b * b;
+            samples += 1;
+        });
+        (samples > cols).then_some(NormalEquations { ata, atb, btb, samples, independent })
+    }
+
+    /// Calls `f` with every usable sample of the equation error (runs of at least 40 samples,
+    /// away from the smoothing's ends); returns about how many of them are independent (the
+    /// smoothing correlates the residual over its window: about one independent sample per window).
+    fn for_each_sample(&self, law: DampingLaw, mut f: impl FnMut(&EquationSample)) -> f64 {
+        let mut independent = 0.0;
         for (r, inp) in self.inputs.iter().enumerate() {
             let n = inp.time.len();
             if n < 40 {
@@ -550,47 +716,75 @@ impl<'a> Problem<'a> {
             let (l, m) = &self.smoothed()[r];
             let t = &inp.time;
             let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
-            let mut row = DVector::<f64>::zeros(cols);
             let range = half + 2..n - half - 2;
-            // the smoothing correlates the residual over its window: about one independent
-            // sample per window
             independent += range.len() as f64 / (2 * half + 1) as f64;
             for k in range {
                 let v = d(l, k);
                 let acc = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]) - (l[k] - l[k - 1]) / (t[k] - t[k - 1]))
                     / (0.5 * (t[k + 1] - t[k - 1]));
-                row.fill(0.0);
-                row[2 * g] = m[k] - l[k];
-                row[2 * g + 1] = w * (d(m, k) - v);
-                let mut c = 2 * self.n_groups;
-                // the model's smooth sign s = tanh(v / 1 mm/s)
-                let sign = (v / 1e-3).tanh();
-                for e in effects {
-                    match e {
-                        Effect::Gravity => {
-                            row[c] = -l[k].sin();
-                            row[c + 1] = l[k].cos();
-                        }
-                        Effect::CoulombFriction => row[c] = -sign,
-                        Effect::LinkDamping => row[c] = -v,
-                        Effect::ConstantLoad => row[c] = 1.0,
-                        Effect::AsymmetricFriction => {
-                            // −a_c s² − a_v s v
-                            row[c] = -sign * sign;
-                            row[c + 1] = -sign * v;
-                        }
-                        _ => unreachable!("checked above"),
-                    }
-                    c += e.params().len();
-                }
-                let b = j * acc;
-                ata += &row * row.transpose();
-                atb += &row * b;
-                btb += b * b;
-                samples += 1;
+                f(&EquationSample {
+                    group: g,
+                    w,
+                    angle: l[k],
+                    phi: m[k] - l[k],
+                    dphi: d(m, k) - v,
+                    v,
+                    inertial: j * acc,
+                });
             }
         }
-        (samples > cols).then_some(NormalEquations { ata, atb, btb, samples, independent })
+        independent
+    }
+
+    /// What the runs can show of a torque on the link (issue 18, item 3): the largest transmission
+    /// torque |K φ + C φ'| of the equation error with every linear effect in (cheap, and pinned at no
+    /// bound), the largest inertial torque |J θl''|, the largest link speed and relative angle, and
+    /// each run's half swing of the link angle. Computed once.
+    pub fn torque_scale(&self) -> Option<TorqueScale> {
+        *self.torque_scale.get_or_init(|| {
+            let law = DampingLaw::Viscous;
+            let normal = self.normal_equations(law, &EQUATION_ERROR_EFFECTS[..5], 0.0)?;
+            let (beta, _) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
+            let mut scale = TorqueScale { transmission_nm: 0.0, inertial_nm: 0.0, speed: 0.0, relative_angle: 0.0 };
+            self.for_each_sample(law, |s| {
+                let tau = beta[2 * s.group].abs() * s.phi.abs() + beta[2 * s.group + 1].abs() * s.dphi.abs();
+                scale.transmission_nm = scale.transmission_nm.max(tau);
+                scale.inertial_nm = scale.inertial_nm.max(s.inertial.abs());
+                scale.speed = scale.speed.max(s.v.abs());
+                scale.relative_angle = scale.relative_angle.max(s.phi.abs());
+            });
+            (scale.transmission_nm > 0.0 && scale.speed > 0.0).then_some(scale)
+        })
+    }
+
+    /// Largest size each effect parameter of `spec` may take (None: unbounded), from
+    /// [`Problem::torque_scale`]: an effect's torque on the link at most `PLAUSIBLE_TORQUE_FACTOR`
+    /// times the largest the transmission and the link's inertia show (friction larger than that
+    /// would hold the link still; a damping or load larger would need a torque the transmission
+    /// never transmits), a backlash no wider than twice the largest relative angle (it would never
+    /// engage). Gravity is not bounded: a hanging link's transmission torque is only mgl times the
+    /// sine of its swing.
+    pub fn plausible_limits(&self, spec: &ModelSpec) -> Vec<Option<f64>> {
+        let scale = self.torque_scale();
+        spec.effects
+            .iter()
+            .flat_map(|&e| e.params().iter().map(move |p| (e, p.0)))
+            .map(|(e, name)| {
+                let s = scale?;
+                let torque = PLAUSIBLE_TORQUE_FACTOR * (s.transmission_nm + s.inertial_nm);
+                match (e, name) {
+                    (Effect::CoulombFriction | Effect::StribeckFriction | Effect::ConstantLoad, "torque_nm") => {
+                        Some(torque)
+                    }
+                    (Effect::AsymmetricFriction, "coulomb_asymmetry_nm") => Some(torque),
+                    (Effect::LinkDamping, _) | (Effect::AsymmetricFriction, "viscous_asymmetry_nms") => {
+                        Some(torque / s.speed)
+                    }
+                    (Effect::Backlash, _) => Some(2.0 * s.relative_angle),
+                    _ => None,
+                }
+            })
+            .collect()
     }
 
     /// The equation error's smoothed (link, motor) angles of every run: a window of 2 % of the run,

@@ -533,6 +533,16 @@ fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String
             undeclared.join(", ")
         ));
     }
+    for e in report["added_effects"].as_array().into_iter().flatten().filter(|e| e["at_plausible_limit"] == true) {
+        warnings.push(format!(
+            "{} sits at its plausible limit {} (its torque on the link at {}× the largest transmission plus inertial \
+             torque the runs show, or a play twice the largest relative angle): the data cannot show it that large, \
+             and it is likely standing in for an effect the library lacks",
+            e["effect"].as_str().unwrap_or("?"),
+            e["plausible_limits"],
+            fit::PLAUSIBLE_TORQUE_FACTOR
+        ));
+    }
     for (stage, key) in [("baseline", "identified_baseline"), ("final", "identified")] {
         for g in report[key].as_array().into_iter().flatten() {
             if g["at_bound"].as_bool() == Some(true) {

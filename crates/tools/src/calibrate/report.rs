@@ -207,18 +207,17 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
     let diagnosis: Vec<Value> = o.rounds.first().map_or(vec![], |r| {
         r.candidates.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence})).collect()
     });
-    // with an asymmetry in, the symmetric friction levels are part of its four levels
-    let folded = |e: Effect| {
-        o.final_fit.spec.effects.contains(&Effect::AsymmetricFriction)
-            && matches!(e, Effect::CoulombFriction | Effect::LinkDamping)
-    };
     let added: Vec<Value> = o
         .final_fit
         .spec
-        .effects
-        .iter()
-        .filter(|&&e| !folded(e))
-        .map(|&e| effect_entry(e.name(), &effect_parameters(&o.final_fit, e), "standard_errors"))
+        .reported_effects()
+        .into_iter()
+        .map(|e| {
+            let mut entry = effect_entry(e.name(), &effect_parameters(&o.final_fit, e), "standard_errors");
+            entry["plausible_limits"] = plausible_limits(prob, &o.final_fit, e);
+            entry["at_plausible_limit"] = json!(at_plausible_limit(prob, &o.final_fit, e));
+            entry
+        })
         .collect();
     let rounds: Vec<Value> = o
         .rounds
@@ -241,6 +240,11 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "pruned_effects": o.pruned.iter().map(|p| json!({"effect": p.0.name(), "bic_with": p.1, "bic_without": p.2})).collect::<Vec<_>>(),
         "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
+        "plausibility": prob.torque_scale().map(|t| json!({
+            "transmission_torque_nm": t.transmission_nm, "inertial_torque_nm": t.inertial_nm, "link_speed_rad_s": t.speed,
+            "relative_angle_rad": t.relative_angle, "factor": super::fit::PLAUSIBLE_TORQUE_FACTOR,
+            "note": "each effect's torque on the link is bounded by factor × (transmission + inertial torque) the runs show (equation error with every linear effect), a backlash by twice the largest relative angle; gravity is not bounded",
+        })),
         "moduli": {"baseline": moduli(prob, &o.baseline, temps), "final": moduli(prob, &o.final_fit, temps)},
         "identified": identified(prob, &o.final_fit, temps),
         "damping_law": {
@@ -265,6 +269,24 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
             "seconds": seconds,
         },
     })
+}
+
+/// (internal name, plausible limit, fitted value) of each parameter of effect `e` in `fit` that has
+/// a limit (`Problem::plausible_limits`).
+fn plausible(prob: &Problem, fit: &Fit, e: Effect) -> Vec<(&'static str, f64, f64)> {
+    let limits = prob.plausible_limits(&fit.spec);
+    let (o, _) = fit.spec.offsets(prob.n_groups).into_iter().find(|&(_, x)| x == e).expect("effect in the fit");
+    let first = o - 2 * prob.n_groups;
+    e.params().iter().enumerate().filter_map(|(i, p)| limits[first + i].map(|l| (p.0, l, fit.p[o + i]))).collect()
+}
+
+fn plausible_limits(prob: &Problem, fit: &Fit, e: Effect) -> Value {
+    Value::Object(plausible(prob, fit, e).into_iter().map(|(n, l, _)| (n.to_string(), json!(l))).collect())
+}
+
+/// Whether a parameter of effect `e` sits at its plausible limit (to 1e-6 relative).
+pub fn at_plausible_limit(prob: &Problem, fit: &Fit, e: Effect) -> bool {
+    plausible(prob, fit, e).iter().any(|&(_, l, x)| x.abs() >= l * (1.0 - 1e-6))
 }
 
 fn fmt_params(fit: &Fit, e: Effect) -> String {
@@ -369,8 +391,20 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     if o.final_fit.spec.effects.is_empty() {
         s += "None.\n";
     }
+    let at_limit: Vec<&str> = j["added_effects"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|e| e["at_plausible_limit"] == true)
+        .filter_map(|e| e["effect"].as_str())
+        .collect();
     for &e in &o.final_fit.spec.effects {
-        s += &format!("- **{}**: {}\n", e.name(), fmt_params(&o.final_fit, e));
+        let limit = if at_limit.contains(&e.name()) {
+            " (**at its plausible limit**: the data cannot show it larger; suspect a missing effect it stands in for)"
+        } else {
+            ""
+        };
+        s += &format!("- **{}**: {}{limit}\n", e.name(), fmt_params(&o.final_fit, e));
     }
     s += &identified_markdown(j);
     s += &format!(

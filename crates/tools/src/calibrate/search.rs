@@ -3,7 +3,8 @@
 
 use super::diagnose::{rank, signatures, Candidate, Signatures};
 use super::fit::{
-    levenberg_marquardt, DampingLaw, Effect, EquationError, Fit, ModelSpec, Problem, SpringBank, EQUATION_ERROR_EFFECTS,
+    levenberg_marquardt, regressor_columns, DampingLaw, Effect, EquationError, Fit, ModelSpec, NormalEquations,
+    Problem, SpringBank, EQUATION_ERROR_EFFECTS,
 };
 
 /// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
@@ -13,7 +14,9 @@ pub const BIC_MARGIN: f64 = 10.0;
 pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
 /// Refits tried per round, best-ranked first.
 pub const TRIES_PER_ROUND: usize = 3;
-pub const MAX_EFFECTS: usize = 4;
+/// The one-at-a-time rounds stop at this many effects as reported (asymmetric friction with the
+/// Coulomb and viscous levels under it counts once).
+pub const MAX_EFFECTS: usize = 5;
 pub const MAX_ITERATIONS: usize = 25;
 /// Levenberg–Marquardt iterations a shortlisted candidate gets before the comparison; the
 /// winner then runs to convergence (speed: most of a search is spent on losers).
@@ -200,13 +203,16 @@ pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String
 /// regression is formed once; every subset is solved from its normal equations.
 pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> Vec<(Vec<Effect>, EquationError)> {
     let all = EQUATION_ERROR_EFFECTS;
-    let Some(normal) = prob.normal_equations(law, &all) else { return Vec::new() };
+    let Some(normal) = prob.normal_equations(law, &all, 0.0) else { return Vec::new() };
+    // with backlash: the same regression at each width of the grid (the best width per subset)
+    let with_play: Vec<NormalEquations> =
+        prob.backlash_width_grid().into_iter().filter_map(|w| prob.normal_equations(law, &all, w)).collect();
     let n_t = 2 * prob.n_groups;
     let mut offsets = Vec::with_capacity(all.len());
     let mut next = n_t;
     for e in all {
         offsets.push(next);
-        next += e.params().len();
+        next += regressor_columns(e);
     }
     let bit = |e: Effect| 1u32 << all.iter().position(|&x| x == e).expect("in the list");
     let valid = |mask: u32| mask & bit(Effect::AsymmetricFriction) == 0 || mask & bit(Effect::CoulombFriction) != 0;
@@ -219,11 +225,16 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
                 .chain(
                     (0..all.len())
                         .filter(|i| mask >> i & 1 == 1)
-                        .flat_map(|i| offsets[i]..offsets[i] + all[i].params().len()),
+                        .flat_map(|i| offsets[i]..offsets[i] + regressor_columns(all[i])),
                 )
                 .collect();
-            let (_, sse) = normal.solve(&columns)?;
-            Some(normal.bic(sse, columns.len()))
+            if mask & bit(Effect::Backlash) == 0 {
+                let (_, sse) = normal.solve(&columns)?;
+                Some(normal.bic(sse, columns.len()))
+            } else {
+                let sse = with_play.iter().filter_map(|n| n.solve(&columns)).map(|(_, sse)| sse).reduce(f64::min)?;
+                Some(normal.bic(sse, columns.len() + 1))
+            }
         })
         .collect();
     let needed = |mask: u32| {
@@ -263,15 +274,15 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
 /// error's transmission, the current one and the closed form, under every allowed structure.
 /// Screened, then the best run to convergence; kept only if it earns its place against `current`
 /// on the screening share and on every sample. None when the equation error proposes nothing new
-/// with at least `min_effects` linear effects.
+/// (`refitted` remembers what earlier passes refitted).
 fn try_combination(
     prob: &Problem,
     screen: &Option<(Problem, Fit, Signatures)>,
     current: &Fit,
     sig: &Signatures,
     stage: &'static str,
-    min_effects: usize,
     structures: &[Structure],
+    refitted: &mut Vec<(Structure, Vec<Effect>)>,
 ) -> Option<(CombinationAttempt, Option<(Fit, Signatures)>)> {
     let n_t = 2 * prob.n_groups;
     let kept_effects: Vec<Effect> =
@@ -287,17 +298,44 @@ fn try_combination(
     let first = (current.spec.law, current.spec.springs);
     let laws: Vec<Structure> =
         std::iter::once(first).chain(structures.iter().copied().filter(|&s| s != first)).collect();
+    // The equation error ranks close structures unreliably (link damping under the wrong damping
+    // law, asymmetric friction against a constant load): the best few subsets of every law are
+    // proposed under every law.
+    let mut subsets: Vec<Vec<Effect>> = Vec::new();
+    for &(law, _) in &laws {
+        for (subset, _) in equation_error_subsets(prob, law, SUBSETS_REFITTED) {
+            let same = subset.len() + kept_effects.len() == current.spec.effects.len()
+                && subset.iter().all(|e| current.spec.effects.contains(e));
+            if !subset.is_empty() && !same && !subsets.contains(&subset) {
+                subsets.push(subset);
+            }
+        }
+    }
     let proposals: Vec<(Structure, Vec<Effect>, EquationError)> = laws
         .iter()
         .flat_map(|&structure| {
-            equation_error_subsets(prob, structure.0, SUBSETS_REFITTED)
-                .into_iter()
-                .map(move |(e, ee)| (structure, e, ee))
+            subsets.iter().filter_map(move |subset| {
+                prob.equation_error(structure.0, subset).map(|ee| (structure, subset.clone(), ee))
+            })
         })
-        .filter(|(_, subset, _)| {
-            let same = subset.len() + kept_effects.len() == current.spec.effects.len()
-                && subset.iter().all(|e| current.spec.effects.contains(e));
-            subset.len() >= min_effects && !same
+        .collect();
+    // a model an earlier pass refitted from the same equation error is not refitted again (only the
+    // current transmission's start would differ)
+    let proposals: Vec<_> = proposals
+        .into_iter()
+        .filter(|(structure, subset, _)| {
+            let mut effects = kept_effects.clone();
+            effects.extend_from_slice(subset);
+            // (a Stribeck excess is defined over a Coulomb level)
+            if effects.contains(&Effect::StribeckFriction) && !effects.contains(&Effect::CoulombFriction) {
+                return false;
+            }
+            let key = (*structure, effects);
+            let new = !refitted.contains(&key);
+            if new {
+                refitted.push(key);
+            }
+            new
         })
         .collect();
     if proposals.is_empty() {
@@ -338,6 +376,11 @@ fn try_combination(
             fits.push(f);
         }
     }
+    debug(format_args!(
+        "combination fits: {:?} against current {:.1}",
+        fits.iter().map(|f| (f.spec.effects.clone(), f.spec.law, f.bic().round())).collect::<Vec<_>>(),
+        scurrent.bic()
+    ));
     let mut screened = fits.iter().min_by(|a, b| a.bic().total_cmp(&b.bic()))?.clone();
     // the groups' transmissions are nearly separable: each group takes the fit that suits its own
     // runs best (one group pinned at a bound need not sink the others)
@@ -596,13 +639,16 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     let mut current = baseline.clone();
     let mut sig = baseline_signatures.clone();
     let mut rounds = Vec::new();
-    // A baseline at a bound is infeasible: linearised rankings around it are blind (a rigid link
-    // does not feel a small probe). The equation error's best subset is refitted at once first
-    // (issue 18), several effects together where one at a time each would be judged against a
-    // baseline that absorbed the others.
+    // The equation error's best subsets are refitted at once first (issue 18): several effects
+    // together, where one at a time each would be judged against a baseline that absorbed the
+    // others (and a baseline at a bound is infeasible: linearised rankings around it are blind, a
+    // rigid link does not feel a small probe). A greedy first step can also take a wrong effect
+    // that mimics two (gravity at an offset for asymmetric friction) and never leave it.
     let mut combinations = Vec::new();
-    if !sig.white() && at_bound(prob, &current) && budget.allows("the equation error's combination at the baseline") {
-        if let Some((attempt, accepted)) = try_combination(prob, &screen, &current, &sig, "baseline", 1, &laws.allowed)
+    let mut refitted = Vec::new();
+    if !sig.white() && budget.allows("the equation error's combination at the baseline") {
+        if let Some((attempt, accepted)) =
+            try_combination(prob, &screen, &current, &sig, "baseline", &laws.allowed, &mut refitted)
         {
             combinations.push(attempt);
             if let Some((f, s)) = accepted {
@@ -619,7 +665,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     // effect found first can hide the rest); rounds again after an accepted combination.
     let mut passes = 0;
     loop {
-        while current.spec.effects.len() < MAX_EFFECTS
+        while current.spec.reported_effects().len() < MAX_EFFECTS
             && (rounds.is_empty() || !sig.white())
             && budget.allows("a round of one-at-a-time refits")
         {
@@ -779,7 +825,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         {
             break;
         }
-        match try_combination(prob, &screen, &current, &sig, "after the rounds", 1, &laws.allowed) {
+        match try_combination(prob, &screen, &current, &sig, "after the rounds", &laws.allowed, &mut refitted) {
             Some((attempt, Some((f, s)))) => {
                 combinations.push(attempt);
                 current = f;
