@@ -37,6 +37,7 @@ SCENARIOS = {
     "asymmetric friction 0.06/0.03 N·m, 0.02/0.01 N·m·s": ["--effect", "asymmetric_friction=0.06,0.03,0.02,0.01"],
     "constant load 0.1 N·m": ["--effect", "constant_load=0.1"],
     "hardening spring α 100 /rad² (out of library)": ["--effect", "hardening=100"],
+    "stiffness with link angle β 5 /rad² (out of library)": ["--effect", "angle_stiffness=5"],
     "jitter 2e-5 of a step": ["--jitter", "2e-5"],
     "gravity 1.25 + coulomb 0.03": ["--effect", "gravity_mgl=1.25", "--effect", "coulomb_friction=0.03"],
     "gravity 1.25 at 0.15 rad + coulomb 0.03": ["--effect", "gravity_mgl=1.25", "--effect", "gravity_offset=0.15",
@@ -52,6 +53,23 @@ SCENARIOS = {
         "--effect", "gravity_mgl=1.25", "--effect", "gravity_offset=0.15", "--effect", "link_damping=0.02",
         "--effect", "coulomb_friction=0.03"],
 }
+# the rest of the pairs of coexisting library effects (issue 18), and a triple with asymmetric friction
+STRIBECK = ["--effect", "coulomb_friction=0.02", "--effect", "stribeck=0.03,0.05"]
+ASYMMETRIC = ["--effect", "asymmetric_friction=0.06,0.03,0.02,0.01"]
+SCENARIOS.update({
+    "coulomb 0.03 + constant load 0.1": ["--effect", "coulomb_friction=0.03", "--effect", "constant_load=0.1"],
+    "stribeck + backlash 0.02": STRIBECK + ["--effect", "backlash=0.02"],
+    "stribeck + gravity 1.25": STRIBECK + ["--effect", "gravity_mgl=1.25"],
+    "stribeck + link damping 0.02": STRIBECK + ["--effect", "link_damping=0.02"],
+    "stribeck + constant load 0.1": STRIBECK + ["--effect", "constant_load=0.1"],
+    "asymmetric friction + backlash 0.02": ASYMMETRIC + ["--effect", "backlash=0.02"],
+    "asymmetric friction + gravity 1.25": ASYMMETRIC + ["--effect", "gravity_mgl=1.25"],
+    "backlash 0.02 + link damping 0.02": ["--effect", "backlash=0.02", "--effect", "link_damping=0.02"],
+    "backlash 0.02 + constant load 0.1": ["--effect", "backlash=0.02", "--effect", "constant_load=0.1"],
+    "link damping 0.02 + constant load 0.1": ["--effect", "link_damping=0.02", "--effect", "constant_load=0.1"],
+    "asymmetric friction + backlash 0.02 + gravity 1.25": ASYMMETRIC + ["--effect", "backlash=0.02",
+                                                                       "--effect", "gravity_mgl=1.25"],
+})
 
 
 def relative(found, true):

@@ -10,6 +10,7 @@
 //! to the parameters already fitted. That projection predicts how much of the residual the effect
 //! can explain and with what value (one Gauss–Newton step from "off"), which ranks the candidates.
 
+use super::signal::harmonics;
 use nalgebra::{DMatrix, DVector};
 
 use super::fit::{spd_inverse, Effect, Fit, ModelSpec, Problem, MAXWELL_TIME_GRID};
@@ -110,32 +111,6 @@ fn sign_of_slope(x: &[f64], k: usize, half: usize) -> f64 {
     let a = x[k.saturating_sub(half)];
     let b = x[(k + half).min(x.len() - 1)];
     (b - a).signum()
-}
-
-/// Least-squares harmonics of `e` on [t0, t1) at multiples of `w`: returns (DC, [(cos, sin) per harmonic]).
-fn harmonics(t: &[f64], e: &[f64], w: f64, orders: &[usize], t0: f64, t1: f64) -> (f64, Vec<(f64, f64)>) {
-    let idx: Vec<usize> = (0..t.len()).filter(|&k| t[k] >= t0 && t[k] < t1).collect();
-    let m = 1 + 2 * orders.len();
-    if idx.len() <= m {
-        return (0.0, vec![(0.0, 0.0); orders.len()]);
-    }
-    let x = DMatrix::from_fn(idx.len(), m, |i, j| {
-        let tt = t[idx[i]];
-        if j == 0 {
-            1.0
-        } else {
-            let k = orders[(j - 1) / 2] as f64;
-            if (j - 1) % 2 == 0 {
-                (k * w * tt).cos()
-            } else {
-                (k * w * tt).sin()
-            }
-        }
-    });
-    let y = DVector::from_iterator(idx.len(), idx.iter().map(|&k| e[k]));
-    let a = x.transpose() * &x;
-    let beta = spd_inverse(&a) * (x.transpose() * y);
-    (beta[0], orders.iter().enumerate().map(|(i, _)| (beta[1 + 2 * i], beta[2 + 2 * i])).collect())
 }
 
 pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {

@@ -15,6 +15,7 @@
 //! test of each friction effect through the FMU); the best effect refitted and kept when BIC falls
 //! by more than 10 and a Wald test passes. A held-out set is scored, never consulted.
 
+use super::signal::derivatives;
 use nalgebra::{DMatrix, DVector};
 use serde_json::{json, Map, Value};
 use thermovia_importer::{HarnessError, Instance};
@@ -169,19 +170,9 @@ pub fn load_gain(declared: Option<f64>, force_log: Option<f64>) -> (f64, LoadGai
     }
 }
 
-/// Speed at the first sample: slope at t0 of a least-squares quadratic over the first samples.
+/// Speed at the first sample: slope at t0 of a least-squares quadratic over the first 11 samples.
 fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
-    let m = t.len().min(11);
-    if m < 3 {
-        return 0.0;
-    }
-    let a = DMatrix::from_fn(m, 3, |i, j| (t[i] - t[0]).powi(j as i32));
-    let y = DVector::from_iterator(m, x[..m].iter().copied());
-    let ata = a.transpose() * &a;
-    match ata.try_inverse() {
-        Some(inv) => (inv * (a.transpose() * y))[1],
-        None => 0.0,
-    }
+    super::signal::start_slope(t, x, t.len().min(11)).map_or(0.0, |(v, _)| v)
 }
 
 impl DriveInput {
@@ -648,20 +639,6 @@ pub fn metrics(inputs: &[DriveInput], sims: &[Simulated]) -> Metrics {
         velocity_relerr_percent: (vn > 0.0).then(|| 100.0 * (ve / vn).sqrt()),
         samples: y.len(),
     }
-}
-
-/// Central differences of a Savitzky–Golay-smoothed position: (speed, acceleration).
-fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
-    let s = super::savitzky_golay(x, 10);
-    let n = s.len();
-    let mut v = vec![0.0; n];
-    let mut a = vec![0.0; n];
-    for k in 1..n - 1 {
-        let (h1, h2) = (t[k] - t[k - 1], t[k + 1] - t[k]);
-        v[k] = (s[k + 1] - s[k - 1]) / (h1 + h2);
-        a[k] = 2.0 * ((s[k + 1] - s[k]) / h2 - (s[k] - s[k - 1]) / h1) / (h1 + h2);
-    }
-    (v, a)
 }
 
 /// Inverse-model least squares on the measured motion (the IDIM-LS of drive identification):
@@ -1267,14 +1244,14 @@ pub fn report_json(
         .final_fit
         .effects
         .iter()
-        .map(|&e| super::report::effect_entry(e.name(), &effect_parameters(&o.final_fit, e), "std_errors"))
+        .map(|&e| super::report::effect_entry(e.name(), &effect_parameters(&o.final_fit, e)))
         .collect();
     // the baseline's own effect (interfaces.md: constant_load), in the final model's value
     let baseline_effects: Vec<Value> = o
         .final_fit
         .value(Param::ConstantLoad)
         .map(|(v, s)| {
-            json!({"effect": "constant_load", "parameters": {"torque_nm": v}, "std_errors": {"torque_nm": s},
+            json!({"effect": "constant_load", "parameters": {"torque_nm": v}, "standard_errors": {"torque_nm": s},
                    "note": "part of the baseline: a constant torque or force on the link (or a measurement offset); a published offset on the motor side is its negative"})
         })
         .into_iter()

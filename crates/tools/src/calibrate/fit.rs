@@ -2,6 +2,7 @@
 //! (each run depends only on its temperature group's two moduli and the effect parameters, so a
 //! Jacobian costs Σ_runs (2 + n_effect) simulations), and parameter covariance σ²(JᵀJ)⁻¹.
 
+use super::signal::savitzky_golay;
 use nalgebra::{DMatrix, DVector};
 
 use super::sim::{EffectValues, RunModel, SimInput, Simulator, TransmissionTable};
@@ -796,7 +797,7 @@ impl<'a> Problem<'a> {
                 .zip(&self.measured)
                 .map(|(inp, y)| {
                     let half = (y.len() / 100).max(5);
-                    (super::savitzky_golay(y, half), super::savitzky_golay(&inp.motor, half))
+                    (savitzky_golay(y, half), savitzky_golay(&inp.motor, half))
                 })
                 .collect()
         })

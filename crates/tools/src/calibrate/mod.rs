@@ -14,9 +14,11 @@ pub mod paper;
 pub mod reference;
 pub mod report;
 pub mod search;
+pub mod signal;
 pub mod sim;
 pub mod synthetic;
 
+use signal::{rms_frequency, savitzky_golay, second_difference_noise};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -130,46 +132,6 @@ pub fn group_runs(runs: &[data::Run]) -> (Vec<usize>, Vec<f64>) {
     (group, temps)
 }
 
-/// Centre weights of a Savitzky–Golay smoother: least-squares polynomial of `order` over
-/// i = −m..m, evaluated at 0 (Savitzky & Golay 1964).
-fn savitzky_golay_weights(m: usize, order: usize) -> Vec<f64> {
-    let rows = 2 * m + 1;
-    let cols = (order + 1).min(rows);
-    // abscissae scaled to [-1, 1] keep XᵀX well conditioned (the weights do not depend on it)
-    let x = nalgebra::DMatrix::from_fn(rows, cols, |i, j| ((i as f64 - m as f64) / m as f64).powi(j as i32));
-    let pinv = (x.transpose() * &x).pseudo_inverse(1e-14).expect("small SPD matrix") * x.transpose();
-    (0..rows).map(|i| pinv[(0, i)]).collect()
-}
-
-/// Zero-phase quintic Savitzky–Golay smoothing over 2m+1 samples, by sample index (uneven
-/// sampling is smoothed as if even; the window shrinks
-/// symmetrically at the ends). Quintics pass unchanged, so a 0.5–1 Hz sinusoid keeps its
-/// amplitude to O((ω m Δt)⁶).
-pub fn savitzky_golay(x: &[f64], half: usize) -> Vec<f64> {
-    let n = x.len();
-    let mut cache: Vec<Option<Vec<f64>>> = vec![None; half + 1];
-    (0..n)
-        .map(|k| {
-            let m = half.min(k).min(n - 1 - k);
-            if m < 3 {
-                return x[k];
-            }
-            let w = cache[m].get_or_insert_with(|| savitzky_golay_weights(m, 5));
-            w.iter().enumerate().map(|(i, wi)| wi * x[k + i - m]).sum()
-        })
-        .collect()
-}
-
-/// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
-/// var(Δ²x) = 6σ²; a smooth signal sampled fast contributes almost nothing).
-pub fn second_difference_noise(x: &[f64]) -> f64 {
-    if x.len() < 3 {
-        return 0.0;
-    }
-    let s: f64 = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2)).sum();
-    (s / (6.0 * (x.len() - 2) as f64)).sqrt()
-}
-
 /// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
 /// default): 0.1 s over the highest frequency the run carries, its own for a single sinusoid, else
 /// three times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms. A quintic
@@ -199,25 +161,6 @@ pub fn smoothing_half_width(r: &data::Run, seconds: Option<f64>) -> usize {
         }
     };
     ((seconds / dt).round() as usize).min(n / 4)
-}
-
-/// rms(x')/(2π rms(x − mean)), x' by differences over ±10 ms (the power-weighted frequency).
-fn rms_frequency(t: &[f64], x: &[f64]) -> f64 {
-    let n = x.len();
-    let mean = x.iter().sum::<f64>() / n as f64;
-    let dt = (t[n - 1] - t[0]) / (n - 1).max(1) as f64;
-    let lag = ((0.01 / dt).round() as usize).max(1);
-    if n <= 2 * lag {
-        return 0.0;
-    }
-    let v2: f64 = (lag..n - lag).map(|k| ((x[k + lag] - x[k - lag]) / (t[k + lag] - t[k - lag])).powi(2)).sum::<f64>()
-        / (n - 2 * lag) as f64;
-    let x2: f64 = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
-    if x2 <= 0.0 {
-        0.0
-    } else {
-        v2.sqrt() / (2.0 * std::f64::consts::PI * x2.sqrt())
-    }
 }
 
 /// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`)
@@ -251,12 +194,7 @@ pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
     if n < 4 {
         return 0.0;
     }
-    let a = nalgebra::DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
-    let y = nalgebra::DVector::from_column_slice(&x[..n]);
-    let ainv = fit::spd_inverse(&(a.transpose() * &a));
-    let beta = &ainv * (a.transpose() * &y);
-    let sigma2 = (&y - &a * &beta).norm_squared() / (n - 3).max(1) as f64;
-    let (v, se) = (beta[1], (sigma2 * ainv[(1, 1)]).max(0.0).sqrt());
+    let Some((v, se)) = signal::start_slope(t, x, n) else { return 0.0 };
     if v.abs() > 3.0 * se {
         v
     } else {

@@ -1,5 +1,6 @@
 //! report.json (interfaces.md), report.md and SVG plots, all built in memory and written at once.
 
+use super::signal::amplitude_spectrum;
 use plotters::prelude::*;
 use serde_json::{json, Map, Value};
 
@@ -28,16 +29,15 @@ pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
     })
 }
 
-/// One `added_effects` entry: {"effect", "parameters", and their standard errors under `errors_key`}
-/// (the device report says `standard_errors`, the drive report `std_errors`).
-pub fn effect_entry(name: &str, params: &[(&'static str, f64, f64)], errors_key: &str) -> Value {
+/// One `added_effects` entry, the same for every rig: {"effect", "parameters", "standard_errors"}.
+pub fn effect_entry(name: &str, params: &[(&'static str, f64, f64)]) -> Value {
     let mut values = Map::new();
     let mut errors = Map::new();
     for &(n, v, s) in params {
         values.insert(n.into(), json!(v));
         errors.insert(n.into(), json!(s));
     }
-    json!({"effect": name, "parameters": values, errors_key: errors})
+    json!({"effect": name, "parameters": values, "standard_errors": errors})
 }
 
 /// (name, value, standard error) of an effect's parameters in the SI units of interfaces.md.
@@ -213,7 +213,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         .reported_effects()
         .into_iter()
         .map(|e| {
-            let mut entry = effect_entry(e.name(), &effect_parameters(&o.final_fit, e), "standard_errors");
+            let mut entry = effect_entry(e.name(), &effect_parameters(&o.final_fit, e));
             entry["plausible_limits"] = plausible_limits(prob, &o.final_fit, e);
             entry["at_plausible_limit"] = json!(at_plausible_limit(prob, &o.final_fit, e));
             entry
@@ -535,26 +535,6 @@ pub(crate) fn line_plot(
         root.present()?;
     }
     Ok(svg)
-}
-
-/// Amplitude spectrum of `e` sampled at `t` (one-sided, rad), on `freqs`.
-pub fn amplitude_spectrum(t: &[f64], e: &[f64], freqs: &[f64]) -> Vec<f64> {
-    let step = (t.len() / 4000).max(1);
-    let idx: Vec<usize> = (0..t.len()).step_by(step).collect();
-    let n = idx.len() as f64;
-    freqs
-        .iter()
-        .map(|&f| {
-            let w = 2.0 * std::f64::consts::PI * f;
-            let (mut c, mut s) = (0.0, 0.0);
-            for &k in &idx {
-                let (sn, cs) = (w * t[k]).sin_cos();
-                c += e[k] * cs;
-                s += e[k] * sn;
-            }
-            2.0 * (c * c + s * s).sqrt() / n
-        })
-        .collect()
 }
 
 pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output::Files, Box<dyn std::error::Error>> {

@@ -1,0 +1,140 @@
+//! Signal processing shared by the calibration's parts (data conditioning, the equation error,
+//! diagnosis, the references, the report, the drive loop): smoothing and differentiation, noise
+//! level, harmonics and spectra. Plain functions of sampled signals: no model in them.
+
+use nalgebra::{DMatrix, DVector};
+
+use super::fit::spd_inverse;
+
+/// Centre weights of a Savitzky–Golay smoother: least-squares polynomial of `order` over
+/// i = −m..m, evaluated at 0 (Savitzky & Golay 1964).
+fn savitzky_golay_weights(m: usize, order: usize) -> Vec<f64> {
+    let rows = 2 * m + 1;
+    let cols = (order + 1).min(rows);
+    // abscissae scaled to [-1, 1] keep XᵀX well conditioned (the weights do not depend on it)
+    let x = DMatrix::from_fn(rows, cols, |i, j| ((i as f64 - m as f64) / m as f64).powi(j as i32));
+    let pinv = (x.transpose() * &x).pseudo_inverse(1e-14).expect("small SPD matrix") * x.transpose();
+    (0..rows).map(|i| pinv[(0, i)]).collect()
+}
+
+/// Zero-phase quintic Savitzky–Golay smoothing over 2m+1 samples, by sample index (uneven
+/// sampling is smoothed as if even; the window shrinks
+/// symmetrically at the ends). Quintics pass unchanged, so a 0.5–1 Hz sinusoid keeps its
+/// amplitude to O((ω m Δt)⁶).
+pub fn savitzky_golay(x: &[f64], half: usize) -> Vec<f64> {
+    let n = x.len();
+    let mut cache: Vec<Option<Vec<f64>>> = vec![None; half + 1];
+    (0..n)
+        .map(|k| {
+            let m = half.min(k).min(n - 1 - k);
+            if m < 3 {
+                return x[k];
+            }
+            let w = cache[m].get_or_insert_with(|| savitzky_golay_weights(m, 5));
+            w.iter().enumerate().map(|(i, wi)| wi * x[k + i - m]).sum()
+        })
+        .collect()
+}
+
+/// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
+/// var(Δ²x) = 6σ²; a smooth signal sampled fast contributes almost nothing).
+pub fn second_difference_noise(x: &[f64]) -> f64 {
+    if x.len() < 3 {
+        return 0.0;
+    }
+    let s: f64 = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).powi(2)).sum();
+    (s / (6.0 * (x.len() - 2) as f64)).sqrt()
+}
+
+/// rms(x')/(2π rms(x − mean)), x' by differences over ±10 ms (the power-weighted frequency).
+pub fn rms_frequency(t: &[f64], x: &[f64]) -> f64 {
+    let n = x.len();
+    let mean = x.iter().sum::<f64>() / n as f64;
+    let dt = (t[n - 1] - t[0]) / (n - 1).max(1) as f64;
+    let lag = ((0.01 / dt).round() as usize).max(1);
+    if n <= 2 * lag {
+        return 0.0;
+    }
+    let v2: f64 = (lag..n - lag).map(|k| ((x[k + lag] - x[k - lag]) / (t[k + lag] - t[k - lag])).powi(2)).sum::<f64>()
+        / (n - 2 * lag) as f64;
+    let x2: f64 = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
+    if x2 <= 0.0 {
+        0.0
+    } else {
+        v2.sqrt() / (2.0 * std::f64::consts::PI * x2.sqrt())
+    }
+}
+
+/// Least-squares harmonics of `e` on [t0, t1) at multiples of `w`: returns (DC, [(cos, sin) per harmonic]).
+pub fn harmonics(t: &[f64], e: &[f64], w: f64, orders: &[usize], t0: f64, t1: f64) -> (f64, Vec<(f64, f64)>) {
+    let idx: Vec<usize> = (0..t.len()).filter(|&k| t[k] >= t0 && t[k] < t1).collect();
+    let m = 1 + 2 * orders.len();
+    if idx.len() <= m {
+        return (0.0, vec![(0.0, 0.0); orders.len()]);
+    }
+    let x = DMatrix::from_fn(idx.len(), m, |i, j| {
+        let tt = t[idx[i]];
+        if j == 0 {
+            1.0
+        } else {
+            let k = orders[(j - 1) / 2] as f64;
+            if (j - 1) % 2 == 0 {
+                (k * w * tt).cos()
+            } else {
+                (k * w * tt).sin()
+            }
+        }
+    });
+    let y = DVector::from_iterator(idx.len(), idx.iter().map(|&k| e[k]));
+    let a = x.transpose() * &x;
+    let beta = spd_inverse(&a) * (x.transpose() * y);
+    (beta[0], orders.iter().enumerate().map(|(i, _)| (beta[1 + 2 * i], beta[2 + 2 * i])).collect())
+}
+
+/// Amplitude spectrum of `e` sampled at `t` (one-sided, rad), on `freqs`.
+pub fn amplitude_spectrum(t: &[f64], e: &[f64], freqs: &[f64]) -> Vec<f64> {
+    let step = (t.len() / 4000).max(1);
+    let idx: Vec<usize> = (0..t.len()).step_by(step).collect();
+    let n = idx.len() as f64;
+    freqs
+        .iter()
+        .map(|&f| {
+            let w = 2.0 * std::f64::consts::PI * f;
+            let (mut c, mut s) = (0.0, 0.0);
+            for &k in &idx {
+                let (sn, cs) = (w * t[k]).sin_cos();
+                c += e[k] * cs;
+                s += e[k] * sn;
+            }
+            2.0 * (c * c + s * s).sqrt() / n
+        })
+        .collect()
+}
+
+/// Central differences of a Savitzky–Golay-smoothed position: (speed, acceleration).
+pub fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
+    let s = savitzky_golay(x, 10);
+    let n = s.len();
+    let mut v = vec![0.0; n];
+    let mut a = vec![0.0; n];
+    for k in 1..n - 1 {
+        let (h1, h2) = (t[k] - t[k - 1], t[k + 1] - t[k]);
+        v[k] = (s[k + 1] - s[k - 1]) / (h1 + h2);
+        a[k] = 2.0 * ((s[k + 1] - s[k]) / h2 - (s[k] - s[k - 1]) / h1) / (h1 + h2);
+    }
+    (v, a)
+}
+
+/// Slope at t[0] of a least-squares quadratic over the first `n` samples, with its standard error
+/// from the fit's residual; None with fewer than 4 samples.
+pub fn start_slope(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64)> {
+    if n < 4 || n > t.len() {
+        return None;
+    }
+    let a = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
+    let y = DVector::from_column_slice(&x[..n]);
+    let ainv = spd_inverse(&(a.transpose() * &a));
+    let beta = &ainv * (a.transpose() * &y);
+    let sigma2 = (&y - &a * &beta).norm_squared() / (n - 3).max(1) as f64;
+    Some((beta[1], (sigma2 * ainv[(1, 1)]).max(0.0).sqrt()))
+}
