@@ -689,8 +689,9 @@ impl<'a> Problem<'a> {
                 c += regressor_columns(*e);
             }
             let b = s.inertial;
-            ata += &row * row.transpose();
-            atb += &row * b;
+            // in place (a rank-1 update per sample; no temporaries)
+            ata.ger(1.0, &row, &row, 1.0);
+            atb.axpy(b, &row, 1.0);
             btb += b * b;
             samples += 1;
         });
