@@ -70,13 +70,9 @@ def test_clean_runs_get_nothing_and_the_transmission_back(tmp_path, name):
         assert report["damping_law"]["chosen"] == "viscous", "a multisine has no single excitation frequency"
 
 
-LIBRARY = {
-    "backlash": (["--effect", "backlash=0.02"], {"backlash": {"width_rad": 0.02}}),
-    "coulomb friction": (["--effect", "coulomb_friction=0.05"], {"coulomb_friction": {"torque_nm": 0.05}}),
-    "gravity": (["--effect", "gravity_mgl=1.249"], {"gravity": {"mgl_nm": 1.249}}),
-    "link damping": (["--effect", "link_damping=0.02"], {"link_damping": {"damping_nms": 0.02}}),
-    "constant load": (["--effect", "constant_load=0.1"], {"constant_load": {"torque_nm": 0.1}}),
-    "stribeck friction": (
+FRICTION = {
+    "Coulomb": (["--effect", "coulomb_friction=0.03"], {"coulomb_friction": {"torque_nm": 0.03}}),
+    "Stribeck": (
         ["--effect", "coulomb_friction=0.02", "--effect", "stribeck=0.03,0.05"],
         {"coulomb_friction": {"torque_nm": 0.02}, "stribeck_friction": {"torque_nm": 0.03, "velocity": 0.05}},
     ),
@@ -85,6 +81,15 @@ LIBRARY = {
         {"asymmetric_friction": {"coulomb_positive": 0.06, "coulomb_negative": 0.03,
                                  "viscous_positive": 0.02, "viscous_negative": 0.01}},
     ),
+}
+LIBRARY = {
+    "backlash": (["--effect", "backlash=0.02"], {"backlash": {"width_rad": 0.02}}),
+    "coulomb friction": (["--effect", "coulomb_friction=0.05"], {"coulomb_friction": {"torque_nm": 0.05}}),
+    "gravity": (["--effect", "gravity_mgl=1.249"], {"gravity": {"mgl_nm": 1.249}}),
+    "link damping": (["--effect", "link_damping=0.02"], {"link_damping": {"damping_nms": 0.02}}),
+    "constant load": (["--effect", "constant_load=0.1"], {"constant_load": {"torque_nm": 0.1}}),
+    "stribeck friction": FRICTION["Stribeck"],
+    "asymmetric friction": FRICTION["asymmetric friction"],
 }
 
 
@@ -105,18 +110,6 @@ def test_each_library_effect_is_found_with_its_parameters(tmp_path, name):
 # constant load. Every pair of them is a case, and triples. Before: nothing added at 80× the floor
 # (Coulomb + gravity), 1.8 N·m of friction "found" (gravity with an offset + Coulomb), 3.3× the floor
 # (backlash + Coulomb: the equation error had no backlash, and the rounds stopped in a local minimum).
-FRICTION = {
-    "Coulomb": (["--effect", "coulomb_friction=0.03"], {"coulomb_friction": {"torque_nm": 0.03}}),
-    "Stribeck": (
-        ["--effect", "coulomb_friction=0.02", "--effect", "stribeck=0.03,0.05"],
-        {"coulomb_friction": {"torque_nm": 0.02}, "stribeck_friction": {"torque_nm": 0.03, "velocity": 0.05}},
-    ),
-    "asymmetric friction": (
-        ["--effect", "asymmetric_friction=0.06,0.03,0.02,0.01"],
-        {"asymmetric_friction": {"coulomb_positive": 0.06, "coulomb_negative": 0.03,
-                                 "viscous_positive": 0.02, "viscous_negative": 0.01}},
-    ),
-}
 OTHERS = {
     "backlash": (["--effect", "backlash=0.02"], {"backlash": {"width_rad": 0.02}}),
     "gravity": (["--effect", "gravity_mgl=1.25"], {"gravity": {"mgl_nm": 1.25}}),
