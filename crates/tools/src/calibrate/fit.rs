@@ -745,7 +745,7 @@ impl<'a> Problem<'a> {
     pub fn torque_scale(&self) -> Option<TorqueScale> {
         *self.torque_scale.get_or_init(|| {
             let law = DampingLaw::Viscous;
-            let normal = self.normal_equations(law, &EQUATION_ERROR_EFFECTS[..5], 0.0)?;
+            let normal = self.normal_equations(law, &EQUATION_ERROR_EFFECTS, 0.0)?;
             let (beta, _) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
             let mut scale = TorqueScale { transmission_nm: 0.0, inertial_nm: 0.0, speed: 0.0, relative_angle: 0.0 };
             self.for_each_sample(law, |s| {

@@ -214,8 +214,11 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         .into_iter()
         .map(|e| {
             let mut entry = effect_entry(e.name(), &effect_parameters(&o.final_fit, e));
-            entry["plausible_limits"] = plausible_limits(prob, &o.final_fit, e);
-            entry["at_plausible_limit"] = json!(at_plausible_limit(prob, &o.final_fit, e));
+            let limits = plausible(prob, &o.final_fit, e);
+            entry["plausible_limits"] =
+                Value::Object(limits.iter().map(|&(n, l, _)| (n.to_string(), json!(l))).collect());
+            // at the limit to 1e-6 relative
+            entry["at_plausible_limit"] = json!(limits.iter().any(|&(_, l, x)| x.abs() >= l * (1.0 - 1e-6)));
             entry
         })
         .collect();
@@ -278,15 +281,6 @@ fn plausible(prob: &Problem, fit: &Fit, e: Effect) -> Vec<(&'static str, f64, f6
     let (o, _) = fit.spec.offsets(prob.n_groups).into_iter().find(|&(_, x)| x == e).expect("effect in the fit");
     let first = o - 2 * prob.n_groups;
     e.params().iter().enumerate().filter_map(|(i, p)| limits[first + i].map(|l| (p.0, l, fit.p[o + i]))).collect()
-}
-
-fn plausible_limits(prob: &Problem, fit: &Fit, e: Effect) -> Value {
-    Value::Object(plausible(prob, fit, e).into_iter().map(|(n, l, _)| (n.to_string(), json!(l))).collect())
-}
-
-/// Whether a parameter of effect `e` sits at its plausible limit (to 1e-6 relative).
-pub fn at_plausible_limit(prob: &Problem, fit: &Fit, e: Effect) -> bool {
-    plausible(prob, fit, e).iter().any(|&(_, l, x)| x.abs() >= l * (1.0 - 1e-6))
 }
 
 fn fmt_params(fit: &Fit, e: Effect) -> String {

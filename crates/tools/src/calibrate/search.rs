@@ -201,7 +201,7 @@ pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String
 /// friction), the lowest BIC on the regression's independent rows among those in which each
 /// effect's removal costs more than `BIC_MARGIN`: the best `count` of them, best first. The
 /// regression is formed once; every subset is solved from its normal equations.
-pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> Vec<(Vec<Effect>, EquationError)> {
+pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> Vec<Vec<Effect>> {
     let all = EQUATION_ERROR_EFFECTS;
     let Some(normal) = prob.normal_equations(law, &all, 0.0) else { return Vec::new() };
     // with backlash: the same regression at each width of the grid (the best width per subset)
@@ -259,14 +259,7 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
         ranked.iter().take(count).map(|&m| (effects_of(m), bic[m as usize].unwrap_or(f64::NAN))).collect::<Vec<_>>(),
         bic[0].unwrap_or(f64::NAN),
     ));
-    ranked
-        .into_iter()
-        .take(count)
-        .filter_map(|m| {
-            let effects = effects_of(m);
-            prob.equation_error(law, &effects).map(|e| (effects, e))
-        })
-        .collect()
+    ranked.into_iter().take(count).map(effects_of).collect()
 }
 
 /// The equation error's combinations refitted at once through the FMU: their linear effects with
@@ -303,7 +296,7 @@ fn try_combination(
     // proposed under every law.
     let mut subsets: Vec<Vec<Effect>> = Vec::new();
     for &(law, _) in &laws {
-        for (subset, _) in equation_error_subsets(prob, law, SUBSETS_REFITTED) {
+        for subset in equation_error_subsets(prob, law, SUBSETS_REFITTED) {
             let same = subset.len() + kept_effects.len() == current.spec.effects.len()
                 && subset.iter().all(|e| current.spec.effects.contains(e));
             if !subset.is_empty() && !same && !subsets.contains(&subset) {
@@ -311,33 +304,26 @@ fn try_combination(
             }
         }
     }
-    let proposals: Vec<(Structure, Vec<Effect>, EquationError)> = laws
-        .iter()
-        .flat_map(|&structure| {
-            subsets.iter().filter_map(move |subset| {
-                prob.equation_error(structure.0, subset).map(|ee| (structure, subset.clone(), ee))
-            })
-        })
-        .collect();
-    // a model an earlier pass refitted from the same equation error is not refitted again (only the
-    // current transmission's start would differ)
-    let proposals: Vec<_> = proposals
-        .into_iter()
-        .filter(|(structure, subset, _)| {
+    let mut proposals: Vec<(Structure, Vec<Effect>, EquationError)> = Vec::new();
+    for &structure in &laws {
+        for subset in &subsets {
             let mut effects = kept_effects.clone();
             effects.extend_from_slice(subset);
-            // (a Stribeck excess is defined over a Coulomb level)
-            if effects.contains(&Effect::StribeckFriction) && !effects.contains(&Effect::CoulombFriction) {
-                return false;
+            // a Stribeck excess is defined over a Coulomb level; a model an earlier pass refitted
+            // from the same equation error is not refitted again (only the current transmission's
+            // start would differ)
+            let stribeck_alone =
+                effects.contains(&Effect::StribeckFriction) && !effects.contains(&Effect::CoulombFriction);
+            let key = (structure, effects);
+            if stribeck_alone || refitted.contains(&key) {
+                continue;
             }
-            let key = (*structure, effects);
-            let new = !refitted.contains(&key);
-            if new {
-                refitted.push(key);
+            refitted.push(key);
+            if let Some(ee) = prob.equation_error(structure.0, subset) {
+                proposals.push((structure, subset.clone(), ee));
             }
-            new
-        })
-        .collect();
+        }
+    }
     if proposals.is_empty() {
         return None;
     }
@@ -346,10 +332,8 @@ fn try_combination(
     let feasible = !at_bound(prob, current);
     let (sprob, scurrent, ssig) = screened(screen, prob, current, sig);
     let t = std::time::Instant::now();
-    // The equation error ranks close structures unreliably (link damping or Coulomb friction under
-    // a damping law that is only approximately right): its best few subsets are each refitted
-    // through the FMU. Each structure's best from every start (a transmission that absorbed an
-    // effect, or sits at a bound, is a valley of its own), the others from their cheapest start.
+    // Each structure's best subset from every start (a transmission that absorbed an effect, or
+    // sits at a bound, is a valley of its own), the others from their cheapest start.
     let mut fits: Vec<Fit> = Vec::new();
     let mut first_of: Vec<Structure> = Vec::new();
     for ((law, springs), subset, ee) in &proposals {
