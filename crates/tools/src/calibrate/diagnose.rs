@@ -11,9 +11,9 @@
 //! can explain and with what value (one Gauss–Newton step from "off"), which ranks the candidates.
 
 use super::signal::harmonics;
-use nalgebra::{DMatrix, DVector};
+use nalgebra::DMatrix;
 
-use super::fit::{spd_inverse, Effect, Fit, ModelSpec, Problem, MAXWELL_TIME_GRID};
+use super::fit::{Effect, Fit, ModelSpec, Problem, MAXWELL_TIME_GRID};
 
 /// Stribeck velocities tried before the Stribeck excess's own fit (its velocity is not
 /// identifiable while the excess is 0), rad/s.
@@ -224,33 +224,12 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     }
 }
 
-/// One ranked candidate.
-#[derive(Clone, Debug)]
-pub struct Candidate {
-    pub effect: Effect,
-    /// Fraction of the residual's sum of squares the effect explains (linearised), 0–1.
-    pub score: f64,
-    /// BIC change predicted by the linearised fit.
-    pub predicted_delta_bic: f64,
-    /// Starting values of the effect's internal parameters for the refit.
-    pub start: Vec<f64>,
-    pub evidence: String,
-}
-
-/// Residual sum of squares after the linear least-squares fit of r on the columns of m.
-fn projected(m: &DMatrix<f64>, r: &DVector<f64>) -> (f64, DVector<f64>) {
-    let a = m.transpose() * m;
-    let g = m.transpose() * r;
-    let beta = spd_inverse(&a) * &g;
-    let fitted = m * &beta;
-    ((r - fitted).norm_squared(), beta)
-}
+/// One ranked candidate (the ranking every rig shares: `stepwise::linearised`).
+pub type Candidate = super::stepwise::Ranked<Effect>;
 
 /// Score test of every effect not yet in the model; best first.
 pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
-    let n = fit.n as f64;
-    let r = DVector::from_column_slice(&fit.residual);
-    let (sse_now, _) = projected(&fit.jacobian, &r);
+    let sse_now = super::stepwise::linearised(&fit.jacobian, &fit.residual, &DMatrix::zeros(fit.n, 0)).0;
     // a lag behind a constant thermocouple changes nothing: no simulation needed to know that
     let heating = thermocouple_varies(prob);
     let mut out = Vec::new();
@@ -320,14 +299,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
                     }
                 }
             }
-            let m = DMatrix::from_fn(fit.n, base + probe_cols.len(), |i, j| {
-                if j < base {
-                    fit.jacobian[(i, j)]
-                } else {
-                    s[(i, j - base)]
-                }
-            });
-            let (sse_aug, beta) = projected(&m, &r);
+            let (_, sse_aug, beta) = super::stepwise::linearised(&fit.jacobian, &fit.residual, &s);
             let mut start = p0[base..].to_vec();
             let mut physical = true;
             for (ci, &j) in probe_cols.iter().enumerate() {
@@ -343,7 +315,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
         }
         let (gain, start) = best.unwrap_or((0.0, vec![0.0; k]));
         let score = gain / sse_now.max(1e-300);
-        let predicted_delta_bic = n * ((sse_now - gain) / sse_now).max(1e-300).ln() + k as f64 * n.ln();
+        let predicted_delta_bic = super::stepwise::predicted_delta_bic(fit.n, sse_now, gain, k);
         let evidence = evidence_text(prob, effect, sig, score, predicted_delta_bic, &start);
         out.push(Candidate { effect, score, predicted_delta_bic, start, evidence });
     }

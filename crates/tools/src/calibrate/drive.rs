@@ -24,6 +24,7 @@ use super::data::{Axis, DriveKind, Run};
 use super::diagnose::corr;
 use super::fit::spd_inverse;
 use super::sim::Simulator;
+use super::stepwise::{Budget, Ranked, Record, Rig, Verdict, BIC_MARGIN};
 
 /// Fitted quantities.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -723,17 +724,17 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     })
 }
 
-/// One candidate's score test.
-#[derive(Clone, Debug)]
-pub struct DriveCandidate {
-    pub effect: DriveEffect,
-    pub score: f64,
-    pub start: Vec<f64>,
-    pub evidence: String,
-}
+/// One candidate's score test (the ranking every rig shares: `stepwise::linearised`).
+pub type DriveCandidate = Ranked<DriveEffect>;
 
-/// One refit tried: (effect, BIC before, after, held-out relerr before, after, kept, Wald χ²).
-pub type Attempt = (DriveEffect, f64, f64, Option<f64>, Option<f64>, bool, f64);
+/// A refit's evidence beyond BIC: the held-out relerr (%) of the model before and after (scored,
+/// never used) and the smallest Wald χ² of the added effects' parameters.
+#[derive(Clone, Copy, Debug)]
+pub struct DriveDetail {
+    pub held_before: Option<f64>,
+    pub held_after: Option<f64>,
+    pub wald: f64,
+}
 
 /// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
 pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
@@ -757,8 +758,9 @@ pub struct DriveOutcome {
     pub baseline: DriveFit,
     pub final_fit: DriveFit,
     pub inverse: Option<InverseModel>,
-    pub rounds: Vec<(Vec<DriveCandidate>, Vec<Attempt>)>,
-    /// The model after each accepted round (baseline first).
+    /// Rounds, combinations, the backward check and the budget (`stepwise::search`).
+    pub record: Record<DriveEffect, (), DriveDetail>,
+    /// The model after each accepted step (baseline first).
     pub path: Vec<DriveFit>,
     pub validation: Option<(Vec<DriveInput>, Metrics, Metrics)>,
     /// Held-out simulations of the baseline and the final model.
@@ -783,13 +785,6 @@ fn residual_corr_sign(prob: &DriveProblem, fit: &DriveFit) -> f64 {
 }
 
 fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> Vec<DriveCandidate> {
-    let r = DVector::from_column_slice(&fit.residual);
-    let project = |m: &DMatrix<f64>| -> (f64, DVector<f64>) {
-        let a = m.transpose() * m;
-        let beta = spd_inverse(&a) * (m.transpose() * &r);
-        ((&r - m * &beta).norm_squared(), beta)
-    };
-    let (sse_now, _) = project(&fit.jacobian);
     let mut out = Vec::new();
     for effect in DriveEffect::ALL {
         if fit.effects.contains(&effect) {
@@ -832,19 +827,19 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
         if cols.len() != probed.len() {
             continue;
         }
-        let m = DMatrix::from_fn(fit.n(), base + cols.len(), |i, j| {
-            if j < base {
-                fit.jacobian[(i, j)]
-            } else {
-                cols[j - base][i]
-            }
-        });
-        let (sse_aug, beta) = project(&m);
+        let probes = DMatrix::from_fn(fit.n(), cols.len(), |i, j| cols[j][i]);
+        let (sse_now, sse_aug, beta) = super::stepwise::linearised(&fit.jacobian, &fit.residual, &probes);
         let mut start = init.clone();
         for (c, &i) in probed.iter().enumerate() {
             start[i] += beta[base + c];
         }
         let score = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
+        let predicted_delta_bic = super::stepwise::predicted_delta_bic(
+            fit.n(),
+            sse_now,
+            (sse_now - sse_aug).max(0.0),
+            effect.params().len(),
+        );
         let evidence = match (effect, inverse) {
             (DriveEffect::CoulombFriction, Some(iv)) => format!(
                 "explains {:.1} % of the position residual (FMU sensitivity projected on it; linearised level {:.4}); \
@@ -886,15 +881,13 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
                 }
             ),
         };
-        out.push(DriveCandidate { effect, score, start, evidence });
+        out.push(DriveCandidate { effect, score, predicted_delta_bic, start, evidence });
     }
     out.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(std::cmp::Ordering::Equal));
     out
 }
 
-/// An effect is kept when BIC falls by more than this (Kass & Raftery: very strong) and its
-/// parameters pass the Wald test. Held-out runs are only scored: they judge the model, never choose it.
-pub const BIC_MARGIN: f64 = 10.0;
+/// Levenberg–Marquardt iterations of every drive fit.
 pub const MAX_ITERATIONS: usize = 30;
 
 /// Simulates held-out runs with a fit's parameters.
@@ -990,7 +983,143 @@ pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadC
     })
 }
 
-pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Result<DriveOutcome, String> {
+/// Drive logs as a rig of the one search (`stepwise`): runs driven by the measured torque or by a
+/// reference through the rig's controller, every fit on every sample (no screening share), an
+/// effect kept when BIC falls by more than the margin and its parameters pass a Wald test with the
+/// block-sandwich covariance (BIC over every sample overrates small effects on a correlated
+/// residual). The held-out runs are simulated after every refit and reported, never consulted.
+pub struct DriveRig<'p, 'a> {
+    prob: &'p DriveProblem<'a>,
+    held: Option<&'p DriveProblem<'a>>,
+    inverse: &'p Option<InverseModel>,
+    /// Held-out relerr of the models scored so far, by BIC (a model is scored once).
+    held_scores: std::cell::RefCell<Vec<(u64, Option<f64>)>>,
+}
+
+impl DriveRig<'_, '_> {
+    fn held_err(&self, f: &DriveFit) -> Option<f64> {
+        let key = f.bic().to_bits();
+        if let Some(&(_, h)) = self.held_scores.borrow().iter().find(|(k, _)| *k == key) {
+            return h;
+        }
+        let h = self.held.and_then(|h| predict(self.prob, h, f)).map(|(_, m)| m.relerr_percent);
+        self.held_scores.borrow_mut().push((key, h));
+        h
+    }
+}
+
+impl Rig for DriveRig<'_, '_> {
+    type Effect = DriveEffect;
+    type Model = DriveFit;
+    type Detail = DriveDetail;
+    type State = ();
+
+    fn name(e: DriveEffect) -> &'static str {
+        e.name()
+    }
+    fn effects(&self, m: &DriveFit) -> Vec<DriveEffect> {
+        m.effects.clone()
+    }
+    fn effect_count(&self, m: &DriveFit) -> usize {
+        m.effects.len()
+    }
+    fn bic(&self, m: &DriveFit) -> f64 {
+        m.bic()
+    }
+    /// Rounds go on while an effect earns its place (the friction library is small).
+    fn structure_left(&self, _m: &DriveFit) -> bool {
+        true
+    }
+    fn rankable(&self, _m: &DriveFit) -> bool {
+        true
+    }
+    fn state(&self, _m: &DriveFit) {}
+    fn rank(&self, m: &DriveFit) -> Vec<DriveCandidate> {
+        rank(self.prob, m, self.inverse)
+    }
+    fn refit_with(&self, m: &DriveFit, added: &[&DriveCandidate]) -> Option<DriveFit> {
+        let prob = self.prob;
+        let mut spec = m.spec.clone();
+        let mut p = m.p.clone();
+        let mut effects = m.effects.clone();
+        for c in added {
+            spec.extend_from_slice(c.effect.params());
+            p.extend_from_slice(&c.start);
+            effects.push(c.effect);
+        }
+        // for Coulomb friction alone also the inverse model's (M, Fv, L, Fc): the baseline's viscous
+        // friction has absorbed the Coulomb level and, through a saturating controller, the score
+        // test's start can lie in another valley
+        if let ([c], Some(iv)) = (added, self.inverse) {
+            if c.effect == DriveEffect::CoulombFriction {
+                let mut q = m.p.clone();
+                for (x, param) in q.iter_mut().zip(&m.spec) {
+                    match param {
+                        Param::LnInertia if iv.with_coulomb_inertia > 0.0 => *x = iv.with_coulomb_inertia.ln(),
+                        Param::Viscous => *x = iv.with_coulomb_viscous.max(0.0),
+                        Param::ConstantLoad => *x = iv.with_coulomb_load,
+                        _ => {}
+                    }
+                }
+                q.push(iv.coulomb.max(0.0));
+                let cost = |x: &[f64]| {
+                    prob.simulate_all(&spec, x)
+                        .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
+                        .unwrap_or(f64::INFINITY)
+                };
+                if cost(&q) < cost(&p) {
+                    p = q;
+                }
+            }
+        }
+        prob.fit(spec, effects, p, MAX_ITERATIONS).ok()
+    }
+    fn judge(&self, m: &DriveFit, refit: &DriveFit) -> Verdict<DriveDetail> {
+        let added: Vec<DriveEffect> = refit.effects.iter().copied().filter(|e| !m.effects.contains(e)).collect();
+        let walds: Vec<(f64, usize)> = added.iter().map(|&e| (wald(refit, e), e.params().len())).collect();
+        let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof));
+        Verdict {
+            keep,
+            bic_before: m.bic(),
+            bic_after: refit.bic(),
+            detail: DriveDetail {
+                held_before: self.held_err(m),
+                held_after: self.held_err(refit),
+                wald: walds.iter().map(|w| w.0).fold(f64::INFINITY, f64::min),
+            },
+        }
+    }
+    fn converge(&self, _m: &DriveFit, winner: DriveFit, _round: usize) -> Option<DriveFit> {
+        Some(winner)
+    }
+    fn adopt(&self, m: DriveFit, _round: usize) -> DriveFit {
+        m
+    }
+    fn removal_delta_bic(&self, m: &DriveFit, e: DriveEffect) -> f64 {
+        let idx: Vec<usize> = e.params().iter().filter_map(|q| m.spec.iter().position(|x| x == q)).collect();
+        super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx)
+    }
+    fn without(&self, m: &DriveFit, e: DriveEffect) -> Option<DriveFit> {
+        // the asymmetry and the Stribeck excess are defined over Coulomb friction
+        if e == DriveEffect::CoulombFriction && m.effects.len() > 1 {
+            return None;
+        }
+        let keep: Vec<usize> = (0..m.spec.len()).filter(|&i| !e.params().contains(&m.spec[i])).collect();
+        let spec = keep.iter().map(|&i| m.spec[i]).collect();
+        let p = keep.iter().map(|&i| m.p[i]).collect();
+        let effects = m.effects.iter().copied().filter(|&x| x != e).collect();
+        self.prob.fit(spec, effects, p, MAX_ITERATIONS).ok()
+    }
+    fn polish(&self, m: DriveFit) -> Option<DriveFit> {
+        Some(m)
+    }
+}
+
+pub fn calibrate(
+    prob: &mut DriveProblem,
+    held: Option<&mut DriveProblem>,
+    budget: &Budget,
+) -> Result<DriveOutcome, String> {
     let inverse = if prob.inputs.iter().all(|i| i.rigid) { inverse_model(&prob.inputs) } else { None };
     // start: the inverse model's inertia on a rigid drive, else the FMU's default link inertia
     prob.inertia_start = match &inverse {
@@ -1019,75 +1148,9 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
         &*h
     });
     let mut load_column = held.and_then(|h| diagnose_load_column(h, &baseline));
-    let held_err = |f: &DriveFit| held.and_then(|h| predict(prob, h, f)).map(|(_, m)| m.relerr_percent);
-    let mut current = baseline.clone();
-    let mut current_held = held_err(&current);
-    let mut rounds = Vec::new();
-    let mut path = vec![baseline.clone()];
-    loop {
-        let candidates = rank(prob, &current, &inverse);
-        let mut attempts = Vec::new();
-        let mut best: Option<(DriveFit, Option<f64>)> = None;
-        for c in &candidates {
-            let mut spec = current.spec.clone();
-            spec.extend_from_slice(c.effect.params());
-            // starts: the current fit with the score test's linearised values; for Coulomb friction also
-            // the inverse model's (M, Fv, L, Fc), because the baseline's viscous friction has absorbed the
-            // Coulomb level and, through a saturating controller, that start can lie in another valley
-            let mut p = current.p.clone();
-            p.extend_from_slice(&c.start);
-            if let (DriveEffect::CoulombFriction, Some(iv)) = (c.effect, &inverse) {
-                let mut q = current.p.clone();
-                for (x, param) in q.iter_mut().zip(&current.spec) {
-                    match param {
-                        Param::LnInertia if iv.with_coulomb_inertia > 0.0 => *x = iv.with_coulomb_inertia.ln(),
-                        Param::Viscous => *x = iv.with_coulomb_viscous.max(0.0),
-                        Param::ConstantLoad => *x = iv.with_coulomb_load,
-                        _ => {}
-                    }
-                }
-                q.push(iv.coulomb.max(0.0));
-                let cost = |x: &[f64]| {
-                    prob.simulate_all(&spec, x)
-                        .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
-                        .unwrap_or(f64::INFINITY)
-                };
-                if cost(&q) < cost(&p) {
-                    p = q;
-                }
-            }
-            let mut effects = current.effects.clone();
-            effects.push(c.effect);
-            let Ok(refit) = prob.fit(spec, effects, p, MAX_ITERATIONS) else { continue };
-            let h = held_err(&refit);
-            let bic_ok = refit.bic() < current.bic() - BIC_MARGIN;
-            // BIC over every sample overrates small effects on a correlated residual: the effect's
-            // parameters must also stand out of their block-sandwich errors
-            let w = wald(&refit, c.effect);
-            let keep = bic_ok && w > wald_limit(c.effect.params().len());
-            attempts.push((c.effect, current.bic(), refit.bic(), current_held, h, keep, w));
-            if keep && best.as_ref().is_none_or(|b| refit.bic() < b.0.bic()) {
-                best = Some((refit, h));
-            }
-        }
-        if let Some((f, _)) = &best {
-            for a in attempts.iter_mut() {
-                a.5 = a.5 && f.effects.last() == Some(&a.0);
-            }
-        }
-        rounds.push((candidates, attempts));
-        match best {
-            Some((f, h)) => {
-                path.push(f.clone());
-                current = f;
-                current_held = h;
-            }
-            None => break,
-        }
-        if current.effects.len() == DriveEffect::ALL.len() {
-            break;
-        }
-    }
+    let rig = DriveRig { prob, held, inverse: &inverse, held_scores: std::cell::RefCell::new(Vec::new()) };
+    let found = super::stepwise::search(&rig, baseline.clone(), budget);
+    let current = found.model;
     let mut validation_sims = None;
     let validation = held.and_then(|h| {
         let (sb, b) = predict(prob, h, &baseline)?;
@@ -1105,8 +1168,8 @@ pub fn calibrate(prob: &mut DriveProblem, held: Option<&mut DriveProblem>) -> Re
         baseline,
         final_fit: current,
         inverse,
-        rounds,
-        path,
+        record: found.record,
+        path: found.path,
         validation,
         validation_sims,
         load_column,
@@ -1235,10 +1298,11 @@ pub fn report_json(
     let bm = metrics(&prob.inputs, &o.baseline.sims);
     let fm = metrics(&prob.inputs, &o.final_fit.sims);
     let diagnosis: Vec<Value> = o
+        .record
         .rounds
         .iter()
-        .flat_map(|(c, _)| c.iter())
-        .map(|c| json!({"effect": c.effect.name(), "score": c.score, "evidence": c.evidence}))
+        .flat_map(|r| r.candidates.iter())
+        .map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence}))
         .collect();
     let added: Vec<Value> = o
         .final_fit
@@ -1286,17 +1350,7 @@ pub fn report_json(
             e
         })
         .collect();
-    let rounds: Vec<Value> = o
-        .rounds
-        .iter()
-        .map(|(c, a)| {
-            json!({
-                "candidates": c.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "start": c.start})).collect::<Vec<_>>(),
-                "attempts": a.iter().map(|a| json!({"effect": a.0.name(), "bic_before": a.1, "bic_after": a.2,
-                    "held_out_relerr_before": a.3, "held_out_relerr_after": a.4, "kept": a.5, "wald_chi2": a.6})).collect::<Vec<_>>(),
-            })
-        })
-        .collect();
+    let record = record_json(o);
     let mut j = json!({
         "runs": runs.iter().map(run_json).collect::<Vec<_>>(),
         "units": {"position": pu, "torque": tu, "inertia": iu},
@@ -1310,7 +1364,10 @@ pub fn report_json(
         "parameters": {"baseline": params(&o.baseline), "final": params(&o.final_fit),
                        "standard_errors": "block sandwich: (JᵀJ)⁻¹ Σ_b s_b s_bᵀ (JᵀJ)⁻¹ over 20 contiguous blocks per run, so residuals correlated within a block do not shrink them"},
         "residual": {"baseline_corr_sign_speed": o.residual_corr_sign, "final_corr_sign_speed": o.final_corr_sign},
-        "rounds": rounds,
+        "rounds": record["rounds"],
+        "combinations": record["combinations"],
+        "pruned_effects": record["pruned_effects"],
+        "search_budget": record["search_budget"],
         "method": {
             "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
             "fit": "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)",
@@ -1372,6 +1429,18 @@ pub fn report_json(
         j["comparison"] = comparison(o, p);
     }
     j
+}
+
+/// The drive search's record (`stepwise::record_json`): refits with their Wald χ² and held-out errors.
+fn record_json(o: &DriveOutcome) -> Value {
+    super::stepwise::record_json(
+        &o.record,
+        DriveEffect::name,
+        |_| json!({}),
+        |d: &DriveDetail| {
+            json!({"held_out_relerr_before": d.held_before, "held_out_relerr_after": d.held_after, "wald_chi2": d.wald})
+        },
+    )
 }
 
 /// How load columns are scaled, in the reports' words.
@@ -1597,21 +1666,13 @@ pub fn report_markdown(j: &Value) -> String {
         }
     }
     s += "\n## Chain of evidence\n\n";
-    for (i, r) in j["rounds"].as_array().into_iter().flatten().enumerate() {
-        s += &format!("Round {}:\n", i + 1);
-        for a in r["attempts"].as_array().into_iter().flatten() {
-            s += &format!(
-                "- {}: BIC {} → {}, Wald χ² {}, held-out relerr {} → {} %, {}\n",
-                a["effect"].as_str().unwrap_or(""),
-                f(&a["bic_before"]),
-                f(&a["bic_after"]),
-                f(&a["wald_chi2"]),
-                f(&a["held_out_relerr_before"]),
-                f(&a["held_out_relerr_after"]),
-                if a["kept"].as_bool() == Some(true) { "kept" } else { "not kept" }
-            );
-        }
-    }
+    let record = json!({"rounds": j["rounds"], "combinations": j["combinations"], "pruned_effects": j["pruned_effects"],
+                        "search_budget": j["search_budget"]});
+    s += &super::stepwise::record_markdown(
+        &record,
+        |_| String::new(),
+        |a| format!(", Wald χ² {}, held-out relerr {} → {} %", f(&a["wald_chi2"]), f(&a["held_out_relerr_before"]), f(&a["held_out_relerr_after"])),
+    );
     for d in j["diagnosis"].as_array().into_iter().flatten() {
         s += &format!("\n- {}: {}\n", d["effect"].as_str().unwrap_or(""), d["evidence"].as_str().unwrap_or(""));
     }

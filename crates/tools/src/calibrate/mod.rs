@@ -15,6 +15,7 @@ pub mod reference;
 pub mod report;
 pub mod search;
 pub mod signal;
+pub mod stepwise;
 pub mod sim;
 pub mod synthetic;
 
@@ -547,7 +548,8 @@ fn calibrate_drive(
     } else {
         Some(drive::DriveProblem::new(&sim, &held, held_out_groups(&held, &temperatures), temperatures.len()))
     };
-    let outcome = drive::calibrate(&mut prob, held_prob.as_mut())?;
+    let budget = stepwise::Budget::seconds(args.search_budget);
+    let outcome = drive::calibrate(&mut prob, held_prob.as_mut(), &budget)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
     if let Some(same) = published.as_ref().and_then(|p| drive::published_same_simulation(&prob, held_prob.as_ref(), p))

@@ -204,7 +204,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         .iter()
         .map(|r| json!({"file": r.name(), "temperature_c": r.mean_temperature_c(), "frequency_hz": r.frequency_hz, "samples": r.time.len()}))
         .collect();
-    let diagnosis: Vec<Value> = o.rounds.first().map_or(vec![], |r| {
+    let diagnosis: Vec<Value> = o.record.rounds.first().map_or(vec![], |r| {
         r.candidates.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence})).collect()
     });
     let added: Vec<Value> = o
@@ -222,17 +222,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
             entry
         })
         .collect();
-    let rounds: Vec<Value> = o
-        .rounds
-        .iter()
-        .map(|r| {
-            json!({
-                "structure_ratio": r.signatures.structure_ratio,
-                "ranking": r.candidates.iter().map(|c| json!({"effect": c.effect.name(), "score": c.score, "predicted_delta_bic": c.predicted_delta_bic, "evidence": c.evidence})).collect::<Vec<_>>(),
-                "attempts": r.attempts.iter().map(|a| json!({"effect": a.0.name(), "bic_before": a.1, "bic_after": a.2, "structure_before": a.3, "structure_after": a.4, "kept": a.5})).collect::<Vec<_>>(),
-            })
-        })
-        .collect();
+    let record = record_json(o);
     json!({
         "runs": runs_json,
         "baseline": metrics(prob, &o.baseline),
@@ -240,7 +230,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "added_effects": added,
         "final": metrics(prob, &o.final_fit),
         "unexplained": o.unexplained,
-        "pruned_effects": o.pruned.iter().map(|p| json!({"effect": p.0.name(), "bic_with": p.1, "bic_without": p.2})).collect::<Vec<_>>(),
+        "pruned_effects": record["pruned_effects"],
         "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
         "plausibility": prob.torque_scale().map(|t| json!({
@@ -257,12 +247,9 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
             "compared": o.laws.iter().map(|r| json!({"stage": r.stage, "law": r.structure.0.name(), "spring_bank": r.structure.1.name(), "rmse_rad": r.rmse, "bic": r.bic})).collect::<Vec<_>>(),
         },
         "identified_baseline": identified(prob, &o.baseline, temps),
-        "rounds": rounds,
-        "search_budget": o.budget_exhausted.map(|(seconds, what)| json!({"seconds": seconds, "exhausted": true,
-            "skipped": what, "note": "the search stopped when its time budget ran out (--search-budget) and kept the best model found so far"})),
-        "combinations": o.combinations.iter().map(|c| json!({"stage": c.stage, "effects": c.effects.iter().map(|e| e.name()).collect::<Vec<_>>(),
-            "bic_before": c.before.0, "bic_after": c.after.0, "structure_before": c.before.1, "structure_after": c.after.1, "kept": c.kept,
-            "what": "the equation error's best subset of linear effects (transmission per temperature fitted beside them), refitted at once through the FMU"})).collect::<Vec<_>>(),
+        "rounds": record["rounds"],
+        "search_budget": record["search_budget"],
+        "combinations": record["combinations"],
         "signatures": {"baseline": signature_json(&o.baseline_signatures), "final": signature_json(&o.final_signatures)},
         "method": {
             "fit": "per temperature the transmission's stiffness K and damping C (log-parameters; springs and PCL scaled together), plus the effects' parameters; the baseline starts from the best of a closed form (frequency response K* = Jω²H/(H−1) for sinusoidal runs, equation error otherwise), the material table and a mix, then Levenberg–Marquardt on every sample, the FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians",
@@ -272,6 +259,17 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
             "seconds": seconds,
         },
     })
+}
+
+/// The device search's record (`stepwise::record_json`): rounds with the screened residual's
+/// structure ratio, refits with the structure ratio before and after.
+fn record_json(o: &Outcome) -> Value {
+    super::stepwise::record_json(
+        &o.record,
+        Effect::name,
+        |s: &super::diagnose::Signatures| json!({"structure_ratio": s.structure_ratio}),
+        |d: &(f64, f64)| json!({"structure_before": d.0, "structure_after": d.1}),
+    )
 }
 
 /// (internal name, plausible limit, fitted value) of each parameter of effect `e` in `fit` that has
@@ -335,52 +333,18 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
             s += &format!("- {}\n", n.as_str().unwrap_or_default());
         }
     }
-    if let Some((seconds, what)) = o.budget_exhausted {
-        s += &format!("\n**The search ran out of its {seconds} s budget** before {what}: the model below is the best found by then (`--search-budget`).\n");
-    }
     s += "\n## Chain of evidence\n\n";
-    for c in &o.combinations {
-        s += &format!(
-            "Combination ({}) from the equation error's best subset, refitted at once: **{}**: BIC {:.0} → {:.0}, structure {:.1} → {:.1}: {}.\n\n",
-            c.stage,
-            c.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(" + "),
-            c.before.0,
-            c.after.0,
-            c.before.1,
-            c.after.1,
-            if c.kept { "kept" } else { "rejected" }
-        );
-    }
-    for (i, r) in o.rounds.iter().enumerate() {
-        s += &format!("### Round {} (residual structure {:.1}× white noise)\n\n| effect | score | predicted ΔBIC | evidence |\n|---|---|---|---|\n", i + 1, r.signatures.structure_ratio);
-        for c in &r.candidates {
-            s +=
-                &format!("| {} | {:.3} | {:+.0} | {} |\n", c.effect.name(), c.score, c.predicted_delta_bic, c.evidence);
-        }
-        for a in &r.attempts {
-            s += &format!(
-                "\nRefit with **{}**: BIC {:.0} → {:.0}, structure {:.1} → {:.1}: {}.\n",
-                a.0.name(),
-                a.1,
-                a.2,
-                a.3,
-                a.4,
-                if a.5 { "kept" } else { "rejected" }
-            );
-        }
-        if r.attempts.is_empty() && r.signatures.white() {
-            s += "\nThe residual is white at the noise floor: nothing to add.\n";
-        } else if r.attempts.is_empty() {
-            s += "\nNo candidate predicted a BIC gain worth a refit.\n";
-        }
-        s += "\n";
-    }
-    if o.rounds.is_empty() && o.budget_exhausted.is_none() {
-        s += "The baseline residual is already white at the noise floor: no effect searched for.\n\n";
-    }
-    for p in &o.pruned {
-        s += &format!("Backward check: **{}** removed again (BIC {:.0} with it, {:.0} without: redundant once the later effects were in).\n\n", p.0.name(), p.1, p.2);
-    }
+    s += &super::stepwise::record_markdown(
+        &record_json(o),
+        |r| format!(" (residual structure {:.1}× white noise)", r["structure_ratio"].as_f64().unwrap_or(f64::NAN)),
+        |a| {
+            format!(
+                ", structure {:.1} → {:.1}",
+                a["structure_before"].as_f64().unwrap_or(f64::NAN),
+                a["structure_after"].as_f64().unwrap_or(f64::NAN)
+            )
+        },
+    );
     s += "## Added effects\n\n";
     if o.final_fit.spec.effects.is_empty() {
         s += "None.\n";

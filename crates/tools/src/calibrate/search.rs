@@ -1,22 +1,19 @@
 //! The loop: fit the nominal model, diagnose, add the best-supported effect, refit everything,
 //! keep it only if it earns its place, repeat until nothing in the library helps.
 
-use super::diagnose::{rank, signatures, Candidate, Signatures};
+use super::diagnose::{rank, signatures, Signatures};
 use super::fit::{
     levenberg_marquardt, regressor_columns, DampingLaw, Effect, EquationError, Fit, ModelSpec, NormalEquations,
     Problem, SpringBank, EQUATION_ERROR_EFFECTS,
 };
 
-/// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
-/// on the Kass & Raftery (1995) scale (ΔBIC > 10).
-pub const BIC_MARGIN: f64 = 10.0;
+pub use super::stepwise::{
+    Budget, BIC_MARGIN, COMBINATION_PASSES, MAX_EFFECTS, PAIR_POOL, PRUNE_SKIP, SHORTLIST_SHARE, TRIES_PER_ROUND,
+};
+use super::stepwise::{Attempt, Ranked, Record, Rig, Verdict};
+
 /// Fraction of the residual's low-frequency structure (over white noise) an effect must remove.
 pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
-/// Refits tried per round, best-ranked first.
-pub const TRIES_PER_ROUND: usize = 3;
-/// The one-at-a-time rounds stop at this many effects as reported (asymmetric friction with the
-/// Coulomb and viscous levels under it counts once).
-pub const MAX_EFFECTS: usize = 5;
 pub const MAX_ITERATIONS: usize = 25;
 /// Levenberg–Marquardt iterations a shortlisted candidate gets before the comparison; the
 /// winner then runs to convergence (speed: most of a search is spent on losers).
@@ -25,21 +22,6 @@ pub const SCREEN_ITERATIONS: usize = 4;
 /// The equation error's best subsets refitted through the FMU when combinations are tried.
 pub const SUBSETS_REFITTED: usize = 3;
 
-/// Times the equation error's combination is tried after the one-at-a-time rounds (each accepted
-/// one is followed by rounds again).
-pub const COMBINATION_PASSES: usize = 2;
-
-/// Candidates (by score, each predicting a BIC gain) refitted in pairs when no single one earns
-/// its place: 4 give 6 pairs.
-pub const PAIR_POOL: usize = 4;
-
-/// A candidate is refitted only if its linearised score is at least this share of the best one's.
-pub const SHORTLIST_SHARE: f64 = 0.25;
-
-/// The backward check skips the refit of an effect whose linearised removal costs more than this
-/// many BIC margins.
-pub const PRUNE_SKIP: f64 = 10.0;
-
 /// An effect earns its place if BIC falls by more than `BIC_MARGIN` and the residual loses at least
 /// `STRUCTURE_DROP` of its low-frequency excess over white noise (BIC alone, with N = every
 /// sample, over-rewards small effects fitting correlated leftovers).
@@ -47,6 +29,16 @@ fn earns_its_place(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Sig
     let excess = |x: f64| (x - 1.0).max(0.0);
     refit.bic() < current.bic() - BIC_MARGIN
         && excess(refit_sig.structure_ratio) <= (1.0 - STRUCTURE_DROP) * excess(sig.structure_ratio)
+}
+
+/// `refit` against `current` (same data): BIC and the structure ratios.
+fn verdict(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Signatures) -> Verdict<(f64, f64)> {
+    Verdict {
+        keep: earns_its_place(current, sig, refit, refit_sig),
+        bic_before: current.bic(),
+        bic_after: refit.bic(),
+        detail: (sig.structure_ratio, refit_sig.structure_ratio),
+    }
 }
 
 /// Share of every run the candidates are screened on (its start), when that still holds three
@@ -79,75 +71,19 @@ pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
     (0..prob.n_groups).any(|g| prob.transmission_at_bound(g, &fit.p))
 }
 
-/// Predicted BIC change of removing effect `e` from `fit` (the others re-adjusted, linearised).
-fn removal_delta_bic(fit: &Fit, e: Effect, n_groups: usize) -> f64 {
-    let Some((o, _)) = fit.spec.offsets(n_groups).into_iter().find(|(_, x)| *x == e) else { return f64::NEG_INFINITY };
-    let k = e.params().len();
-    let inv = super::fit::spd_inverse(&(fit.jacobian.transpose() * &fit.jacobian));
-    let block = inv.view((o, o), (k, k)).into_owned();
-    let theta = nalgebra::DVector::from_column_slice(&fit.p[o..o + k]);
-    let delta_sse = (theta.transpose() * super::fit::spd_inverse(&block) * &theta)[(0, 0)].max(0.0);
-    let n = fit.n as f64;
-    n * ((fit.sse + delta_sse) / fit.sse.max(1e-300)).ln() - k as f64 * n.ln()
-}
-
-/// One round of diagnosis and what came of it.
-#[derive(Clone, Debug)]
-pub struct Round {
-    pub signatures: Signatures,
-    pub candidates: Vec<Candidate>,
-    /// (effect, BIC before, BIC after, structure ratio before, after, kept)
-    pub attempts: Vec<(Effect, f64, f64, f64, f64, bool)>,
-}
-
-/// The time the effect search may take. Checked between refits: a refit under way finishes.
-pub struct Budget {
-    pub start: std::time::Instant,
-    pub seconds: f64,
-    /// Set when the search stopped because the budget ran out: what it was about to do.
-    pub exhausted: std::cell::Cell<Option<&'static str>>,
-}
-
-impl Budget {
-    pub fn seconds(seconds: f64) -> Budget {
-        Budget { start: std::time::Instant::now(), seconds, exhausted: std::cell::Cell::new(None) }
-    }
-    /// Whether the search may go on to `next`; records the first refusal.
-    pub fn allows(&self, next: &'static str) -> bool {
-        if self.exhausted.get().is_some() {
-            return false;
-        }
-        if self.start.elapsed().as_secs_f64() > self.seconds {
-            self.exhausted.set(Some(next));
-            return false;
-        }
-        true
-    }
-}
-
-/// A combination of effects proposed by the equation error's best subset and refitted at once.
-#[derive(Clone, Debug)]
-pub struct CombinationAttempt {
-    /// When it was tried: "baseline" (before the one-at-a-time rounds) or "after the rounds".
-    pub stage: &'static str,
-    pub effects: Vec<Effect>,
-    /// (BIC, structure ratio) of the model it was compared with, and of the refit.
-    pub before: (f64, f64),
-    pub after: (f64, f64),
-    pub kept: bool,
-}
+/// A round of the device's search: the screened residual's signatures, the ranking, the refits
+/// with (structure ratio before, after).
+pub type Round = super::stepwise::Round<Effect, Signatures, (f64, f64)>;
+/// An effect set refitted at once, with (structure ratio before, after).
+pub type CombinationAttempt = Attempt<Effect, (f64, f64)>;
 
 pub struct Outcome {
-    /// Set when the search budget ran out: (seconds allowed, what was skipped).
-    pub budget_exhausted: Option<(f64, &'static str)>,
-    pub combinations: Vec<CombinationAttempt>,
+    /// Rounds, combinations, the backward check and the budget (`stepwise::search`).
+    pub record: Record<Effect, Signatures, (f64, f64)>,
     pub baseline: Fit,
     pub baseline_signatures: Signatures,
     pub final_fit: Fit,
     pub final_signatures: Signatures,
-    pub rounds: Vec<Round>,
-    /// Effects removed again by the backward check: (effect, BIC with it, BIC without).
-    pub pruned: Vec<(Effect, f64, f64)>,
     pub unexplained: bool,
     /// Damping laws compared (baseline and after each added effect).
     pub laws: Vec<LawRow>,
@@ -378,15 +314,14 @@ fn try_combination(
     }
     let effects = screened.spec.effects.clone();
     let screened_sig = signatures(sprob, &screened);
-    let mut attempt = CombinationAttempt {
-        stage,
-        effects,
-        before: (scurrent.bic(), ssig.structure_ratio),
-        after: (screened.bic(), screened_sig.structure_ratio),
-        kept: earns_its_place(scurrent, ssig, &screened, &screened_sig),
-    };
-    debug(format_args!("combination {:?} screened in {:?}: kept {}", attempt.effects, t.elapsed(), attempt.kept));
-    if !attempt.kept {
+    let mut attempt = CombinationAttempt { stage, effects, verdict: verdict(scurrent, ssig, &screened, &screened_sig) };
+    debug(format_args!(
+        "combination {:?} screened in {:?}: kept {}",
+        attempt.effects,
+        t.elapsed(),
+        attempt.verdict.keep
+    ));
+    if !attempt.verdict.keep {
         return Some((attempt, None));
     }
     let done = if screen.is_some() {
@@ -395,10 +330,8 @@ fn try_combination(
         screened
     };
     let s = signatures(prob, &done);
-    attempt.before = (current.bic(), sig.structure_ratio);
-    attempt.after = (done.bic(), s.structure_ratio);
-    attempt.kept = earns_its_place(current, sig, &done, &s);
-    let accepted = attempt.kept.then_some((done, s));
+    attempt.verdict = verdict(current, sig, &done, &s);
+    let accepted = attempt.verdict.keep.then_some((done, s));
     Some((attempt, accepted))
 }
 
@@ -408,7 +341,7 @@ fn try_combination(
 /// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
 /// bounded fit can be absurd); and the equation error with the effects' torques as regressors
 /// (transmission and effects estimated together, so neither absorbs the other).
-fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Candidate], law: DampingLaw) -> Vec<Vec<f64>> {
+fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Ranked<Effect>], law: DampingLaw) -> Vec<Vec<f64>> {
     let n_t = 2 * prob.n_groups;
     let closed = prob.closed_form_start(law);
     let linearised: Vec<f64> = added.iter().flat_map(|c| c.start.iter().copied()).collect();
@@ -607,6 +540,169 @@ fn sims(prob: &Problem) -> usize {
     prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed)
 }
 
+/// A device model in the search: the fit and its residual's signatures.
+#[derive(Clone, Debug)]
+pub struct Judged {
+    pub fit: Fit,
+    pub sig: Signatures,
+}
+
+/// The device as a rig of the one search (`stepwise`): runs driven by the measured motor angle,
+/// the transmission fitted per temperature under the damping law and spring share the data
+/// allow. Candidates are ranked and screened on the start of every run when that holds enough
+/// cycles (the winner is judged on every sample); an effect earns its place by BIC and by the
+/// structure it removes from the residual.
+pub struct DeviceRig<'p, 'a> {
+    prob: &'p Problem<'a>,
+    laws: &'p LawChoice,
+    screen: std::cell::RefCell<Option<(Problem<'a>, Fit, Signatures)>>,
+    rows: std::cell::RefCell<Vec<LawRow>>,
+    /// (structure, effects) the equation error's combinations refitted already.
+    refitted: std::cell::RefCell<Vec<(Structure, Vec<Effect>)>>,
+}
+
+impl DeviceRig<'_, '_> {
+    /// The problem, fit and signatures to screen `m` on.
+    fn with_screen<T>(&self, m: &Judged, f: impl FnOnce(&Problem, &Fit, &Signatures) -> T) -> T {
+        let screen = self.screen.borrow();
+        let (p, c, s) = screened(&screen, self.prob, &m.fit, &m.sig);
+        f(p, c, s)
+    }
+
+    fn judged(&self, prob: &Problem, fit: Fit) -> Judged {
+        let sig = signatures(prob, &fit);
+        Judged { fit, sig }
+    }
+}
+
+impl Rig for DeviceRig<'_, '_> {
+    type Effect = Effect;
+    type Model = Judged;
+    type Detail = (f64, f64);
+    type State = Signatures;
+
+    fn name(e: Effect) -> &'static str {
+        e.name()
+    }
+    fn effects(&self, m: &Judged) -> Vec<Effect> {
+        m.fit.spec.effects.clone()
+    }
+    fn effect_count(&self, m: &Judged) -> usize {
+        m.fit.spec.reported_effects().len()
+    }
+    fn bic(&self, m: &Judged) -> f64 {
+        m.fit.bic()
+    }
+    fn structure_left(&self, m: &Judged) -> bool {
+        !m.sig.white()
+    }
+    fn rankable(&self, m: &Judged) -> bool {
+        !at_bound(self.prob, &m.fit)
+    }
+    fn state(&self, m: &Judged) -> Signatures {
+        self.with_screen(m, |_, _, s| s.clone())
+    }
+    fn rank(&self, m: &Judged) -> Vec<Ranked<Effect>> {
+        let t = std::time::Instant::now();
+        // ranked on the screening share (the linearised projections need no more)
+        let out = self.with_screen(m, rank);
+        debug(format_args!("rank took {:?}", t.elapsed()));
+        out
+    }
+    fn refit_with(&self, m: &Judged, added: &[&Ranked<Effect>]) -> Option<Judged> {
+        let mut spec = m.fit.spec.clone();
+        spec.effects.extend(added.iter().map(|c| c.effect));
+        let starts = candidate_starts(self.prob, &m.fit, added, spec.law);
+        self.with_screen(m, |sprob, _, _| {
+            let t = std::time::Instant::now();
+            let refit = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
+            debug(format_args!("refit {:?} took {:?}, {} iterations", refit.spec.effects, t.elapsed(), refit.iterations));
+            Some(self.judged(sprob, refit))
+        })
+    }
+    fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<(f64, f64)> {
+        self.with_screen(m, |_, c, s| verdict(c, s, &refit.fit, &refit.sig))
+    }
+    fn converge(&self, m: &Judged, winner: Judged, round: usize) -> Option<Judged> {
+        // an effect can change which damping law the data favour (friction read as frequency-
+        // dependent loss before it was in): re-chosen on the screening share with it, so only the
+        // chosen structure is fitted on every sample
+        let screen = self.screen.borrow();
+        let f = match &*screen {
+            Some((sp, _, _)) => {
+                let stage = format!("round {round} (screening share)");
+                best_law(sp, None, winner.fit, &self.laws.allowed, &stage, &mut self.rows.borrow_mut())
+            }
+            None if winner.fit.iterations < SCREEN_ITERATIONS => return Some(winner),
+            None => winner.fit,
+        };
+        let done = levenberg_marquardt(self.prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS).ok()?;
+        debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
+        let s = signatures(self.prob, &done);
+        earns_its_place(&m.fit, &m.sig, &done, &s).then_some(Judged { fit: done, sig: s })
+    }
+    fn adopt(&self, m: Judged, round: usize) -> Judged {
+        // without a screening share the structure is re-chosen here, on every sample
+        if self.screen.borrow().is_some() {
+            return m;
+        }
+        let before = (m.fit.spec.law, m.fit.spec.springs);
+        let fit = best_law(self.prob, None, m.fit, &self.laws.allowed, &format!("round {round}"), &mut self.rows.borrow_mut());
+        if (fit.spec.law, fit.spec.springs) == before {
+            Judged { fit, sig: m.sig }
+        } else {
+            self.judged(self.prob, fit)
+        }
+    }
+    fn moved_to(&self, m: &Judged) {
+        refresh_screen(&mut self.screen.borrow_mut(), &m.fit);
+    }
+    fn combination(&self, m: &Judged, stage: &'static str) -> Option<(CombinationAttempt, Option<Judged>)> {
+        let screen = self.screen.borrow();
+        let (attempt, accepted) = try_combination(
+            self.prob,
+            &screen,
+            &m.fit,
+            &m.sig,
+            stage,
+            &self.laws.allowed,
+            &mut self.refitted.borrow_mut(),
+        )?;
+        Some((attempt, accepted.map(|(fit, sig)| Judged { fit, sig })))
+    }
+    fn removal_delta_bic(&self, m: &Judged, e: Effect) -> f64 {
+        let idx: Vec<usize> = m
+            .fit
+            .spec
+            .offsets(self.prob.n_groups)
+            .into_iter()
+            .filter(|&(_, x)| x == e)
+            .flat_map(|(o, x)| o..o + x.params().len())
+            .collect();
+        super::stepwise::removal_delta_bic(&m.fit.jacobian, &m.fit.p, m.fit.sse, &idx)
+    }
+    fn without(&self, m: &Judged, e: Effect) -> Option<Judged> {
+        let current = &m.fit;
+        let spec = ModelSpec {
+            effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect(),
+            law: current.spec.law,
+            springs: current.spec.springs,
+        };
+        let mut p = current.p[..2 * self.prob.n_groups].to_vec();
+        for (o, x) in current.spec.offsets(self.prob.n_groups) {
+            if x != e {
+                p.extend_from_slice(&current.p[o..o + x.params().len()]);
+            }
+        }
+        let fit = levenberg_marquardt(self.prob, spec, p, SCREEN_ITERATIONS).ok()?;
+        Some(self.judged(self.prob, fit))
+    }
+    fn polish(&self, m: Judged) -> Option<Judged> {
+        let fit = levenberg_marquardt(self.prob, m.fit.spec, m.fit.p, MAX_ITERATIONS).ok()?;
+        Some(self.judged(self.prob, fit))
+    }
+}
+
 pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Result<Outcome, String> {
     let mut rows = Vec::new();
     let t = std::time::Instant::now();
@@ -618,253 +714,19 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     let baseline = resolve_initial_speeds(prob, chosen);
     debug(format_args!("initial speeds: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline_signatures = signatures(prob, &baseline);
-    // candidates are screened on the start of every run (cheaper), the winner is judged on all
-    let mut screen = screening_problem(prob, &baseline);
-    let mut current = baseline.clone();
-    let mut sig = baseline_signatures.clone();
-    let mut rounds = Vec::new();
-    // The equation error's best subsets are refitted at once first (issue 18): several effects
-    // together, where one at a time each would be judged against a baseline that absorbed the
-    // others (and a baseline at a bound is infeasible: linearised rankings around it are blind, a
-    // rigid link does not feel a small probe). A greedy first step can also take a wrong effect
-    // that mimics two (gravity at an offset for asymmetric friction) and never leave it.
-    let mut combinations = Vec::new();
-    let mut refitted = Vec::new();
-    if !sig.white() && budget.allows("the equation error's combination at the baseline") {
-        if let Some((attempt, accepted)) =
-            try_combination(prob, &screen, &current, &sig, "baseline", &laws.allowed, &mut refitted)
-        {
-            combinations.push(attempt);
-            if let Some((f, s)) = accepted {
-                current = f;
-                sig = s;
-                refresh_screen(&mut screen, &current);
-            }
-        }
-    }
-    // until the residual is white at the noise floor, or nothing in the library earns its place
-    // The baseline is always diagnosed (the ranking and its evidence are reported even for a
-    // white residual); refits happen only while structure remains.
-    // One-at-a-time rounds, then the equation error's combination with what they found (a partial
-    // effect found first can hide the rest); rounds again after an accepted combination.
-    let mut passes = 0;
-    loop {
-        while current.spec.reported_effects().len() < MAX_EFFECTS
-            && (rounds.is_empty() || !sig.white())
-            && budget.allows("a round of one-at-a-time refits")
-        {
-            let t = std::time::Instant::now();
-            // ranked on the screening share too (the linearised projections need no more)
-            let (rprob, rcurrent, rsig) = screened(&screen, prob, &current, &sig);
-            let candidates = rank(rprob, rcurrent, rsig);
-            debug(format_args!("rank took {:?}", t.elapsed()));
-            let mut round = Round { signatures: rsig.clone(), candidates: candidates.clone(), attempts: vec![] };
-            // The linearised ranking shortlists; the refits decide: of the shortlisted effects that
-            // earn their place, the one with the lowest BIC is added.
-            let mut accepted: Option<(Fit, Signatures)> = None;
-            let shortlist = if sig.white() { 0 } else { TRIES_PER_ROUND };
-            // refits are for candidates the linearised ranking cannot tell apart from the best: a
-            // score below SHORTLIST_SHARE of the best one's is not worth a refit
-            // (unless the fit sits at a bound, where the linearisation is blind: a rigid fit does not
-            // feel a small gravity probe)
-            let best_score = if at_bound(prob, &current) { 0.0 } else { candidates.first().map_or(0.0, |c| c.score) };
-            for c in candidates
-                .iter()
-                .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
-                .take(shortlist)
-            {
-                let mut spec = current.spec.clone();
-                spec.effects.push(c.effect);
-                let starts = candidate_starts(prob, &current, &[c], spec.law);
-                let (sprob, scurrent, ssig) = screened(&screen, prob, &current, &sig);
-                let t = std::time::Instant::now();
-                let Ok(refit) = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS) else { continue };
-                debug(format_args!(
-                    "refit {} took {:?}, {} iterations",
-                    c.effect.name(),
-                    t.elapsed(),
-                    refit.iterations
-                ));
-                let refit_sig = signatures(sprob, &refit);
-                // it earns its place if BIC says so and the residual lost the structure it explained:
-                // at least STRUCTURE_DROP of the low-frequency excess over white noise (BIC alone,
-                // with N = every sample, over-rewards small effects fitting correlated leftovers)
-                let keep = earns_its_place(scurrent, ssig, &refit, &refit_sig);
-                round.attempts.push((
-                    c.effect,
-                    scurrent.bic(),
-                    refit.bic(),
-                    ssig.structure_ratio,
-                    refit_sig.structure_ratio,
-                    keep,
-                ));
-                if keep && accepted.as_ref().is_none_or(|a| refit.bic() < a.0.bic()) {
-                    accepted = Some((refit, refit_sig));
-                }
-            }
-            if let Some((f, _)) = &accepted {
-                for a in round.attempts.iter_mut() {
-                    a.5 = a.5 && f.spec.effects.last() == Some(&a.0);
-                }
-            }
-            // No single effect earned its place while structure remains: a partial effect is
-            // judged against a model that lacks its partner (friction with backlash), so the
-            // BIC-improving candidates are refitted in pairs.
-            let mut pair_index = None;
-            // (not from a fit at a bound, whose linearised ranking is blind)
-            if accepted.is_none() && shortlist > 0 && !at_bound(prob, &current) && budget.allows("pairs of candidates")
-            {
-                let (sprob, scurrent, ssig) = screened(&screen, prob, &current, &sig);
-                let pool: Vec<&Candidate> =
-                    candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(PAIR_POOL).collect();
-                let first_pair = combinations.len();
-                for (i, a) in pool.iter().enumerate() {
-                    for b in &pool[i + 1..] {
-                        let mut spec = current.spec.clone();
-                        spec.effects.extend([a.effect, b.effect]);
-                        let starts = candidate_starts(prob, &current, &[a, b], spec.law);
-                        let Ok(refit) = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS) else { continue };
-                        let refit_sig = signatures(sprob, &refit);
-                        let keep = earns_its_place(scurrent, ssig, &refit, &refit_sig);
-                        debug(format_args!("pair {} + {}: kept {keep}", a.effect.name(), b.effect.name()));
-                        combinations.push(CombinationAttempt {
-                            stage: "pair after a round",
-                            effects: vec![a.effect, b.effect],
-                            before: (scurrent.bic(), ssig.structure_ratio),
-                            after: (refit.bic(), refit_sig.structure_ratio),
-                            kept: keep,
-                        });
-                        if keep && accepted.as_ref().is_none_or(|x: &(Fit, Signatures)| refit.bic() < x.0.bic()) {
-                            accepted = Some((refit, refit_sig));
-                            pair_index = Some(combinations.len() - 1);
-                        }
-                    }
-                }
-                // only this round's winner stays marked kept (earlier rounds' records are final)
-                for (k, c) in combinations.iter_mut().enumerate().skip(first_pair) {
-                    if Some(k) != pair_index {
-                        c.kept = false;
-                    }
-                }
-            }
-            debug(format_args!("round screened: {:?}, {} simulations", t.elapsed(), sims(prob)));
-            // the winner runs to convergence on every sample, and must earn its place there too
-            if let Some((f, fs)) = accepted.take() {
-                // an effect can change which damping law the data favour (friction read as frequency-
-                // dependent loss before it was in): re-chosen on the screening share with it, so only
-                // the chosen structure is fitted on every sample
-                let f = match &screen {
-                    Some((sp, _, _)) => {
-                        let stage = format!("round {} (screening share)", rounds.len() + 1);
-                        best_law(sp, None, f, &laws.allowed, &stage, &mut rows)
-                    }
-                    None => f,
-                };
-                if screen.is_none() && f.iterations < SCREEN_ITERATIONS {
-                    accepted = Some((f, fs));
-                } else if let Ok(done) = levenberg_marquardt(prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS) {
-                    debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
-                    let s = signatures(prob, &done);
-                    if earns_its_place(&current, &sig, &done, &s) {
-                        accepted = Some((done, s));
-                    } else if let Some(a) = round.attempts.iter_mut().find(|a| a.5) {
-                        a.5 = false;
-                    } else if let Some(k) = pair_index {
-                        combinations[k].kept = false;
-                    }
-                }
-            }
-            debug(format_args!("winner converged: {:?}, {} simulations", t.elapsed(), sims(prob)));
-            rounds.push(round);
-            match accepted {
-                Some((f, s)) => {
-                    // (without a screening share the structure is re-chosen here, on every sample)
-                    if screen.is_none() {
-                        let before = (f.spec.law, f.spec.springs);
-                        current = best_law(prob, None, f, &laws.allowed, &format!("round {}", rounds.len()), &mut rows);
-                        sig = if (current.spec.law, current.spec.springs) == before {
-                            s
-                        } else {
-                            signatures(prob, &current)
-                        };
-                    } else {
-                        current = f;
-                        sig = s;
-                    }
-                    debug(format_args!(
-                        "law re-checked: {:?}, {} simulations, {:?}",
-                        t.elapsed(),
-                        sims(prob),
-                        current.spec.law
-                    ));
-                    refresh_screen(&mut screen, &current);
-                }
-                None => break,
-            }
-        }
-        passes += 1;
-        if sig.white()
-            || passes > COMBINATION_PASSES
-            || !budget.allows("the equation error's combination after the rounds")
-        {
-            break;
-        }
-        match try_combination(prob, &screen, &current, &sig, "after the rounds", &laws.allowed, &mut refitted) {
-            Some((attempt, Some((f, s)))) => {
-                combinations.push(attempt);
-                current = f;
-                sig = s;
-                refresh_screen(&mut screen, &current);
-            }
-            Some((attempt, None)) => {
-                combinations.push(attempt);
-                break;
-            }
-            None => break,
-        }
-    }
-    // Backward check: an effect added early may be redundant once a later one is in (a Maxwell
-    // branch standing in for link damping). Drop any whose removal does not cost BIC_MARGIN.
-    let mut pruned = Vec::new();
-    let mut changed = current.spec.effects.len() > 1;
-    while changed && budget.allows("the backward check") {
-        changed = false;
-        for &e in current.spec.effects.clone().iter() {
-            let spec = ModelSpec {
-                effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect(),
-                law: current.spec.law,
-                springs: current.spec.springs,
-            };
-            let mut p = current.p[..2 * prob.n_groups].to_vec();
-            for (o, x) in current.spec.offsets(prob.n_groups) {
-                if x != e {
-                    p.extend_from_slice(&current.p[o..o + x.params().len()]);
-                }
-            }
-            // Linearised first: the Gauss–Newton cost of forcing the effect off while the rest
-            // re-adjusts, θ_eᵀ [(JᵀJ)⁻¹]_ee⁻¹ θ_e. Far beyond the margin, the effect is plainly
-            // needed, and a refit without it would only wander to a bound, where every simulation
-            // is slow.
-            if removal_delta_bic(&current, e, prob.n_groups) > PRUNE_SKIP * BIC_MARGIN {
-                continue;
-            }
-            debug(format_args!("prune screen of {}: {:?}", e.name(), t.elapsed()));
-            // then a screening refit: if even that cannot come within the margin, keep the effect
-            let Ok(screen) = levenberg_marquardt(prob, spec.clone(), p, SCREEN_ITERATIONS) else { continue };
-            if screen.bic() >= current.bic() + BIC_MARGIN {
-                continue;
-            }
-            let Ok(refit) = levenberg_marquardt(prob, spec, screen.p, MAX_ITERATIONS) else { continue };
-            if refit.bic() < current.bic() + BIC_MARGIN {
-                pruned.push((e, current.bic(), refit.bic()));
-                sig = signatures(prob, &refit);
-                current = refit;
-                changed = current.spec.effects.len() > 1;
-                break;
-            }
-        }
-    }
-    debug(format_args!("pruned: {:?}, {} simulations", t.elapsed(), sims(prob)));
+    let rig = DeviceRig {
+        prob,
+        laws,
+        // candidates are screened on the start of every run (cheaper), the winner is judged on all
+        screen: std::cell::RefCell::new(screening_problem(prob, &baseline)),
+        rows: std::cell::RefCell::new(rows),
+        refitted: std::cell::RefCell::new(Vec::new()),
+    };
+    let start = Judged { fit: baseline.clone(), sig: baseline_signatures.clone() };
+    let found = super::stepwise::search(&rig, start, budget);
+    let rows = rig.rows.into_inner();
+    debug(format_args!("searched: {:?}, {} simulations", t.elapsed(), sims(prob)));
+    let Judged { fit: mut current, mut sig } = found.model;
     if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
         current = resolve_initial_speeds(prob, current);
@@ -875,14 +737,11 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let unexplained = !sig.white();
     Ok(Outcome {
-        budget_exhausted: budget.exhausted.get().map(|what| (budget.seconds, what)),
-        combinations,
+        record: found.record,
         baseline,
         baseline_signatures,
         final_fit: current,
         final_signatures: sig,
-        rounds,
-        pruned,
         unexplained,
         laws: rows,
         law_reason: laws.reason.clone(),

@@ -1,0 +1,487 @@
+//! The one effect search, for every rig (issue 18, item 6). A rig says how its runs drive the FMU
+//! and what its models are: the device (`search::DeviceRig`: the measured motor angle drives the
+//! FMU, the transmission fitted per temperature) and drive logs (`drive::DriveRig`: the measured
+//! torque, or a reference through the rig's controller; rotary or linear, compliant or rigid). The
+//! search itself is here, once:
+//!
+//! 1. a jump first when the baseline leaves structure (the rig's combination: the device refits the
+//!    equation error's best subsets at once);
+//! 2. rounds: the linearised ranking shortlists, the refits decide; of the shortlisted effects that
+//!    earn their place, the one with the lowest BIC is added; when none does, the candidates that
+//!    predict a BIC gain are refitted in pairs (a partial effect is judged against a model that
+//!    lacks its partner); the winner is run to convergence and must earn its place again;
+//! 3. the combination again after the rounds (a partial effect found first can hide the rest);
+//! 4. a backward check: an effect whose removal does not cost the BIC margin goes.
+//!
+//! Every step is checked against the time budget; a search that runs out keeps the best model found
+//! and says what it skipped.
+
+use nalgebra::{DMatrix, DVector};
+use serde_json::{json, Value};
+
+use super::fit::spd_inverse;
+
+/// An effect is kept only when the refit lowers the BIC by more than this: "very strong" evidence
+/// on the Kass & Raftery (1995) scale (ΔBIC > 10).
+pub const BIC_MARGIN: f64 = 10.0;
+/// Refits tried per round, best-ranked first.
+pub const TRIES_PER_ROUND: usize = 3;
+/// The rounds stop at this many effects as reported (asymmetric friction with the Coulomb and
+/// viscous levels under it counts once).
+pub const MAX_EFFECTS: usize = 5;
+/// Times the rig's combination is tried after the rounds (each accepted one is followed by rounds
+/// again).
+pub const COMBINATION_PASSES: usize = 2;
+/// Candidates (by score, each predicting a BIC gain) refitted in pairs when no single one earns its
+/// place: 4 give 6 pairs.
+pub const PAIR_POOL: usize = 4;
+/// A candidate is refitted only if its linearised score is at least this share of the best one's.
+pub const SHORTLIST_SHARE: f64 = 0.25;
+/// The backward check skips the refit of an effect whose linearised removal costs more than this
+/// many BIC margins.
+pub const PRUNE_SKIP: f64 = 10.0;
+
+/// The time the effect search may take. Checked between refits: a refit under way finishes.
+pub struct Budget {
+    pub start: std::time::Instant,
+    pub seconds: f64,
+    /// Set when the search stopped because the budget ran out: what it was about to do.
+    pub exhausted: std::cell::Cell<Option<&'static str>>,
+}
+
+impl Budget {
+    pub fn seconds(seconds: f64) -> Budget {
+        Budget { start: std::time::Instant::now(), seconds, exhausted: std::cell::Cell::new(None) }
+    }
+    /// Whether the search may go on to `next`; records the first refusal.
+    pub fn allows(&self, next: &'static str) -> bool {
+        if self.exhausted.get().is_some() {
+            return false;
+        }
+        if self.start.elapsed().as_secs_f64() > self.seconds {
+            self.exhausted.set(Some(next));
+            return false;
+        }
+        true
+    }
+}
+
+/// A candidate effect as the linearised ranking sees it.
+#[derive(Clone, Debug)]
+pub struct Ranked<E> {
+    pub effect: E,
+    /// Fraction of the residual's sum of squares the effect explains (linearised), 0–1.
+    pub score: f64,
+    /// BIC change predicted by the linearised fit.
+    pub predicted_delta_bic: f64,
+    /// Starting values of the effect's parameters for the refit.
+    pub start: Vec<f64>,
+    pub evidence: String,
+}
+
+/// The ranking's core, the same for every rig: the residual r projected on the model's Jacobian J
+/// alone and on [J, S], with S the effect's sensitivity columns (secant probes through the FMU).
+/// Returns (SSE on J, SSE on [J, S], the coefficients on [J, S]).
+pub fn linearised(jacobian: &DMatrix<f64>, residual: &[f64], probes: &DMatrix<f64>) -> (f64, f64, DVector<f64>) {
+    let r = DVector::from_column_slice(residual);
+    let project = |m: &DMatrix<f64>| {
+        let beta = spd_inverse(&(m.transpose() * m)) * (m.transpose() * &r);
+        ((&r - m * &beta).norm_squared(), beta)
+    };
+    let (sse_now, _) = project(jacobian);
+    let base = jacobian.ncols();
+    let m = DMatrix::from_fn(jacobian.nrows(), base + probes.ncols(), |i, j| {
+        if j < base {
+            jacobian[(i, j)]
+        } else {
+            probes[(i, j - base)]
+        }
+    });
+    let (sse_aug, beta) = project(&m);
+    (sse_now, sse_aug, beta)
+}
+
+/// BIC change of a fit with `n` samples whose SSE goes from `sse_now` to `sse_now − gain` with `k`
+/// more parameters.
+pub fn predicted_delta_bic(n: usize, sse_now: f64, gain: f64, k: usize) -> f64 {
+    let n = n as f64;
+    n * ((sse_now - gain) / sse_now.max(1e-300)).max(1e-300).ln() + k as f64 * n.ln()
+}
+
+/// Predicted BIC change of forcing the parameters `idx` of a fit (Jacobian `jacobian`, SSE `sse`, `n`
+/// samples) to zero while the rest re-adjusts, linearised: Δ SSE = θᵀ [(JᵀJ)⁻¹]_θθ⁻¹ θ.
+pub fn removal_delta_bic(jacobian: &DMatrix<f64>, p: &[f64], sse: f64, idx: &[usize]) -> f64 {
+    if idx.is_empty() {
+        return f64::NEG_INFINITY;
+    }
+    let inv = spd_inverse(&(jacobian.transpose() * jacobian));
+    let k = idx.len();
+    let block = DMatrix::from_fn(k, k, |a, b| inv[(idx[a], idx[b])]);
+    let theta = DVector::from_iterator(k, idx.iter().map(|&i| p[i]));
+    let delta_sse = (theta.transpose() * spd_inverse(&block) * &theta)[(0, 0)].max(0.0);
+    let n = jacobian.nrows() as f64;
+    n * ((sse + delta_sse) / sse.max(1e-300)).ln() - k as f64 * n.ln()
+}
+
+/// How a refit compares with the model it would replace: BIC and the rig's own evidence.
+#[derive(Clone, Debug)]
+pub struct Verdict<D> {
+    pub keep: bool,
+    pub bic_before: f64,
+    pub bic_after: f64,
+    pub detail: D,
+}
+
+/// One refit tried, of one effect or several at once.
+#[derive(Clone, Debug)]
+pub struct Attempt<E, D> {
+    /// "round", "pair after a round", or the rig's combination stage ("baseline", "after the rounds").
+    pub stage: &'static str,
+    pub effects: Vec<E>,
+    pub verdict: Verdict<D>,
+}
+
+/// One round of ranking and refits.
+#[derive(Clone, Debug)]
+pub struct Round<E, S, D> {
+    /// What the rig records of the model the round started from.
+    pub state: S,
+    pub candidates: Vec<Ranked<E>>,
+    pub attempts: Vec<Attempt<E, D>>,
+}
+
+/// What the search needs of a rig. A model is a fit together with whatever the rig judges it by.
+pub trait Rig {
+    type Effect: Copy + PartialEq + std::fmt::Debug;
+    type Model: Clone;
+    /// A verdict's evidence beyond BIC (the device: the residual's structure ratio; drives: the Wald
+    /// statistic and the held-out errors).
+    type Detail: Clone;
+    /// What a round records of its starting model.
+    type State: Clone;
+
+    fn name(e: Self::Effect) -> &'static str;
+    fn effects(&self, m: &Self::Model) -> Vec<Self::Effect>;
+    /// Effects as the report counts them (for `MAX_EFFECTS`).
+    fn effect_count(&self, m: &Self::Model) -> usize;
+    fn bic(&self, m: &Self::Model) -> f64;
+    /// Whether the residual still shows structure the rounds should look for.
+    fn structure_left(&self, m: &Self::Model) -> bool;
+    /// False where the linearised ranking is blind (a fit at a bound: a rigid link does not feel a
+    /// small probe): every candidate predicting a gain is then refitted, and no pairs are formed.
+    fn rankable(&self, m: &Self::Model) -> bool;
+    fn state(&self, m: &Self::Model) -> Self::State;
+    /// Candidates, best first.
+    fn rank(&self, m: &Self::Model) -> Vec<Ranked<Self::Effect>>;
+    /// `m` refitted with the candidates' effects added (a screening refit where the rig has one).
+    fn refit_with(&self, m: &Self::Model, added: &[&Ranked<Self::Effect>]) -> Option<Self::Model>;
+    /// `refit` against `m`, on the same data.
+    fn judge(&self, m: &Self::Model, refit: &Self::Model) -> Verdict<Self::Detail>;
+    /// A round's winner on every sample, to convergence: None when it no longer earns its place.
+    fn converge(&self, m: &Self::Model, winner: Self::Model, round: usize) -> Option<Self::Model>;
+    /// The model a round accepted, with the rig's structure re-chosen for it where it has a choice.
+    fn adopt(&self, m: Self::Model, round: usize) -> Self::Model;
+    /// The search moved to `m` (the rig refreshes what it keeps of the current model).
+    fn moved_to(&self, _m: &Self::Model) {}
+    /// Several effects refitted at once from a model-free proposal (None: nothing new to propose).
+    #[allow(clippy::type_complexity)]
+    fn combination(
+        &self,
+        _m: &Self::Model,
+        _stage: &'static str,
+    ) -> Option<(Attempt<Self::Effect, Self::Detail>, Option<Self::Model>)> {
+        None
+    }
+    fn removal_delta_bic(&self, m: &Self::Model, e: Self::Effect) -> f64;
+    /// `m` without effect `e`, a screening refit (None where the rest cannot stand without it).
+    fn without(&self, m: &Self::Model, e: Self::Effect) -> Option<Self::Model>;
+    /// A screening refit run to convergence on every sample.
+    fn polish(&self, m: Self::Model) -> Option<Self::Model>;
+}
+
+/// What the search found.
+pub struct Search<E, M, S, D> {
+    pub model: M,
+    /// The model after each step accepted (the start first).
+    pub path: Vec<M>,
+    pub record: Record<E, S, D>,
+}
+
+/// How the search went, for the report.
+#[derive(Clone, Debug)]
+pub struct Record<E, S, D> {
+    pub rounds: Vec<Round<E, S, D>>,
+    /// Effect sets refitted at once: the rig's combinations and pairs of candidates.
+    pub combinations: Vec<Attempt<E, D>>,
+    /// Effects removed again by the backward check: (effect, BIC with it, BIC without).
+    pub pruned: Vec<(E, f64, f64)>,
+    /// Set when the budget ran out: (seconds allowed, what was skipped).
+    pub budget_exhausted: Option<(f64, &'static str)>,
+}
+
+/// The search from `start` (the rig's baseline).
+#[allow(clippy::type_complexity)]
+pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Effect, R::Model, R::State, R::Detail> {
+    let mut current = start;
+    let mut path = vec![current.clone()];
+    let mut rounds: Vec<Round<R::Effect, R::State, R::Detail>> = Vec::new();
+    let mut combinations: Vec<Attempt<R::Effect, R::Detail>> = Vec::new();
+    // Several effects at once first: one at a time, each would be judged against a baseline that
+    // absorbed the others (and a greedy first step can take a wrong effect that mimics two, such as
+    // gravity at an offset for asymmetric friction, and never leave it).
+    if rig.structure_left(&current) && budget.allows("the equation error's combination at the baseline") {
+        if let Some((attempt, accepted)) = rig.combination(&current, "baseline") {
+            combinations.push(attempt);
+            if let Some(m) = accepted {
+                current = m;
+                rig.moved_to(&current);
+                path.push(current.clone());
+            }
+        }
+    }
+    // The start is always ranked (the ranking and its evidence are reported even for a white
+    // residual); refits happen only while structure remains.
+    let mut passes = 0;
+    loop {
+        while rig.effect_count(&current) < MAX_EFFECTS
+            && (rounds.is_empty() || rig.structure_left(&current))
+            && budget.allows("a round of one-at-a-time refits")
+        {
+            let candidates = rig.rank(&current);
+            let mut round = Round { state: rig.state(&current), candidates: candidates.clone(), attempts: vec![] };
+            let shortlist = if rig.structure_left(&current) { TRIES_PER_ROUND } else { 0 };
+            let rankable = rig.rankable(&current);
+            // refits are for candidates the ranking cannot tell apart from the best
+            let best_score = if rankable { candidates.first().map_or(0.0, |c| c.score) } else { 0.0 };
+            let mut accepted: Option<R::Model> = None;
+            for c in candidates
+                .iter()
+                .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
+                .take(shortlist)
+            {
+                let Some(refit) = rig.refit_with(&current, &[c]) else { continue };
+                let verdict = rig.judge(&current, &refit);
+                let keep = verdict.keep;
+                round.attempts.push(Attempt { stage: "round", effects: vec![c.effect], verdict });
+                if keep && accepted.as_ref().is_none_or(|a| rig.bic(&refit) < rig.bic(a)) {
+                    accepted = Some(refit);
+                }
+            }
+            if let Some(f) = &accepted {
+                let last = rig.effects(f).last().copied();
+                for a in round.attempts.iter_mut() {
+                    a.verdict.keep = a.verdict.keep && Some(a.effects[0]) == last;
+                }
+            }
+            let mut pair_index = None;
+            if accepted.is_none() && shortlist > 0 && rankable && budget.allows("pairs of candidates") {
+                let pool: Vec<&Ranked<R::Effect>> =
+                    candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(PAIR_POOL).collect();
+                let first_pair = combinations.len();
+                for (i, a) in pool.iter().enumerate() {
+                    for b in &pool[i + 1..] {
+                        let Some(refit) = rig.refit_with(&current, &[a, b]) else { continue };
+                        let verdict = rig.judge(&current, &refit);
+                        let keep = verdict.keep;
+                        super::search::debug(format_args!("pair {:?} + {:?}: kept {keep}", a.effect, b.effect));
+                        combinations.push(Attempt {
+                            stage: "pair after a round",
+                            effects: vec![a.effect, b.effect],
+                            verdict,
+                        });
+                        if keep && accepted.as_ref().is_none_or(|x| rig.bic(&refit) < rig.bic(x)) {
+                            accepted = Some(refit);
+                            pair_index = Some(combinations.len() - 1);
+                        }
+                    }
+                }
+                // only this round's winner stays marked kept (earlier rounds' records are final)
+                for (k, c) in combinations.iter_mut().enumerate().skip(first_pair) {
+                    if Some(k) != pair_index {
+                        c.verdict.keep = false;
+                    }
+                }
+            }
+            let round_number = rounds.len() + 1;
+            if let Some(f) = accepted.take() {
+                accepted = rig.converge(&current, f, round_number);
+                if accepted.is_none() {
+                    if let Some(a) = round.attempts.iter_mut().find(|a| a.verdict.keep) {
+                        a.verdict.keep = false;
+                    } else if let Some(k) = pair_index {
+                        combinations[k].verdict.keep = false;
+                    }
+                }
+            }
+            rounds.push(round);
+            match accepted {
+                Some(f) => {
+                    current = rig.adopt(f, round_number);
+                    rig.moved_to(&current);
+                    path.push(current.clone());
+                }
+                None => break,
+            }
+        }
+        passes += 1;
+        if !rig.structure_left(&current)
+            || passes > COMBINATION_PASSES
+            || !budget.allows("the equation error's combination after the rounds")
+        {
+            break;
+        }
+        match rig.combination(&current, "after the rounds") {
+            Some((attempt, Some(m))) => {
+                combinations.push(attempt);
+                current = m;
+                rig.moved_to(&current);
+                path.push(current.clone());
+            }
+            Some((attempt, None)) => {
+                combinations.push(attempt);
+                break;
+            }
+            None => break,
+        }
+    }
+    // Backward check: an effect added early may be redundant once a later one is in (a Maxwell
+    // branch standing in for link damping). Any whose removal does not cost BIC_MARGIN goes.
+    let mut pruned = Vec::new();
+    let mut changed = rig.effects(&current).len() > 1;
+    while changed && budget.allows("the backward check") {
+        changed = false;
+        for e in rig.effects(&current) {
+            // far beyond the margin the effect is plainly needed: a refit without it would only
+            // wander to a bound, where every simulation is slow
+            if rig.removal_delta_bic(&current, e) > PRUNE_SKIP * BIC_MARGIN {
+                continue;
+            }
+            let Some(screen) = rig.without(&current, e) else { continue };
+            if rig.bic(&screen) >= rig.bic(&current) + BIC_MARGIN {
+                continue;
+            }
+            let Some(refit) = rig.polish(screen) else { continue };
+            if rig.bic(&refit) < rig.bic(&current) + BIC_MARGIN {
+                pruned.push((e, rig.bic(&current), rig.bic(&refit)));
+                current = refit;
+                path.push(current.clone());
+                changed = rig.effects(&current).len() > 1;
+                break;
+            }
+        }
+    }
+    Search {
+        model: current,
+        path,
+        record: Record {
+            rounds,
+            combinations,
+            pruned,
+            budget_exhausted: budget.exhausted.get().map(|what| (budget.seconds, what)),
+        },
+    }
+}
+
+/// The search's record in report.json, the same for every rig: `rounds` (each with its `ranking`
+/// and `attempts`), `combinations`, `pruned_effects` and `search_budget`. `state` and `detail` add
+/// the rig's own fields to a round and to an attempt.
+pub fn record_json<E: Copy, S, D>(
+    s: &Record<E, S, D>,
+    name: impl Fn(E) -> &'static str,
+    state: impl Fn(&S) -> Value,
+    detail: impl Fn(&D) -> Value,
+) -> Value {
+    let names = |effects: &[E]| effects.iter().map(|&e| name(e)).collect::<Vec<_>>();
+    let attempt = |a: &Attempt<E, D>| {
+        let mut j = json!({"stage": a.stage, "effect": names(&a.effects).join(" + "), "effects": names(&a.effects),
+            "bic_before": a.verdict.bic_before, "bic_after": a.verdict.bic_after, "kept": a.verdict.keep});
+        if let (Some(o), Value::Object(d)) = (j.as_object_mut(), detail(&a.verdict.detail)) {
+            o.extend(d);
+        }
+        j
+    };
+    let rounds: Vec<Value> = s
+        .rounds
+        .iter()
+        .map(|r| {
+            let mut j = json!({
+                "ranking": r.candidates.iter().map(|c| json!({"effect": name(c.effect), "score": c.score,
+                    "predicted_delta_bic": c.predicted_delta_bic, "start": c.start, "evidence": c.evidence})).collect::<Vec<_>>(),
+                "attempts": r.attempts.iter().map(attempt).collect::<Vec<_>>(),
+            });
+            if let (Some(o), Value::Object(st)) = (j.as_object_mut(), state(&r.state)) {
+                o.extend(st);
+            }
+            j
+        })
+        .collect();
+    json!({
+        "rounds": rounds,
+        "combinations": s.combinations.iter().map(attempt).collect::<Vec<_>>(),
+        "pruned_effects": s.pruned.iter().map(|p| json!({"effect": name(p.0), "bic_with": p.1, "bic_without": p.2})).collect::<Vec<_>>(),
+        "search_budget": s.budget_exhausted.map(|(seconds, what)| json!({"seconds": seconds, "exhausted": true,
+            "skipped": what, "note": "the search stopped when its time budget ran out (--search-budget) and kept the best model found so far"})),
+    })
+}
+
+/// The chain of evidence in report.md, the same for every rig, from `record_json`'s record.
+/// `state` words a round's start ("residual structure 3.1× white noise"); `detail` an attempt's
+/// evidence beyond BIC.
+pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail: impl Fn(&Value) -> String) -> String {
+    let f = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.0}"));
+    let mut s = String::new();
+    if let Some(b) = record["search_budget"].as_object() {
+        s += &format!(
+            "\n**The search ran out of its {} s budget** before {}: the model below is the best found by then (`--search-budget`).\n\n",
+            b["seconds"].as_f64().unwrap_or(f64::NAN),
+            b["skipped"].as_str().unwrap_or("")
+        );
+    }
+    let line = |a: &Value| {
+        format!(
+            "**{}**: BIC {} → {}{}: {}",
+            a["effect"].as_str().unwrap_or(""),
+            f(&a["bic_before"]),
+            f(&a["bic_after"]),
+            detail(a),
+            if a["kept"] == true { "kept" } else { "rejected" }
+        )
+    };
+    for c in record["combinations"].as_array().into_iter().flatten() {
+        s += &format!("Refitted at once ({}): {}.\n\n", c["stage"].as_str().unwrap_or(""), line(c));
+    }
+    let rounds = record["rounds"].as_array().map_or(&[][..], |v| v.as_slice());
+    for (i, r) in rounds.iter().enumerate() {
+        s += &format!(
+            "### Round {}{}\n\n| effect | score | predicted ΔBIC | evidence |\n|---|---|---|---|\n",
+            i + 1,
+            state(r)
+        );
+        for c in r["ranking"].as_array().into_iter().flatten() {
+            s += &format!(
+                "| {} | {:.3} | {:+.0} | {} |\n",
+                c["effect"].as_str().unwrap_or(""),
+                c["score"].as_f64().unwrap_or(f64::NAN),
+                c["predicted_delta_bic"].as_f64().unwrap_or(f64::NAN),
+                c["evidence"].as_str().unwrap_or("")
+            );
+        }
+        let attempts = r["attempts"].as_array().map_or(&[][..], |v| v.as_slice());
+        for a in attempts {
+            s += &format!("\nRefit with {}.\n", line(a));
+        }
+        if attempts.is_empty() {
+            s += "\nNo candidate predicted a BIC gain worth a refit (or the residual is white at the noise floor).\n";
+        }
+        s += "\n";
+    }
+    for p in record["pruned_effects"].as_array().into_iter().flatten() {
+        s += &format!(
+            "Backward check: **{}** removed again (BIC {} with it, {} without: redundant once the later effects were in).\n\n",
+            p["effect"].as_str().unwrap_or(""),
+            f(&p["bic_with"]),
+            f(&p["bic_without"])
+        );
+    }
+    s
+}
