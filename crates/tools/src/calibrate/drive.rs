@@ -834,12 +834,8 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
             start[i] += beta[base + c];
         }
         let score = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
-        let predicted_delta_bic = super::stepwise::predicted_delta_bic(
-            fit.n(),
-            sse_now,
-            (sse_now - sse_aug).max(0.0),
-            effect.params().len(),
-        );
+        let predicted_delta_bic =
+            super::stepwise::predicted_delta_bic(fit.n(), sse_now, (sse_now - sse_aug).max(0.0), effect.params().len());
         let evidence = match (effect, inverse) {
             (DriveEffect::CoulombFriction, Some(iv)) => format!(
                 "explains {:.1} % of the position residual (FMU sensitivity projected on it; linearised level {:.4}); \
@@ -1437,9 +1433,7 @@ fn record_json(o: &DriveOutcome) -> Value {
         &o.record,
         DriveEffect::name,
         |_| json!({}),
-        |d: &DriveDetail| {
-            json!({"held_out_relerr_before": d.held_before, "held_out_relerr_after": d.held_after, "wald_chi2": d.wald})
-        },
+        |d: &DriveDetail| json!({"held_out_relerr_before": d.held_before, "held_out_relerr_after": d.held_after, "wald_chi2": d.wald}),
     )
 }
 
@@ -1671,7 +1665,14 @@ pub fn report_markdown(j: &Value) -> String {
     s += &super::stepwise::record_markdown(
         &record,
         |_| String::new(),
-        |a| format!(", Wald χ² {}, held-out relerr {} → {} %", f(&a["wald_chi2"]), f(&a["held_out_relerr_before"]), f(&a["held_out_relerr_after"])),
+        |a| {
+            format!(
+                ", Wald χ² {}, held-out relerr {} → {} %",
+                f(&a["wald_chi2"]),
+                f(&a["held_out_relerr_before"]),
+                f(&a["held_out_relerr_after"])
+            )
+        },
     );
     for d in j["diagnosis"].as_array().into_iter().flatten() {
         s += &format!("\n- {}: {}\n", d["effect"].as_str().unwrap_or(""), d["evidence"].as_str().unwrap_or(""));

@@ -1,11 +1,14 @@
-//! Measured data → fit → residual → missing effect → refit (issue 4).
+//! Measured data → fit → residual → missing effect → refit (issue 4); this module orchestrates.
 //!
-//! `data` reads runs (interfaces.md), `sim` drives the packaged FMU through the harness, `fit` is
-//! Levenberg–Marquardt through those simulations, `diagnose` analyses residuals and ranks the
-//! effect library, `search` adds and refits, `report` writes report.json, Markdown and plots,
-//! `synth` writes synthetic measured runs from a truth model, `paper` runs the loop on the
-//! paper's summary numbers.
+//! `data` reads runs (interfaces.md), `conditioning` turns them into model inputs, `sim` drives the
+//! packaged FMU through the harness, `fit` is Levenberg–Marquardt through those simulations,
+//! `diagnose` analyses residuals and ranks the effect library, `stepwise` is the one effect search
+//! over a rig (`search::DeviceRig` for the device, `drive::DriveRig` for drive logs), `reference`
+//! holds the black boxes `unexplained` is judged against, `signal` the smoothing, spectra and
+//! derivatives, `report` writes report.json, Markdown and plots, `synth` writes synthetic measured
+//! runs from a truth model, `paper` runs the loop on the paper's summary numbers.
 
+pub mod conditioning;
 pub mod data;
 pub mod diagnose;
 pub mod drive;
@@ -15,11 +18,11 @@ pub mod reference;
 pub mod report;
 pub mod search;
 pub mod signal;
-pub mod stepwise;
 pub mod sim;
+pub mod stepwise;
 pub mod synthetic;
 
-use signal::{rms_frequency, savitzky_golay, second_difference_noise};
+pub use conditioning::{group_runs, held_out_groups, initial_speed, sim_input, smoothing_half_width};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -101,108 +104,6 @@ impl CalibrateArgs {
     }
 }
 
-/// The fitted temperature group each held-out run uses: the one nearest its own temperature
-/// (held-out runs take the moduli fitted there; nothing is fitted on them).
-fn held_out_groups(held: &[data::Run], fitted_temperatures: &[f64]) -> Vec<usize> {
-    let (group, temperatures) = group_runs(held);
-    let nearest = |t: f64| {
-        (0..fitted_temperatures.len())
-            .min_by(|&a, &b| (fitted_temperatures[a] - t).abs().total_cmp(&(fitted_temperatures[b] - t).abs()))
-            .unwrap_or(0)
-    };
-    group.into_iter().map(|g| nearest(temperatures[g])).collect()
-}
-
-/// Temperature groups: runs at one nominal temperature share E' and E''. The nominal temperature is
-/// the declared `temperature_c` metadata, else the thermocouple mean, to 0.5 °C.
-pub fn group_runs(runs: &[data::Run]) -> (Vec<usize>, Vec<f64>) {
-    let mut temps: Vec<f64> = Vec::new();
-    let mut group = Vec::new();
-    for r in runs {
-        let t = r.meta_f64("temperature_c").unwrap_or_else(|| r.mean_temperature_c());
-        let t = (t * 2.0).round() / 2.0;
-        let g = match temps.iter().position(|&x| x == t) {
-            Some(g) => g,
-            None => {
-                temps.push(t);
-                temps.len() - 1
-            }
-        };
-        group.push(g);
-    }
-    (group, temps)
-}
-
-/// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
-/// default): 0.1 s over the highest frequency the run carries, its own for a single sinusoid, else
-/// three times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms. A quintic
-/// Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
-/// frequency. A motor angle without noise (second-difference noise below 1e-12 of its swing) is
-/// not smoothed.
-pub fn smoothing_half_width(r: &data::Run, seconds: Option<f64>) -> usize {
-    let n = r.time.len();
-    let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
-    let seconds = match seconds {
-        Some(s) => s,
-        None => {
-            let swing = r.motor.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(1e-300);
-            if second_difference_noise(&r.motor) <= 1e-12 * swing {
-                return 0;
-            }
-            let top = if fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz) {
-                r.frequency_hz
-            } else {
-                3.0 * rms_frequency(&r.time, &r.motor)
-            };
-            if top > 0.0 {
-                0.1 / top
-            } else {
-                0.0
-            }
-        }
-    };
-    ((seconds / dt).round() as usize).min(n / 4)
-}
-
-/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`)
-/// because it sets the commanded speed of every step: encoder steps of 2π/10000 at 1 kHz make the
-/// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
-/// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
-/// rectifies into bias.
-pub fn sim_input(r: &data::Run, smoothing_seconds: Option<f64>) -> sim::SimInput {
-    sim::SimInput {
-        time: r.time.clone(),
-        motor: savitzky_golay(&r.motor, smoothing_half_width(r, smoothing_seconds)),
-        housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
-        frequency_hz: r.frequency_hz,
-        link_inertia: r.link_inertia,
-        link0: r.link[0],
-        com_distance: r.meta_f64("link_length_m").unwrap_or(0.14),
-        initial_link_speed: initial_speed(&r.time, &r.link),
-    }
-}
-
-/// Speed at the first sample when the data show one (a run need not start at rest): the slope of a
-/// least-squares quadratic over the first 20 ms (at least 10 samples), kept only when it stands
-/// out of its own standard error by 3 (at rest, encoder noise alone must not set the link moving).
-/// A link that starts at rest and catches up with the motor within a millisecond looks the same
-/// over 20 ms, so `search::resolve_initial_speeds` lets the baseline fit decide.
-pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
-    if std::env::var_os("THERMOVIA_NO_V0").is_some() {
-        return 0.0;
-    }
-    let n = t.iter().take_while(|&&ti| ti - t[0] <= 0.02).count().max(10).min(t.len());
-    if n < 4 {
-        return 0.0;
-    }
-    let Some((v, se)) = signal::start_slope(t, x, n) else { return 0.0 };
-    if v.abs() > 3.0 * se {
-        v
-    } else {
-        0.0
-    }
-}
-
 /// Everything `thermovia calibrate` computes, before it is written.
 pub struct Calibration {
     pub runs: Vec<data::Run>,
@@ -247,11 +148,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let mut prob = fit::Problem::new(&sim, inputs, measured, group, &temperatures)?;
-    let laws = damping_laws(&prob);
+    let laws = search::damping_laws(&prob);
     // the black-box references need no FMU: computed beside the search
     let groups = prob.group.clone();
     let (outcome, references) = std::thread::scope(|scope| {
-        let refs = scope.spawn(|| black_box_references(&runs, &groups));
+        let refs = scope.spawn(|| reference::black_box(&runs, &groups));
         let budget = search::Budget::seconds(args.search_budget);
         (search::calibrate(&mut prob, &laws, &budget), refs.join())
     });
@@ -287,20 +188,44 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     // the fitting runs (fitted on the first half of every run, scored on the second); --validate
     // runs are only scored.
     let (held_base, held_final) =
-        (blocked_fold_rmse(&prob, &outcome.baseline)?, blocked_fold_rmse(&prob, &outcome.final_fit)?);
+        (search::blocked_fold_rmse(&prob, &outcome.baseline)?, search::blocked_fold_rmse(&prob, &outcome.final_fit)?);
     let method = "a blocked fold: refitted on the first half of every run, scored on the second half (the --validate runs, if any, are scored under validation and choose nothing)";
     search::debug(format_args!("held-out: {:?}", t0.elapsed()));
-    let reverted = !outcome.final_fit.spec.effects.is_empty() && held_final >= held_base;
-    if reverted {
+    let mut held_final = held_final;
+    let mut dropped: Vec<fit::Effect> = Vec::new();
+    if !outcome.final_fit.spec.effects.is_empty() && held_final >= held_base {
+        // Back along the search's path: the last model before the final one that the fold still
+        // prefers to the baseline (an early effect can hold up where a later one overfits).
+        let mut back: Option<(f64, usize)> = None;
+        let last = outcome.path.len().saturating_sub(1);
+        for i in (1..last).rev() {
+            let r = search::blocked_fold_rmse(&prob, &outcome.path[i].0)?;
+            if r < held_base && back.is_none_or(|b| r < b.0) {
+                back = Some((r, i));
+            }
+        }
+        let (fit, sig, rmse) = match back {
+            Some((r, i)) => (outcome.path[i].0.clone(), outcome.path[i].1.clone(), r),
+            None => (outcome.baseline.clone(), outcome.baseline_signatures.clone(), held_base),
+        };
+        dropped = outcome.final_fit.spec.effects.iter().copied().filter(|e| !fit.spec.effects.contains(e)).collect();
         notes.push(format!(
-            "the added effects ({}) did not lower the held-out error ({held_base:.4e} → {held_final:.4e} rad): they were \
-             dropped, and the final model is the baseline",
-            outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", ")
+            "the added effects ({}) did not lower the held-out error ({held_base:.4e} → {held_final:.4e} rad): {} \
+             dropped, and the final model is {} ({rmse:.4e} rad)",
+            outcome.final_fit.spec.effects.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+            dropped.iter().map(|e| e.name()).collect::<Vec<_>>().join(", "),
+            if fit.spec.effects.is_empty() {
+                "the baseline".to_string()
+            } else {
+                "the search's earlier step with the rest".to_string()
+            }
         ));
-        outcome.final_fit = outcome.baseline.clone();
-        outcome.final_signatures = outcome.baseline_signatures.clone();
+        outcome.final_fit = fit;
+        outcome.final_signatures = sig;
         outcome.unexplained = !outcome.final_signatures.white();
+        held_final = rmse;
     }
+    let reverted = !dropped.is_empty();
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
     for (j, r) in report["runs"].as_array_mut().into_iter().flatten().zip(&runs) {
@@ -340,8 +265,9 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     report["held_out"] = serde_json::json!({
         "method": method,
         "baseline_rmse_rad": held_base,
-        "final_rmse_rad": if reverted { held_base } else { held_final },
+        "final_rmse_rad": held_final,
         "effects_reverted": reverted,
+        "effects_dropped": dropped.iter().map(|e| e.name()).collect::<Vec<_>>(),
         "notes": notes,
     });
     if let Some(h) = &held_prob {
@@ -354,7 +280,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
             "final": report::held_out_metrics(&h.measured, &f),
         });
     }
-    report["warnings"] = serde_json::json!(device_warnings(&runs, &report));
+    report["warnings"] = serde_json::json!(report::device_warnings(&runs, &report));
     let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
         ("report.md".to_string(), report::report_markdown(&report, &outcome).into_bytes()),
@@ -369,140 +295,6 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
 /// The black box must beat the model's rms above the noise by this factor for the leftover
 /// structure to count as unexplained (a margin for the reference's own fitting freedom).
 const REFERENCE_MARGIN: f64 = 1.1;
-
-/// Link = motor and a linear black box per temperature group (reference.rs), on the measured runs.
-fn black_box_references(runs: &[data::Run], group: &[usize]) -> (reference::Reference, reference::Reference) {
-    let signals: Vec<reference::RunSignals> =
-        runs.iter().map(|r| reference::RunSignals { time: &r.time, motor: &r.motor, link: &r.link }).collect();
-    let t = std::time::Instant::now();
-    let out = (reference::trivial(&signals), reference::arx_grouped(&signals, group, BLACK_BOX_MAX_ORDER));
-    search::debug(format_args!("black box: {:?}", t.elapsed()));
-    out
-}
-
-/// Highest order of the black box: two modes (motor–link resonance and one more) are what a
-/// transmission with a link shows; more fits noise on records this long.
-const BLACK_BOX_MAX_ORDER: usize = 4;
-
-/// RMSE on the second half of every run of the model refitted (from `fit`) on the first halves:
-/// a blocked fold that respects time (the second half is predicted by simulating on from the
-/// start, never fitted).
-fn blocked_fold_rmse(prob: &fit::Problem, fit: &fit::Fit) -> Result<f64, String> {
-    let first = prob.truncated(0.5);
-    let refit = fit::levenberg_marquardt(&first, fit.spec.clone(), fit.p.clone(), search::MAX_ITERATIONS)?;
-    let out = prob.outputs(&refit.spec, &refit.p).ok_or("the FMU could not simulate the blocked fold")?;
-    let (mut sse, mut n) = (0.0, 0usize);
-    for (y, m) in prob.measured.iter().zip(&out) {
-        for k in y.len() / 2..y.len() {
-            sse += (y[k] - m[k]).powi(2);
-            n += 1;
-        }
-    }
-    Ok((sse / n.max(1) as f64).sqrt())
-}
-
-/// Frequencies closer than this (relative) are one frequency.
-const SAME_FREQUENCY: f64 = 0.05;
-
-/// The damping laws the data allow (issue 10, item 2). Runs that are not single sinusoids have no
-/// "excitation frequency": viscous only. Sinusoidal runs at two or more frequencies within one
-/// temperature tell the laws apart: both are fitted (baseline and after each added effect) and the
-/// lower BIC wins. At one frequency per temperature they predict the same runs: viscous is kept
-/// and the report says the data cannot tell.
-fn damping_laws(prob: &fit::Problem) -> search::LawChoice {
-    use fit::DampingLaw::{Hysteretic, Viscous};
-    use fit::SpringBank::{Nominal, Scaled};
-    let sinusoidal = prob.sinusoidal().iter().all(|&s| s);
-    let two_frequencies = (0..prob.n_groups).any(|g| {
-        let f: Vec<f64> =
-            (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).map(|r| prob.inputs[r].frequency_hz).collect();
-        f.iter().any(|a| f.iter().any(|b| (a - b).abs() > SAME_FREQUENCY * a.max(*b)))
-    });
-    let (laws, reason) = if !sinusoidal {
-        (vec![Viscous], "some runs are not single sinusoids, so no law that needs the excitation frequency applies")
-    } else if !two_frequencies {
-        (
-            vec![Viscous],
-            "every temperature has runs at one frequency only: viscous and hysteretic damping predict the same runs \
-             and cannot be told apart (the damping is reported at that frequency)",
-        )
-    } else {
-        (
-            vec![Viscous, Hysteretic],
-            "runs at two or more frequencies per temperature: both laws fitted, the lower BIC kept (baseline and after \
-             each added effect)",
-        )
-    };
-    let mut reason = reason.to_string();
-    // the split of K between springs and PCL shows only while the temperature moves in a run
-    let banks = if diagnose::thermocouple_varies(prob) {
-        reason += "; the thermocouple moves within runs, so the spring bank is fitted two ways (scaled with the PCL, \
-                   or nominal with the PCL carrying the rest) and the lower BIC kept";
-        vec![Scaled, Nominal]
-    } else {
-        reason += "; the thermocouple is steady within runs, so the split of K between springs and PCL cannot show \
-                   (springs scaled with the PCL)";
-        vec![Scaled]
-    };
-    let allowed = laws.iter().flat_map(|&l| banks.iter().map(move |&b| (l, b))).collect();
-    search::LawChoice { allowed, reason, undecided: sinusoidal && !two_frequencies }
-}
-
-/// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default
-/// rather than declared, and material factors stopped at their bounds. Never silent: report.json
-/// `warnings`, report.md and the console.
-fn device_warnings(runs: &[data::Run], report: &serde_json::Value) -> Vec<String> {
-    let mut warnings = Vec::new();
-    let from_mass: Vec<String> = runs.iter().filter(|r| r.inertia_from_mass).map(|r| r.name()).collect();
-    if !from_mass.is_empty() {
-        warnings.push(format!(
-            "the link inertia of {} is the point mass m·l² from link_mass_kg and link_length_m (the link's own \
-             inertia about its centre is not in it): declare link_inertia_kgm2 when it is known",
-            from_mass.join(", ")
-        ));
-    }
-    let undeclared: Vec<String> = runs.iter().filter(|r| r.link_inertia.is_none()).map(|r| r.name()).collect();
-    if !undeclared.is_empty() {
-        warnings.push(format!(
-            "link_inertia_kgm2 is not declared in {} of {} runs ({}): the FMU's default link_inertia is used, so the \
-             fitted stiffness and damping are known only relative to it (K/J and C/J); declare the inertia for \
-             physical values",
-            undeclared.len(),
-            runs.len(),
-            undeclared.join(", ")
-        ));
-    }
-    for e in report["added_effects"].as_array().into_iter().flatten().filter(|e| e["at_plausible_limit"] == true) {
-        warnings.push(format!(
-            "{} sits at its plausible limit {} (its torque on the link at {}× the largest transmission plus inertial \
-             torque the runs show, or a play twice the largest relative angle): the data cannot show it that large, \
-             and it is likely standing in for an effect the library lacks",
-            e["effect"].as_str().unwrap_or("?"),
-            e["plausible_limits"],
-            fit::PLAUSIBLE_TORQUE_FACTOR
-        ));
-    }
-    for (stage, key) in [("baseline", "identified_baseline"), ("final", "identified")] {
-        for g in report[key].as_array().into_iter().flatten() {
-            if g["at_bound"].as_bool() == Some(true) {
-                warnings.push(format!(
-                "{stage} fit at {} °C: the transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.2e}, C = \
-                 {:.4e} N·m·s/rad within {:.0e}–{:.2e}; the upper ends are what the sample rate can show for this \
-                 inertia): the structure cannot reach what these data want, and what the loop adds may be filling \
-                 that gap",
-                g["temperature_c"].as_f64().unwrap_or(f64::NAN),
-                g["stiffness"].as_f64().unwrap_or(f64::NAN),
-                g["stiffness_range"][0].as_f64().unwrap_or(f64::NAN),
-                g["stiffness_range"][1].as_f64().unwrap_or(f64::NAN),
-                g["damping"].as_f64().unwrap_or(f64::NAN),
-                g["damping_range"][0].as_f64().unwrap_or(f64::NAN),
-                g["damping_range"][1].as_f64().unwrap_or(f64::NAN),
-            ));
-            }
-        }
-    }
-    warnings
-}
 
 /// The drive loop (drive.rs) on runs driven by torque or by a reference, rigid or linear.
 fn calibrate_drive(

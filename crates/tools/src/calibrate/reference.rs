@@ -514,6 +514,20 @@ fn held_out_rmse(uniform: &[Uniform], sets: &[(usize, f64, Vec<usize>)], na: usi
     (n > 0 && sse.is_finite()).then(|| (sse / n as f64).sqrt())
 }
 
+/// Link = motor and a linear black box per temperature group on the measured runs.
+pub fn black_box(runs: &[super::data::Run], group: &[usize]) -> (Reference, Reference) {
+    let signals: Vec<RunSignals> =
+        runs.iter().map(|r| RunSignals { time: &r.time, motor: &r.motor, link: &r.link }).collect();
+    let t = std::time::Instant::now();
+    let out = (trivial(&signals), arx_grouped(&signals, group, BLACK_BOX_MAX_ORDER));
+    super::search::debug(format_args!("black box: {:?}", t.elapsed()));
+    out
+}
+
+/// Highest order of the black box: two modes (motor–link resonance and one more) are what a
+/// transmission with a link shows; more fits noise on records this long.
+const BLACK_BOX_MAX_ORDER: usize = 4;
+
 #[cfg(test)]
 mod tests {
     use super::*;

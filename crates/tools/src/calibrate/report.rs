@@ -272,6 +272,62 @@ fn record_json(o: &Outcome) -> Value {
     )
 }
 
+/// What a reader of the device loop's numbers must know: an inertia taken from the FMU's default
+/// rather than declared, and material factors stopped at their bounds. Never silent: report.json
+/// `warnings`, report.md and the console.
+pub fn device_warnings(runs: &[Run], report: &serde_json::Value) -> Vec<String> {
+    let mut warnings = Vec::new();
+    let from_mass: Vec<String> = runs.iter().filter(|r| r.inertia_from_mass).map(|r| r.name()).collect();
+    if !from_mass.is_empty() {
+        warnings.push(format!(
+            "the link inertia of {} is the point mass m·l² from link_mass_kg and link_length_m (the link's own \
+             inertia about its centre is not in it): declare link_inertia_kgm2 when it is known",
+            from_mass.join(", ")
+        ));
+    }
+    let undeclared: Vec<String> = runs.iter().filter(|r| r.link_inertia.is_none()).map(|r| r.name()).collect();
+    if !undeclared.is_empty() {
+        warnings.push(format!(
+            "link_inertia_kgm2 is not declared in {} of {} runs ({}): the FMU's default link_inertia is used, so the \
+             fitted stiffness and damping are known only relative to it (K/J and C/J); declare the inertia for \
+             physical values",
+            undeclared.len(),
+            runs.len(),
+            undeclared.join(", ")
+        ));
+    }
+    for e in report["added_effects"].as_array().into_iter().flatten().filter(|e| e["at_plausible_limit"] == true) {
+        warnings.push(format!(
+            "{} sits at its plausible limit {} (its torque on the link at {}× the largest transmission plus inertial \
+             torque the runs show, or a play twice the largest relative angle): the data cannot show it that large, \
+             and it is likely standing in for an effect the library lacks",
+            e["effect"].as_str().unwrap_or("?"),
+            e["plausible_limits"],
+            super::fit::PLAUSIBLE_TORQUE_FACTOR
+        ));
+    }
+    for (stage, key) in [("baseline", "identified_baseline"), ("final", "identified")] {
+        for g in report[key].as_array().into_iter().flatten() {
+            if g["at_bound"].as_bool() == Some(true) {
+                warnings.push(format!(
+                "{stage} fit at {} °C: the transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.2e}, C = \
+                 {:.4e} N·m·s/rad within {:.0e}–{:.2e}; the upper ends are what the sample rate can show for this \
+                 inertia): the structure cannot reach what these data want, and what the loop adds may be filling \
+                 that gap",
+                g["temperature_c"].as_f64().unwrap_or(f64::NAN),
+                g["stiffness"].as_f64().unwrap_or(f64::NAN),
+                g["stiffness_range"][0].as_f64().unwrap_or(f64::NAN),
+                g["stiffness_range"][1].as_f64().unwrap_or(f64::NAN),
+                g["damping"].as_f64().unwrap_or(f64::NAN),
+                g["damping_range"][0].as_f64().unwrap_or(f64::NAN),
+                g["damping_range"][1].as_f64().unwrap_or(f64::NAN),
+            ));
+            }
+        }
+    }
+    warnings
+}
+
 /// (internal name, plausible limit, fitted value) of each parameter of effect `e` in `fit` that has
 /// a limit (`Problem::plausible_limits`).
 fn plausible(prob: &Problem, fit: &Fit, e: Effect) -> Vec<(&'static str, f64, f64)> {

@@ -7,10 +7,10 @@ use super::fit::{
     Problem, SpringBank, EQUATION_ERROR_EFFECTS,
 };
 
+use super::stepwise::{Attempt, Ranked, Record, Rig, Verdict};
 pub use super::stepwise::{
     Budget, BIC_MARGIN, COMBINATION_PASSES, MAX_EFFECTS, PAIR_POOL, PRUNE_SKIP, SHORTLIST_SHARE, TRIES_PER_ROUND,
 };
-use super::stepwise::{Attempt, Ranked, Record, Rig, Verdict};
 
 /// Fraction of the residual's low-frequency structure (over white noise) an effect must remove.
 pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
@@ -84,6 +84,8 @@ pub struct Outcome {
     pub baseline_signatures: Signatures,
     pub final_fit: Fit,
     pub final_signatures: Signatures,
+    /// The model after each step the search accepted (the baseline first, the final model last).
+    pub path: Vec<(Fit, Signatures)>,
     pub unexplained: bool,
     /// Damping laws compared (baseline and after each added effect).
     pub laws: Vec<LawRow>,
@@ -540,6 +542,70 @@ fn sims(prob: &Problem) -> usize {
     prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed)
 }
 
+/// RMSE on the second half of every run of the model refitted (from `fit`) on the first halves:
+/// a blocked fold that respects time (the second half is predicted by simulating on from the
+/// start, never fitted).
+pub fn blocked_fold_rmse(prob: &Problem, fit: &Fit) -> Result<f64, String> {
+    let first = prob.truncated(0.5);
+    let refit = levenberg_marquardt(&first, fit.spec.clone(), fit.p.clone(), MAX_ITERATIONS)?;
+    let out = prob.outputs(&refit.spec, &refit.p).ok_or("the FMU could not simulate the blocked fold")?;
+    let (mut sse, mut n) = (0.0, 0usize);
+    for (y, m) in prob.measured.iter().zip(&out) {
+        for k in y.len() / 2..y.len() {
+            sse += (y[k] - m[k]).powi(2);
+            n += 1;
+        }
+    }
+    Ok((sse / n.max(1) as f64).sqrt())
+}
+
+/// Frequencies closer than this (relative) are one frequency.
+const SAME_FREQUENCY: f64 = 0.05;
+
+/// The damping laws the data allow (issue 10, item 2). Runs that are not single sinusoids have no
+/// "excitation frequency": viscous only. Sinusoidal runs at two or more frequencies within one
+/// temperature tell the laws apart: both are fitted (baseline and after each added effect) and the
+/// lower BIC wins. At one frequency per temperature they predict the same runs: viscous is kept
+/// and the report says the data cannot tell.
+pub fn damping_laws(prob: &Problem) -> LawChoice {
+    use super::fit::DampingLaw::{Hysteretic, Viscous};
+    use super::fit::SpringBank::{Nominal, Scaled};
+    let sinusoidal = prob.sinusoidal().iter().all(|&s| s);
+    let two_frequencies = (0..prob.n_groups).any(|g| {
+        let f: Vec<f64> =
+            (0..prob.inputs.len()).filter(|&r| prob.group[r] == g).map(|r| prob.inputs[r].frequency_hz).collect();
+        f.iter().any(|a| f.iter().any(|b| (a - b).abs() > SAME_FREQUENCY * a.max(*b)))
+    });
+    let (laws, reason) = if !sinusoidal {
+        (vec![Viscous], "some runs are not single sinusoids, so no law that needs the excitation frequency applies")
+    } else if !two_frequencies {
+        (
+            vec![Viscous],
+            "every temperature has runs at one frequency only: viscous and hysteretic damping predict the same runs \
+             and cannot be told apart (the damping is reported at that frequency)",
+        )
+    } else {
+        (
+            vec![Viscous, Hysteretic],
+            "runs at two or more frequencies per temperature: both laws fitted, the lower BIC kept (baseline and after \
+             each added effect)",
+        )
+    };
+    let mut reason = reason.to_string();
+    // the split of K between springs and PCL shows only while the temperature moves in a run
+    let banks = if super::diagnose::thermocouple_varies(prob) {
+        reason += "; the thermocouple moves within runs, so the spring bank is fitted two ways (scaled with the PCL, \
+                   or nominal with the PCL carrying the rest) and the lower BIC kept";
+        vec![Scaled, Nominal]
+    } else {
+        reason += "; the thermocouple is steady within runs, so the split of K between springs and PCL cannot show \
+                   (springs scaled with the PCL)";
+        vec![Scaled]
+    };
+    let allowed = laws.iter().flat_map(|&l| banks.iter().map(move |&b| (l, b))).collect();
+    LawChoice { allowed, reason, undecided: sinusoidal && !two_frequencies }
+}
+
 /// A device model in the search: the fit and its residual's signatures.
 #[derive(Clone, Debug)]
 pub struct Judged {
@@ -616,7 +682,12 @@ impl Rig for DeviceRig<'_, '_> {
         self.with_screen(m, |sprob, _, _| {
             let t = std::time::Instant::now();
             let refit = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
-            debug(format_args!("refit {:?} took {:?}, {} iterations", refit.spec.effects, t.elapsed(), refit.iterations));
+            debug(format_args!(
+                "refit {:?} took {:?}, {} iterations",
+                refit.spec.effects,
+                t.elapsed(),
+                refit.iterations
+            ));
             Some(self.judged(sprob, refit))
         })
     }
@@ -647,7 +718,14 @@ impl Rig for DeviceRig<'_, '_> {
             return m;
         }
         let before = (m.fit.spec.law, m.fit.spec.springs);
-        let fit = best_law(self.prob, None, m.fit, &self.laws.allowed, &format!("round {round}"), &mut self.rows.borrow_mut());
+        let fit = best_law(
+            self.prob,
+            None,
+            m.fit,
+            &self.laws.allowed,
+            &format!("round {round}"),
+            &mut self.rows.borrow_mut(),
+        );
         if (fit.spec.law, fit.spec.springs) == before {
             Judged { fit, sig: m.sig }
         } else {
@@ -723,10 +801,10 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         refitted: std::cell::RefCell::new(Vec::new()),
     };
     let start = Judged { fit: baseline.clone(), sig: baseline_signatures.clone() };
-    let found = super::stepwise::search(&rig, start, budget);
+    let super::stepwise::Search { model, path, record } = super::stepwise::search(&rig, start, budget);
     let rows = rig.rows.into_inner();
     debug(format_args!("searched: {:?}, {} simulations", t.elapsed(), sims(prob)));
-    let Judged { fit: mut current, mut sig } = found.model;
+    let Judged { fit: mut current, mut sig } = model;
     if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
         current = resolve_initial_speeds(prob, current);
@@ -737,11 +815,12 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let unexplained = !sig.white();
     Ok(Outcome {
-        record: found.record,
+        record,
         baseline,
         baseline_signatures,
         final_fit: current,
         final_signatures: sig,
+        path: path.into_iter().map(|j| (j.fit, j.sig)).collect(),
         unexplained,
         laws: rows,
         law_reason: laws.reason.clone(),

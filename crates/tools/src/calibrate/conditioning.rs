@@ -1,0 +1,108 @@
+//! Runs as the loops see them: temperature groups, and the device's model inputs from a measured run
+//! (the motor angle smoothed, the link's initial speed). Drive runs condition their own inputs in
+//! `drive::DriveInput`.
+
+use super::data::Run;
+use super::signal::{rms_frequency, savitzky_golay, second_difference_noise};
+
+/// The fitted temperature group each held-out run uses: the one nearest its own temperature
+/// (held-out runs take the moduli fitted there; nothing is fitted on them).
+pub fn held_out_groups(held: &[Run], fitted_temperatures: &[f64]) -> Vec<usize> {
+    let (group, temperatures) = group_runs(held);
+    let nearest = |t: f64| {
+        (0..fitted_temperatures.len())
+            .min_by(|&a, &b| (fitted_temperatures[a] - t).abs().total_cmp(&(fitted_temperatures[b] - t).abs()))
+            .unwrap_or(0)
+    };
+    group.into_iter().map(|g| nearest(temperatures[g])).collect()
+}
+
+/// Temperature groups: runs at one nominal temperature share E' and E''. The nominal temperature is
+/// the declared `temperature_c` metadata, else the thermocouple mean, to 0.5 °C.
+pub fn group_runs(runs: &[Run]) -> (Vec<usize>, Vec<f64>) {
+    let mut temps: Vec<f64> = Vec::new();
+    let mut group = Vec::new();
+    for r in runs {
+        let t = r.meta_f64("temperature_c").unwrap_or_else(|| r.mean_temperature_c());
+        let t = (t * 2.0).round() / 2.0;
+        let g = match temps.iter().position(|&x| x == t) {
+            Some(g) => g,
+            None => {
+                temps.push(t);
+                temps.len() - 1
+            }
+        };
+        group.push(g);
+    }
+    (group, temps)
+}
+
+/// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
+/// default): 0.1 s over the highest frequency the run carries, its own for a single sinusoid, else
+/// three times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms. A quintic
+/// Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
+/// frequency. A motor angle without noise (second-difference noise below 1e-12 of its swing) is
+/// not smoothed.
+pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
+    let n = r.time.len();
+    let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
+    let seconds = match seconds {
+        Some(s) => s,
+        None => {
+            let swing = r.motor.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(1e-300);
+            if second_difference_noise(&r.motor) <= 1e-12 * swing {
+                return 0;
+            }
+            let top = if super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz) {
+                r.frequency_hz
+            } else {
+                3.0 * rms_frequency(&r.time, &r.motor)
+            };
+            if top > 0.0 {
+                0.1 / top
+            } else {
+                0.0
+            }
+        }
+    };
+    ((seconds / dt).round() as usize).min(n / 4)
+}
+
+/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`)
+/// because it sets the commanded speed of every step: encoder steps of 2π/10000 at 1 kHz make the
+/// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
+/// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
+/// rectifies into bias.
+pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> super::sim::SimInput {
+    super::sim::SimInput {
+        time: r.time.clone(),
+        motor: savitzky_golay(&r.motor, smoothing_half_width(r, smoothing_seconds)),
+        housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
+        frequency_hz: r.frequency_hz,
+        link_inertia: r.link_inertia,
+        link0: r.link[0],
+        com_distance: r.meta_f64("link_length_m").unwrap_or(0.14),
+        initial_link_speed: initial_speed(&r.time, &r.link),
+    }
+}
+
+/// Speed at the first sample when the data show one (a run need not start at rest): the slope of a
+/// least-squares quadratic over the first 20 ms (at least 10 samples), kept only when it stands
+/// out of its own standard error by 3 (at rest, encoder noise alone must not set the link moving).
+/// A link that starts at rest and catches up with the motor within a millisecond looks the same
+/// over 20 ms, so `search::resolve_initial_speeds` lets the baseline fit decide.
+pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
+    if std::env::var_os("THERMOVIA_NO_V0").is_some() {
+        return 0.0;
+    }
+    let n = t.iter().take_while(|&&ti| ti - t[0] <= 0.02).count().max(10).min(t.len());
+    if n < 4 {
+        return 0.0;
+    }
+    let Some((v, se)) = super::signal::start_slope(t, x, n) else { return 0.0 };
+    if v.abs() > 3.0 * se {
+        v
+    } else {
+        0.0
+    }
+}
