@@ -263,6 +263,13 @@ fn torque_drive_on_a_rotary_axis_recovers_inertia_viscous_and_coulomb() {
         assert!((got - truth).abs() <= rel * truth, "{name}: {got}, truth {truth}");
     }
     assert!(j["held_out"].as_str().unwrap().contains("no held-out set"));
+    assert!(j["search_budget"].is_null(), "{}", j["search_budget"]);
+    // the drive goes through the same search as the device: out of budget, it keeps the baseline
+    // and says what it skipped
+    let j = run_calibrate(&[&file, "--search-budget", "0"]);
+    assert_eq!(j["search_budget"]["exhausted"], true, "{}", j["search_budget"]);
+    assert!(added(&j).is_empty(), "{:?}", added(&j));
+    assert_eq!(j["final"]["relerr_percent"], j["baseline"]["relerr_percent"]);
 }
 
 /// Torque drive on the compliant device: motor and link angles are both predicted (the residual

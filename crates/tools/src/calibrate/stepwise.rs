@@ -85,6 +85,9 @@ pub struct Ranked<E> {
 pub fn linearised(jacobian: &DMatrix<f64>, residual: &[f64], probes: &DMatrix<f64>) -> (f64, f64, DVector<f64>) {
     let r = DVector::from_column_slice(residual);
     let project = |m: &DMatrix<f64>| {
+        if m.ncols() == 0 {
+            return (r.norm_squared(), DVector::zeros(0));
+        }
         let beta = spd_inverse(&(m.transpose() * m)) * (m.transpose() * &r);
         ((&r - m * &beta).norm_squared(), beta)
     };
@@ -229,7 +232,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
     // Several effects at once first: one at a time, each would be judged against a baseline that
     // absorbed the others (and a greedy first step can take a wrong effect that mimics two, such as
     // gravity at an offset for asymmetric friction, and never leave it).
-    if rig.structure_left(&current) && budget.allows("the equation error's combination at the baseline") {
+    if rig.structure_left(&current) && budget.allows("the combination at the baseline") {
         if let Some((attempt, accepted)) = rig.combination(&current, "baseline") {
             combinations.push(attempt);
             if let Some(m) = accepted {
@@ -326,7 +329,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         passes += 1;
         if !rig.structure_left(&current)
             || passes > COMBINATION_PASSES
-            || !budget.allows("the equation error's combination after the rounds")
+            || !budget.allows("the combination after the rounds")
         {
             break;
         }
@@ -484,4 +487,203 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
         );
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    //! The search on a rig with no FMU in it: effects are columns of a linear regression, so every
+    //! ranking and refit is exact and the search's own logic is what is tested.
+    use super::*;
+
+    /// Uniform-sum normal deviates from a fixed LCG (deterministic, no dependency).
+    fn normals(seed: u64, n: usize) -> Vec<f64> {
+        let mut s = seed;
+        let mut next = || {
+            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64
+        };
+        (0..n).map(|_| (0..12).map(|_| next()).sum::<f64>() - 6.0).collect()
+    }
+
+    #[derive(Clone, Debug)]
+    struct Model {
+        cols: Vec<usize>,
+        residual: Vec<f64>,
+        sse: f64,
+        p: Vec<f64>,
+    }
+
+    /// y and candidate columns; an effect keeps when BIC falls by the margin and the excess of the
+    /// mean square over the noise variance falls by a third (the device's rule, on a known noise).
+    struct Linear {
+        x: Vec<Vec<f64>>,
+        y: Vec<f64>,
+        noise_var: f64,
+    }
+
+    impl Linear {
+        fn design(&self, cols: &[usize]) -> DMatrix<f64> {
+            DMatrix::from_fn(self.y.len(), cols.len(), |i, j| self.x[cols[j]][i])
+        }
+        fn fit(&self, cols: Vec<usize>) -> Model {
+            let a = self.design(&cols);
+            let y = DVector::from_column_slice(&self.y);
+            let beta = if cols.is_empty() {
+                DVector::zeros(0)
+            } else {
+                spd_inverse(&(a.transpose() * &a)) * (a.transpose() * &y)
+            };
+            let r = &y - &a * &beta;
+            Model {
+                sse: r.norm_squared(),
+                residual: r.iter().copied().collect(),
+                p: beta.iter().copied().collect(),
+                cols,
+            }
+        }
+        fn excess(&self, m: &Model) -> f64 {
+            (m.sse / self.y.len() as f64 - self.noise_var).max(0.0)
+        }
+    }
+
+    impl Rig for Linear {
+        type Effect = usize;
+        type Model = Model;
+        type Detail = ();
+        type State = ();
+        fn name(e: usize) -> &'static str {
+            ["x0", "x1", "x2", "x3", "x4"][e]
+        }
+        fn effects(&self, m: &Model) -> Vec<usize> {
+            m.cols.clone()
+        }
+        fn effect_count(&self, m: &Model) -> usize {
+            m.cols.len()
+        }
+        fn bic(&self, m: &Model) -> f64 {
+            let n = self.y.len() as f64;
+            n * (m.sse / n).ln() + m.cols.len() as f64 * n.ln()
+        }
+        fn structure_left(&self, m: &Model) -> bool {
+            self.excess(m) > 0.05 * self.noise_var
+        }
+        fn rankable(&self, _m: &Model) -> bool {
+            true
+        }
+        fn state(&self, _m: &Model) {}
+        fn rank(&self, m: &Model) -> Vec<Ranked<usize>> {
+            let mut out: Vec<Ranked<usize>> = (0..self.x.len())
+                .filter(|c| !m.cols.contains(c))
+                .map(|c| {
+                    let probe = self.design(&[c]);
+                    let (now, aug, beta) = linearised(&self.design(&m.cols), &m.residual, &probe);
+                    Ranked {
+                        effect: c,
+                        score: (now - aug) / now,
+                        predicted_delta_bic: predicted_delta_bic(self.y.len(), now, now - aug, 1),
+                        start: vec![beta[m.cols.len()]],
+                        evidence: String::new(),
+                    }
+                })
+                .collect();
+            out.sort_by(|a, b| b.score.total_cmp(&a.score));
+            out
+        }
+        fn refit_with(&self, m: &Model, added: &[&Ranked<usize>]) -> Option<Model> {
+            let mut cols = m.cols.clone();
+            cols.extend(added.iter().map(|c| c.effect));
+            Some(self.fit(cols))
+        }
+        fn judge(&self, m: &Model, refit: &Model) -> Verdict<()> {
+            let keep = self.bic(refit) < self.bic(m) - BIC_MARGIN && self.excess(refit) <= 2.0 / 3.0 * self.excess(m);
+            Verdict { keep, bic_before: self.bic(m), bic_after: self.bic(refit), detail: () }
+        }
+        fn converge(&self, _m: &Model, winner: Model, _round: usize) -> Option<Model> {
+            Some(winner)
+        }
+        fn adopt(&self, m: Model, _round: usize) -> Model {
+            m
+        }
+        fn removal_delta_bic(&self, m: &Model, e: usize) -> f64 {
+            let i = m.cols.iter().position(|&c| c == e).unwrap();
+            removal_delta_bic(&self.design(&m.cols), &m.p, m.sse, &[i])
+        }
+        fn without(&self, m: &Model, e: usize) -> Option<Model> {
+            Some(self.fit(m.cols.iter().copied().filter(|&c| c != e).collect()))
+        }
+        fn polish(&self, m: Model) -> Option<Model> {
+            Some(m)
+        }
+    }
+
+    const N: usize = 2000;
+    const NOISE: f64 = 0.01;
+
+    fn rig(x: Vec<Vec<f64>>, y: impl Fn(usize) -> f64) -> (Linear, Model) {
+        let e = normals(99, N);
+        let y: Vec<f64> = (0..N).map(|i| y(i) + NOISE * e[i]).collect();
+        let r = Linear { x, y, noise_var: NOISE * NOISE };
+        let start = r.fit(vec![]);
+        (r, start)
+    }
+
+    fn sorted(mut v: Vec<usize>) -> Vec<usize> {
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn forward_rounds_find_the_effects_in_the_data_and_nothing_else() {
+        let x: Vec<Vec<f64>> = (0..5).map(|k| normals(k + 1, N)).collect();
+        let (r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + 0.3 * x[2][i]);
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(sorted(s.model.cols.clone()), vec![0, 2]);
+        assert_eq!(s.record.rounds[0].candidates[0].effect, 0, "the larger effect ranks first");
+        assert_eq!(s.path.len(), 3, "start and two accepted steps");
+        assert!(s.record.pruned.is_empty() && s.record.budget_exhausted.is_none());
+    }
+
+    #[test]
+    fn two_effects_that_only_help_together_are_found_as_a_pair() {
+        // y = x0 − x1 = v − w: each alone explains 5 % of y (a BIC gain, but not a third of the
+        // structure), the two together all of it
+        let (u, v, w) = (normals(11, N), normals(12, N), normals(13, N));
+        let x0: Vec<f64> = (0..N).map(|i| 3.0 * u[i] + v[i]).collect();
+        let x1: Vec<f64> = (0..N).map(|i| 3.0 * u[i] + w[i]).collect();
+        let x = vec![x0.clone(), x1.clone(), normals(14, N)];
+        let (r, start) = rig(x, |i| x0[i] - x1[i]);
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
+        let first = &s.record.rounds[0];
+        assert!(first.attempts.iter().all(|a| !a.verdict.keep), "no single effect earns its place");
+        let pair = s.record.combinations.iter().find(|c| c.verdict.keep).expect("a kept pair");
+        assert_eq!((pair.stage, sorted(pair.effects.clone())), ("pair after a round", vec![0, 1]));
+    }
+
+    #[test]
+    fn an_effect_made_redundant_by_later_ones_is_pruned() {
+        // x2 stands in for x0 + x1 and is taken first; once both are in, it is redundant
+        let (x0, x1, z) = (normals(21, N), normals(22, N), normals(23, N));
+        let x2: Vec<f64> = (0..N).map(|i| x0[i] + x1[i] + 0.3 * z[i]).collect();
+        let x = vec![x0.clone(), x1.clone(), x2];
+        let (r, start) = rig(x, |i| x0[i] + x1[i]);
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(s.record.rounds[0].candidates[0].effect, 2, "the stand-in ranks first");
+        assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
+        assert_eq!(s.record.pruned.iter().map(|p| p.0).collect::<Vec<_>>(), vec![2]);
+        assert_eq!(s.path.last().map(|m| sorted(m.cols.clone())), Some(vec![0, 1]));
+    }
+
+    #[test]
+    fn a_search_out_of_budget_keeps_its_start_and_says_what_it_skipped() {
+        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 31, N)).collect();
+        let (r, start) = rig(x.clone(), |i| x[0][i]);
+        let budget = Budget::seconds(0.0);
+        std::thread::sleep(std::time::Duration::from_millis(2));
+        let s = search(&r, start, &budget);
+        assert!(s.model.cols.is_empty() && s.record.rounds.is_empty());
+        assert_eq!(s.record.budget_exhausted, Some((0.0, "the combination at the baseline")));
+        let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
+        assert_eq!(j["search_budget"]["skipped"], "the combination at the baseline");
+    }
 }
