@@ -544,3 +544,142 @@ fn a_step_too_small_to_resolve_is_refused_with_that_reason() {
     m.step(thermovia_model::MIN_RESOLVABLE_STEP).expect("the shortest resolvable step");
     assert!([m.link_angle(), m.link_speed(), m.thermal.pcl_temperature].iter().all(|x| x.is_finite()));
 }
+
+/// Link-driven mode (issue 21): the link follows the engine's angle and speed over each step, and
+/// `transmitted_torque_mean` is the impulse the step integrated. Energy through the joint — into
+/// the transmission from the motor, minus out to the link at the engine's speeds — must equal what
+/// the transmission stores plus what it dissipates.
+fn link_driven(motor: MotorDrive, loss_scale: f64) -> Model {
+    let mut p = Params::default();
+    p.link_drive = thermovia_model::LinkDrive::Prescribed;
+    p.motor_drive = motor;
+    p.motor_damping = 0.0;
+    p.loss_modulus_scale = loss_scale;
+    at_temperature(p, 40.0)
+}
+
+/// The engine's side: a link path of straight pieces, speed v_n over step n (continuous angle).
+fn link_speed(t: f64) -> f64 {
+    0.8 * (2.0 * std::f64::consts::PI * 0.7 * t).cos() + 0.3 * (2.0 * std::f64::consts::PI * 2.3 * t).sin()
+}
+
+#[test]
+fn link_driven_torque_motor_passes_its_work_to_the_link_and_the_springs_exactly() {
+    // a torque-driven motor (the engine's use) on a lossless transmission: motor work − link work
+    // = the change of stored energy, every term from step ends (B_m = 0, C ≈ 0)
+    let mut m = link_driven(MotorDrive::Torque, 1e-12);
+    let h = 1e-3;
+    let k = m.effective_stiffness();
+    let stored = |m: &Model| 0.5 * k * (m.motor_angle() - m.link_angle()).powi(2);
+    let (mut link_angle, mut w_motor, mut w_link, mut through) = (0.0, 0.0, 0.0, 0.0);
+    let e0 = stored(&m);
+    for n in 0..2000 {
+        let t = n as f64 * h;
+        let v = link_speed(t);
+        let tau_m = 2.0 * (2.0 * std::f64::consts::PI * 1.1 * t).sin() - 30.0 * (m.motor_angle() - 0.2 * t.sin());
+        m.inputs.link_angle_command = link_angle;
+        m.inputs.link_speed_command = v;
+        m.inputs.motor_torque = tau_m;
+        let (a0, s0) = (m.motor_angle(), m.motor_speed());
+        m.step(h).unwrap();
+        assert!((m.link_angle() - (link_angle + v * h)).abs() < 1e-12, "the link follows the engine");
+        assert_eq!(m.link_speed(), v);
+        link_angle += v * h;
+        let dw_motor =
+            tau_m * (m.motor_angle() - a0) - 0.5 * m.params().motor_inertia * (m.motor_speed().powi(2) - s0 * s0);
+        let dw_link = v * m.transmitted_torque_mean * h;
+        w_motor += dw_motor;
+        w_link += dw_link;
+        through += dw_motor.abs() + dw_link.abs();
+    }
+    let balance = w_motor - w_link - (stored(&m) - e0);
+    assert!(through > 0.1, "the test moves energy: {through} J");
+    assert!(
+        balance.abs() <= 1e-6 * through,
+        "motor {w_motor} J − link {w_link} J − stored: {balance:e} of {through} J"
+    );
+}
+
+#[test]
+fn link_driven_transmission_stores_and_dissipates_what_passes_through_it() {
+    // both sides prescribed, the PCL damping on: the relative speed is constant over each step, so
+    // the dissipation ∫ C Δ'² dt is exact from step ends, and the energy through the joint,
+    // Σ (u_n − v_n) τ̄_n h, must equal ΔE_stored + dissipated
+    let mut m = link_driven(MotorDrive::PrescribedAngle, 1.0);
+    let h = 1e-3;
+    let (k, c) = (m.effective_stiffness(), m.effective_damping());
+    assert!(c > 0.1, "C {c}");
+    let stored = |m: &Model| 0.5 * k * (m.motor_angle() - m.link_angle()).powi(2);
+    let (mut link_angle, mut motor_angle) = (0.0, 0.0);
+    let (mut through, mut dissipated, mut scale) = (0.0, 0.0, 0.0);
+    let e0 = stored(&m);
+    for n in 0..2000 {
+        let t = n as f64 * h;
+        let (u, v) = (0.5 * (2.0 * std::f64::consts::PI * 0.9 * t).sin(), link_speed(t));
+        m.inputs.motor_angle_command = motor_angle;
+        m.inputs.motor_speed_command = u;
+        m.inputs.link_angle_command = link_angle;
+        m.inputs.link_speed_command = v;
+        m.step(h).unwrap();
+        motor_angle += u * h;
+        link_angle += v * h;
+        let flow = (u - v) * m.transmitted_torque_mean * h;
+        through += flow;
+        scale += flow.abs();
+        dissipated += c * (u - v).powi(2) * h;
+    }
+    let balance = through - (stored(&m) - e0) - dissipated;
+    assert!(dissipated > 0.1 * scale, "dissipation matters here: {dissipated} of {scale} J");
+    assert!(
+        balance.abs() <= 1e-6 * scale,
+        "through {through} J, stored {} J, dissipated {dissipated} J: {balance:e}",
+        stored(&m) - e0
+    );
+}
+
+#[test]
+fn link_driven_motor_matches_an_independent_integration_with_the_link_moving_as_commanded() {
+    // the motor's ODE with the link on its commanded path, RK4 at 1 µs in this test, against the
+    // model's exact steps of 1 ms: motor angle, speed and the mean torque
+    let mut m = link_driven(MotorDrive::Torque, 1.0);
+    let (k, c) = (m.effective_stiffness(), m.effective_damping());
+    let jm = m.params().motor_inertia;
+    let h = 1e-3;
+    let (mut x, mut w) = (0.0f64, 0.0f64); // reference motor angle and speed
+    let mut link_angle = 0.0;
+    for n in 0..300 {
+        let t = n as f64 * h;
+        let v = link_speed(t);
+        let tau_m = 1.5 * (2.0 * std::f64::consts::PI * 1.3 * t).cos();
+        m.inputs.link_angle_command = link_angle;
+        m.inputs.link_speed_command = v;
+        m.inputs.motor_torque = tau_m;
+        m.step(h).unwrap();
+        let sub = 1000;
+        let dt = h / sub as f64;
+        let mut impulse = 0.0;
+        for i in 0..sub {
+            let s0 = i as f64 * dt;
+            let f = |s: f64, x: f64, w: f64| {
+                let torque = k * (x - (link_angle + v * s)) + c * (w - v);
+                (w, (tau_m - torque) / jm, torque)
+            };
+            let (k1x, k1w, t1) = f(s0, x, w);
+            let (k2x, k2w, t2) = f(s0 + dt / 2.0, x + dt / 2.0 * k1x, w + dt / 2.0 * k1w);
+            let (k3x, k3w, t3) = f(s0 + dt / 2.0, x + dt / 2.0 * k2x, w + dt / 2.0 * k2w);
+            let (k4x, k4w, t4) = f(s0 + dt, x + dt * k3x, w + dt * k3w);
+            x += dt / 6.0 * (k1x + 2.0 * k2x + 2.0 * k3x + k4x);
+            w += dt / 6.0 * (k1w + 2.0 * k2w + 2.0 * k3w + k4w);
+            impulse += dt / 6.0 * (t1 + 2.0 * t2 + 2.0 * t3 + t4);
+        }
+        link_angle += v * h;
+        assert!((m.motor_angle() - x).abs() < 1e-9, "step {n}: motor angle {} vs {x}", m.motor_angle());
+        assert!((m.motor_speed() - w).abs() < 1e-6, "step {n}: motor speed {} vs {w}", m.motor_speed());
+        let mean = impulse / h;
+        assert!(
+            (m.transmitted_torque_mean - mean).abs() < 1e-6 * (1.0 + mean.abs()),
+            "step {n}: mean torque {} vs {mean}",
+            m.transmitted_torque_mean
+        );
+    }
+}

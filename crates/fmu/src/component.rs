@@ -741,7 +741,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 // ---- serialized FMU state: versioned, pointer-free, checked ----
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
-pub const STATE_FORMAT_VERSION: u32 = 2;
+pub const STATE_FORMAT_VERSION: u32 = 3;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;
@@ -985,9 +985,9 @@ mod tests {
                 forge(&bytes, |p| put(p, states_at + 16, f64::NAN))
             }),
             ("gravity's sine anchor", {
-                // [.., adaptive step, anchor angle, sine, cosine]: a sine without its angle
+                // [.., adaptive step, anchor angle, sine, cosine, mean torque]: a sine without its angle
                 let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
-                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 2), 0.5))
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 3), 0.5))
             }),
         ];
         for (what, forged) in cases {

@@ -3,7 +3,7 @@
 //! so they cannot disagree. Start values are read from `Model::default()` through each row's getter.
 
 use thermovia_model::material::MaterialTable;
-use thermovia_model::{Model, MotorDrive, ThermalDrive, Transmission};
+use thermovia_model::{LinkDrive, Model, MotorDrive, ThermalDrive, Transmission};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Causality {
@@ -233,6 +233,14 @@ pub static MOTOR_DRIVE: Enumeration = Enumeration {
     ],
 };
 
+pub static LINK_DRIVE: Enumeration = Enumeration {
+    name: "LinkDrive",
+    items: &[
+        (0, "integrated", "the FMU integrates the link (link_inertia, load_torque, link-side effects)"),
+        (1, "prescribed", "a rigid-body engine integrates the link: it follows link_angle_command with slope link_speed_command over each step"),
+    ],
+};
+
 pub static TRANSMISSION: Enumeration = Enumeration {
     name: "Transmission",
     items: &[
@@ -258,6 +266,8 @@ pub static VARIABLES: &[Variable] = &[
     real_input!(4, motor_angle_command, "rad", -ANGLE, ANGLE, "Motor angle at the start of the step (motor_drive = 1)"),
     real_input!(5, motor_speed_command, "rad/s", -1e4, 1e4, "Motor speed over the step (motor_drive = 1)"),
     real_input!(6, housing_temperature_command, "K", T_MIN, T_MAX, "Measured housing temperature (thermal_drive = 1)"),
+    real_input!(7, link_angle_command, "rad", -ANGLE, ANGLE, "Link angle at the start of the step, from the engine that integrates the link (link_drive = 1)"),
+    real_input!(8, link_speed_command, "rad/s", -1e4, 1e4, "Link speed over the step, held (link_drive = 1)"),
     // ---- outputs
     real_output!(100, motor_angle, "rad", "Motor / housing angle θm", |m| m.motor_angle()),
     real_output!(101, motor_speed, "rad/s", "Motor speed θm'", |m| m.motor_speed()),
@@ -273,6 +283,7 @@ pub static VARIABLES: &[Variable] = &[
     real_output!(111, pcl_melt_fraction, "", "Melt fraction χ of the PCL (0 solid, 1 melt)", |m| m.melt_fraction()),
     real_output!(112, heater_energy, "J", "Electrical energy into the heaters since initialisation", |m| m.thermal.heater_energy),
     real_output!(113, heat_lost, "J", "Heat lost to ambient since initialisation", |m| m.thermal.heat_lost),
+    real_output!(120, transmitted_torque_mean, "N.m", "Transmission torque on the link averaged over the last step: its impulse over the step / h, what an engine that integrates the link applies over its next step (link_drive = 1)", |m| m.transmitted_torque_mean),
     // ---- mechanical parameters
     real_param!(200, motor_inertia, Fixed, "kg.m2", 1e-9, 1e3, "J_m, motor + gearbox inertia on the housing side", "EST: rotor inertia reflected through the gearbox; the paper gives none"),
     real_param!(201, motor_damping, Fixed, "N.m.s/rad", 0.0, 1e4, "B_m, viscous loss of motor and gearbox", "EST: small; the motor is position-controlled in the experiments"),
@@ -358,6 +369,24 @@ pub static VARIABLES: &[Variable] = &[
             }),
         },
         enumeration: Some(&MOTOR_DRIVE),
+    },
+    Variable {
+        name: "link_drive",
+        value_reference: 304,
+        causality: Causality::Parameter,
+        variability: Variability::Fixed,
+        unit: "",
+        min: Some(0.0),
+        max: Some(1.0),
+        description: "0: the FMU integrates the link; 1: an engine integrates it and the FMU follows link_angle_command / link_speed_command (a force element: transmitted_torque_mean is the torque on the link)",
+        source: "MODE",
+        access: Access::Integer {
+            get: |m| m.params().link_drive as i32,
+            set: Some(|m, v| {
+                m.params_mut().link_drive = if v == 0 { LinkDrive::Integrated } else { LinkDrive::Prescribed }
+            }),
+        },
+        enumeration: Some(&LINK_DRIVE),
     },
     Variable {
         name: "transmission",

@@ -13,7 +13,7 @@ use std::sync::Arc;
 use mechanics::{
     Coefficients, Contact, Coupling, Drive, EtdStep, FineCell, LinearStep, PropagatorTable, State, Tabulated,
 };
-pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
+pub use params::{LinkDrive, MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -25,6 +25,9 @@ pub struct Inputs {
     pub motor_angle_command: f64,
     pub motor_speed_command: f64,
     pub housing_temperature_command: f64,
+    /// Link angle at the start of the step and its speed over the step (`LinkDrive::Prescribed`).
+    pub link_angle_command: f64,
+    pub link_speed_command: f64,
 }
 
 impl Default for Inputs {
@@ -38,6 +41,8 @@ impl Default for Inputs {
             motor_angle_command: 0.0,
             motor_speed_command: 0.0,
             housing_temperature_command: room,
+            link_angle_command: 0.0,
+            link_speed_command: 0.0,
         }
     }
 }
@@ -121,7 +126,7 @@ fn etd_level(key: f64, last: f64) -> u32 {
 }
 
 /// Length of [`Model::state`].
-pub const STATE_LEN: usize = mechanics::N_STATE + 9;
+pub const STATE_LEN: usize = mechanics::N_STATE + 10;
 
 /// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
 /// and the outputs read the moduli, K.
@@ -167,6 +172,9 @@ pub struct Model {
     /// Gravity's sine and cosine at an angle near the link's (part of the state
     /// for the same reason, see [`mechanics::SineAnchor`]).
     pub sine_anchor: mechanics::SineAnchor,
+    /// The transmission's torque on the link averaged over the last step (its impulse over the
+    /// step divided by the step; 0 before the first step). Part of the state.
+    pub transmitted_torque_mean: f64,
     coefficients: Option<(f64, Coefficients)>,
     /// Propagator tables of the last two step lengths (shared with clones until one adds a node).
     tables: Vec<Arc<PropagatorTable<LinearStep>>>,
@@ -200,6 +208,7 @@ impl PartialEq for Model {
             && self.thermal == o.thermal
             && self.adaptive_step == o.adaptive_step
             && self.sine_anchor == o.sine_anchor
+            && self.transmitted_torque_mean.to_bits() == o.transmitted_torque_mean.to_bits()
     }
 }
 
@@ -218,6 +227,7 @@ impl Model {
             mechanics: State::zeros(),
             adaptive_step: 0.0,
             sine_anchor: mechanics::SineAnchor::NONE,
+            transmitted_torque_mean: 0.0,
             coefficients: None,
             tables: Vec::new(),
             step_keys: mechanics::StepKeys::default(),
@@ -652,6 +662,21 @@ impl Model {
                 self.mechanics[mechanics::LINK_SPEED] = self.inputs.motor_speed_command;
             }
         }
+        let link_prescribed = self.params.link_drive == LinkDrive::Prescribed;
+        let rigid = self.params.transmission == Transmission::Rigid;
+        if link_prescribed {
+            self.mechanics[mechanics::LINK_ANGLE] = self.inputs.link_angle_command;
+            self.mechanics[mechanics::LINK_SPEED] = self.inputs.link_speed_command;
+            if rigid {
+                self.mechanics[mechanics::MOTOR_ANGLE] = self.inputs.link_angle_command;
+                self.mechanics[mechanics::MOTOR_SPEED] = self.inputs.link_speed_command;
+            }
+        }
+        let (motor_start, link_start, torque_start) = (
+            [self.mechanics[mechanics::MOTOR_ANGLE], self.mechanics[mechanics::MOTOR_SPEED]],
+            [self.mechanics[mechanics::LINK_ANGLE], self.mechanics[mechanics::LINK_SPEED]],
+            if self.mean_torque_needs_start() { self.transmitted_torque() } else { 0.0 },
+        );
         let drive = Drive::new(self.inputs.motor_torque, self.inputs.load_torque);
         let thermal_inputs = ThermalInputs {
             heater_power: self.inputs.heater_power,
@@ -663,6 +688,13 @@ impl Model {
             // Thermal first, then mechanics with the moduli at the sub-step's midpoint PCL
             // temperature: the thermal time scale (s) is far above the sub-step (ms).
             let t_mid = self.thermal.advance_cached(&self.params, &thermal_inputs, hs, &mut self.inversion);
+            if link_prescribed && rigid {
+                // one body, and the engine moves it
+                let v = self.inputs.link_speed_command;
+                self.mechanics[mechanics::MOTOR_ANGLE] += v * hs;
+                self.mechanics[mechanics::LINK_ANGLE] += v * hs;
+                continue;
+            }
             if linear {
                 let key = self.step_keys.key(hs);
                 self.prepare_linear_step(t_mid, key);
@@ -692,7 +724,44 @@ impl Model {
             self.set_state(&before);
             return Err(StepFailure::NonFinite);
         }
+        self.transmitted_torque_mean = self.step_mean_torque(h, motor_start, link_start, torque_start);
         Ok(())
+    }
+
+    /// Whether [`Model::step_mean_torque`] needs the transmission's torque at the start of the step:
+    /// neither side's momentum balance gives the impulse (the motor prescribed, and the link
+    /// prescribed too or under a nonlinear law).
+    fn mean_torque_needs_start(&self) -> bool {
+        let p = &self.params;
+        p.motor_drive == MotorDrive::PrescribedAngle
+            && p.transmission == Transmission::Compliant
+            && (p.link_drive == LinkDrive::Prescribed || !p.link_torque_is_linear())
+    }
+
+    /// The transmission's torque on the link averaged over a step of `h` that started with motor
+    /// and link states `motor_start`, `link_start`. From a momentum balance where one holds, exact
+    /// whatever the transmission (backlash, Maxwell branch, a moving PCL temperature): the motor's,
+    /// J_m Δθm' = ∫(τ_m − B_m θm' − τ) dt, when it is torque-driven; else the link's,
+    /// J_l Δθl' = ∫(τ + τ_load − B_l θl') dt, when its law is linear. Otherwise the mean of the
+    /// torques at both ends (`torque_start`, and now): exact for springs and Kelvin–Voigt PCL at a
+    /// steady temperature, whose torque is then linear over the step.
+    fn step_mean_torque(&mut self, h: f64, motor_start: [f64; 2], link_start: [f64; 2], torque_start: f64) -> f64 {
+        let p = &self.params;
+        let x = &self.mechanics;
+        if p.motor_drive == MotorDrive::Torque {
+            return self.inputs.motor_torque
+                - p.motor_damping * (x[mechanics::MOTOR_ANGLE] - motor_start[0]) / h
+                - p.motor_inertia * (x[mechanics::MOTOR_SPEED] - motor_start[1]) / h;
+        }
+        if p.transmission == Transmission::Rigid {
+            return 0.0;
+        }
+        if !self.mean_torque_needs_start() {
+            return p.link_inertia * (x[mechanics::LINK_SPEED] - link_start[1]) / h
+                + p.link_damping * (x[mechanics::LINK_ANGLE] - link_start[0]) / h
+                - self.inputs.load_torque;
+        }
+        0.5 * (torque_start + self.transmitted_torque())
     }
 
     /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical
@@ -717,6 +786,7 @@ impl Model {
             self.sine_anchor.angle,
             self.sine_anchor.sin,
             self.sine_anchor.cos,
+            self.transmitted_torque_mean,
         ]
     }
 
@@ -730,6 +800,7 @@ impl Model {
         self.thermal.heat_lost = x[9];
         self.adaptive_step = x[10];
         self.sine_anchor = mechanics::SineAnchor { angle: x[11], sin: x[12], cos: x[13] };
+        self.transmitted_torque_mean = x[14];
     }
 
     pub fn motor_angle(&self) -> f64 {

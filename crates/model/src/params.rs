@@ -25,6 +25,19 @@ pub enum Transmission {
     Rigid = 1,
 }
 
+/// How the output link moves (issue 21).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkDrive {
+    /// The FMU integrates the link: `link_inertia`, `load_torque`, link damping, friction, gravity.
+    Integrated = 0,
+    /// A rigid-body engine integrates the link: its angle is `link_angle_command` at the start of
+    /// each step and moves at `link_speed_command` over it (held). The link's inertia and every
+    /// link-side torque belong to the engine; the FMU integrates motor, transmission and heat, and
+    /// reports the transmission's torque on the link averaged over the step
+    /// (`transmitted_torque_mean`).
+    Prescribed = 1,
+}
+
 /// How the thermal side is driven.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ThermalDrive {
@@ -87,6 +100,7 @@ pub struct Params {
     pub initial_pcl_temperature: f64,
     // modes and numerics
     pub motor_drive: MotorDrive,
+    pub link_drive: LinkDrive,
     pub transmission: Transmission,
     pub thermal_drive: ThermalDrive,
     pub max_internal_step: f64,
@@ -141,6 +155,7 @@ impl Default for Params {
             initial_housing_temperature: ZERO_CELSIUS + 22.0,
             initial_pcl_temperature: ZERO_CELSIUS + 22.0,
             motor_drive: MotorDrive::Torque,
+            link_drive: LinkDrive::Integrated,
             transmission: Transmission::Compliant,
             thermal_drive: ThermalDrive::Heater,
             max_internal_step: 1e-3,
@@ -150,6 +165,16 @@ impl Default for Params {
 }
 
 impl Params {
+    /// 1/J_l, the link's acceleration per unit torque; 0 when the link is prescribed
+    /// ([`LinkDrive::Prescribed`]): its speed is then held over the step whatever acts on it, which
+    /// is the limit J_l → ∞ of every step of the mechanics (exact, exponential and adaptive alike).
+    pub fn link_mobility(&self) -> f64 {
+        match self.link_drive {
+            LinkDrive::Integrated => 1.0 / self.link_inertia,
+            LinkDrive::Prescribed => 0.0,
+        }
+    }
+
     /// K_s r_s²: torsional stiffness of the spring bank, N·m/rad (Eq. 4).
     pub fn spring_torsional_stiffness(&self) -> f64 {
         self.spring_stiffness * self.spring_count * self.spring_radius * self.spring_radius
