@@ -7,6 +7,8 @@
 #   valgrind      memcheck over 1,000 FMU life cycles and a cross-process state round trip
 #                 (crates/fuzz/tests/reliability.rs); the check looks for the valgrind command and
 #                 its memcheck tool, which the tests run.
+#   libosmesa6    MuJoCo's off-screen software renderer (MUJOCO_GL=osmesa) for the robot example's
+#                 frames (examples/mujoco); without it the example skips its frames and says so.
 #
 # Usage: scripts/setup-system.sh [--dry-run]
 #   --dry-run  print what would be installed and why, install nothing; exit 0 either way.
@@ -16,7 +18,7 @@ dry_run=0
 case "${1:-}" in
   "") ;;
   --dry-run) dry_run=1 ;;
-  -h|--help) sed -n '2,10p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+  -h|--help) sed -n '2,12p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
   *) echo "setup-system.sh: unknown argument '$1' (expected --dry-run or nothing)" >&2; exit 2 ;;
 esac
 
@@ -67,8 +69,13 @@ if ! has_valgrind; then
   reasons+=("valgrind: no valgrind with its memcheck tool (leak test over 1,000 life cycles)")
 fi
 
+if ! has_shared_lib libOSMesa.so.8; then
+  missing+=(libosmesa6)
+  reasons+=("libosmesa6: no libOSMesa.so.8 for MuJoCo's off-screen frames (examples/mujoco)")
+fi
+
 if ((${#missing[@]} == 0)); then
-  echo "setup-system: nothing to install (libclang, libtbb12 and valgrind present)"
+  echo "setup-system: nothing to install (libclang, libtbb12, valgrind and libOSMesa present)"
   exit 0
 fi
 for r in "${reasons[@]}"; do echo "setup-system: would install $r"; done
