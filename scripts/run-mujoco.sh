@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# The MuJoCo example (issue 21): a three-joint arm with a ThermoVIA FMU at every joint, the touch /
+# heat / touch task, its report with plots and off-screen frames in out/mujoco. Installs what it
+# needs first (Debian's libosmesa6 for the frames, the pinned venv with mujoco and fmpy) and builds
+# the FMU. Extra arguments go to the example (python examples/mujoco/thermovia_mujoco.py --help).
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/setup-system.sh
+scripts/setup-python.sh
+cargo run --release -p fmu-build
+.venv/bin/python examples/mujoco/thermovia_mujoco.py --out out/mujoco "$@"
