@@ -604,6 +604,137 @@ def accuracy_study(xml_path, unzipdir, md, plan, duration, settings, steps=(0.5e
 
 
 # ---------------------------------------------------------------------------------------------
+# cross-check: `thermovia arm`'s planar two-link arm through this MuJoCo path
+
+
+def two_link_xml(cfg: dict) -> str:
+    """`thermovia arm`'s arm in MJCF (crates/tools/src/arm/dynamics.rs): two bodies in the x–z plane,
+    gravity along −z, each with the mass, centre of mass and inertia that file gives it (rod, the
+    elbow actuator on link 1, the payload on link 2, each hub), and a tip site."""
+
+    def body(m_rod, l, m_end):
+        m = m_rod + m_end
+        lc = (m_rod * 0.5 * l + m_end * l) / m
+        i = m_rod * l * l / 12.0 + m_rod * (0.5 * l - lc) ** 2 + m_end * (l - lc) ** 2 + cfg["hub_inertia"]
+        return m, lc, i
+
+    m1, lc1, i1 = body(cfg["m1"], cfg["l1"], cfg["elbow_mass"])
+    m2, lc2, i2 = body(cfg["m2"], cfg["l2"], cfg["payload_mass"])
+    return f"""<mujoco model="thermovia_arm2">
+  <compiler angle="radian"/>
+  <option gravity="0 0 {-cfg['gravity']}" integrator="implicitfast"/>
+  <worldbody>
+    <body name="link1">
+      <joint name="shoulder" type="hinge" axis="0 -1 0"/>
+      <inertial pos="{lc1} 0 0" mass="{m1}" diaginertia="{i1} {i1} {i1}"/>
+      <geom type="capsule" fromto="0 0 0 {cfg['l1']} 0 0" size="0.01" contype="0" conaffinity="0" mass="0"/>
+      <body name="link2" pos="{cfg['l1']} 0 0">
+        <joint name="elbow" type="hinge" axis="0 -1 0"/>
+        <inertial pos="{lc2} 0 0" mass="{m2}" diaginertia="{i2} {i2} {i2}"/>
+        <geom type="capsule" fromto="0 0 0 {cfg['l2']} 0 0" size="0.01" contype="0" conaffinity="0" mass="0"/>
+        <site name="tip" pos="{cfg['l2']} 0 0"/>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"""
+
+
+def two_link_run(cfg: dict, unzipdir, md, h: float, temps_c, holding_w) -> dict:
+    """The `thermovia arm` task (minimum-jerk move of the tip into its compliant wall, the same PD on
+    the motor angle with gravity fed forward and the motor set-point ahead by g/K) with its joints
+    as link-driven FMUs in MuJoCo: the task metrics that `thermovia arm` reports."""
+    m = mujoco.MjModel.from_xml_string(two_link_xml(cfg))
+    m.opt.timestep = h
+    d = mujoco.MjData(m)
+    names = ("shoulder", "elbow")
+    l1, l2, g0 = cfg["l1"], cfg["l2"], cfg["gravity"]
+    mA, lcA, _ = (cfg["m1"] + cfg["elbow_mass"], (cfg["m1"] * 0.5 * l1 + cfg["elbow_mass"] * l1) / (cfg["m1"] + cfg["elbow_mass"]), 0)
+    mB = cfg["m2"] + cfg["payload_mass"]
+    lcB = (cfg["m2"] * 0.5 * l2 + cfg["payload_mass"] * l2) / mB
+
+    def gravity(q):
+        c12 = math.cos(q[0] + q[1])
+        return np.array([g0 * ((mA * lcA + mB * l1) * math.cos(q[0]) + mB * lcB * c12), g0 * mB * lcB * c12])
+
+    def ik(p):
+        c2 = (p[0] ** 2 + p[1] ** 2 - l1 * l1 - l2 * l2) / (2 * l1 * l2)
+        q2 = -math.atan2(math.sqrt(1 - c2 * c2), c2)
+        return np.array([math.atan2(p[1], p[0]) - math.atan2(l2 * math.sin(q2), l1 + l2 * math.cos(q2)), q2])
+
+    a, b = ik(cfg["start_tip"]), ik(cfg["goal_tip"])
+
+    def plan(t):
+        s = min(max((t - cfg["move_start"]) / cfg["move_duration"], 0.0), 1.0)
+        pos = s ** 3 * (10 - 15 * s + 6 * s * s)
+        vel = 0.0 if s <= 0 or s >= 1 else 30 * s * s * (1 - s) ** 2 / cfg["move_duration"]
+        return a + (b - a) * pos, (b - a) * vel
+
+    d.qpos[:] = a
+    mujoco.mj_forward(m, d)
+    ks = [transmission_at(unzipdir, md, t)[0] for t in temps_c]
+    g = gravity(a)
+    settings = [JointSettings(kp=cfg["kp"], kd=cfg["kd"], pcl_c=temps_c[i],
+                              parameters={"motor_inertia": cfg["motor_inertia"], "motor_damping": cfg["motor_damping"],
+                                          "excitation_frequency": cfg["excitation_frequency"]}) for i in range(2)]
+    joints = [FmuJoint(unzipdir, md, n, settings[i], float(a[i]), motor0=float(a[i] + g[i] / ks[i])) for i, n in enumerate(names)]
+    site = m.site("tip").id
+    t_rec, force, tip = [], [], []
+    try:
+        for n in range(int(round(cfg["duration"] / h))):
+            t = n * h
+            qs, qsd = plan(t)
+            gs = gravity(qs)
+            d.qfrc_applied[:] = 0.0
+            for i, j in enumerate(joints):
+                y = j.y
+                tm_ = cfg["kp"] * (qs[i] + gs[i] / y["effective_stiffness"] - y["motor_angle"]) + cfg["kd"] * (qsd[i] - y["motor_speed"]) + gs[i]
+                tau = j.step(t, h, float(d.qpos[i]), float(d.qvel[i]), tm_, holding_w[i])
+                m.dof_damping[i] = y["effective_damping"]
+                d.qfrc_applied[i] += tau + j.y["effective_damping"] * d.qvel[i]
+            # the compliant wall at x = wall_x pushes the tip back (never pulls)
+            x = d.site_xpos[site][0]
+            jp = np.zeros((3, m.nv))
+            mujoco.mj_jacSite(m, d, jp, None, site)
+            vx = float(jp[0] @ d.qvel)
+            fx = -max(cfg["wall_stiffness"] * (x - cfg["wall_x"]) + cfg["wall_damping"] * vx, 0.0) if x > cfg["wall_x"] else 0.0
+            d.qfrc_applied[:] += jp[0] * fx
+            mujoco.mj_step(m, d)
+            t_rec.append(t + h)
+            force.append(-fx)
+            tip.append(d.site_xpos[site][[0, 2]].copy())
+    finally:
+        for j in joints:
+            j.close()
+    force = np.array(force)
+    touching = np.nonzero(force > 0)[0]
+    k = int(np.argmax(force))
+    return {
+        "first_contact_s": t_rec[touching[0]] if len(touching) else None,
+        "peak_contact_force_n": float(force[k]),
+        "peak_contact_force_time_s": t_rec[k],
+        "final_contact_force_n": float(force[-1]),
+        "final_tip_m": tip[-1].tolist(),
+    }
+
+
+def two_link_crosscheck(arm_report: dict, unzipdir, md, h: float = 1e-3) -> dict:
+    """`thermovia arm`'s two tasks (cold, hot) through the MuJoCo path, against its own report."""
+    cfg = arm_report["config"]
+    rows = []
+    for task in arm_report["tasks"]:
+        temps = task["scenario"]["pcl_temperature_c"]
+        ours = two_link_run(cfg, unzipdir, md, h, temps, [j["holding_power"] for j in task["joints"]])
+        acc = next(a for a in arm_report["accuracy"] if a["scenario"] == task["scenario"]["name"] and abs(a["step_s"] - h) < 1e-12)
+        rows.append({
+            "scenario": task["scenario"]["name"],
+            "mujoco": ours,
+            "thermovia_arm": {k: task[k] for k in ("first_contact_s", "peak_contact_force_n", "final_contact_force_n")},
+            "thermovia_arm_coupling_error": {"peak_force_error_n": acc["peak_force_error_n"], "tip_error_m": acc["tip_error_m"]},
+        })
+    return {"step_s": h, "rows": rows}
+
+
+# ---------------------------------------------------------------------------------------------
 # rendering, plots, report
 
 
@@ -712,6 +843,8 @@ Examples:
     ap.add_argument("--max-seconds", type=float, default=600.0, help="longest simulated time to wait for the heating, s [%(default)s]")
     ap.add_argument("--no-accuracy", action="store_true", help="skip the comparison with the monolithic arm")
     ap.add_argument("--no-frames", action="store_true", help="skip the off-screen frames")
+    ap.add_argument("--thermovia", type=pathlib.Path, default=ROOT / "target" / "release" / "thermovia",
+                    help="the thermovia binary, for the cross-check with `thermovia arm` [%(default)s]; skipped when absent")
     args = ap.parse_args(argv)
     try:
         report = run_example(args)
@@ -797,6 +930,17 @@ def run_example(args) -> str:
         cold_plan = Plan([(0.0, p["home"]), *task.first[:3]])
         study = accuracy_study(args.model, unzipdir, md, cold_plan, task.first[2][0], settings)
 
+    cross = None
+    if args.thermovia.exists():
+        with tempfile.TemporaryDirectory() as arm_dir:
+            import subprocess
+
+            run = subprocess.run([str(args.thermovia), "arm", "--out", arm_dir, "--step", str(args.step)],
+                                 capture_output=True, text=True)
+            if run.returncode != 0:
+                raise CouplingError(f"`thermovia arm` failed: {run.stderr.strip()}")
+            cross = two_link_crosscheck(json.loads((pathlib.Path(arm_dir) / "report.json").read_text()), unzipdir, md, args.step)
+
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".mujoco-", dir=args.out.parent))
     files = [plot_run(tmp, rec, {"touch cold": cold_span[0], "heater on": task.heat_on, "touch soft": soft_span[0]})]
@@ -816,6 +960,7 @@ def run_example(args) -> str:
         "stiffness_at_touch": {"cold": cold_k, "soft": soft_k},
         "pcl_temperature_c_at_touch": {"cold": during(rec.pcl_c, cold_span).tolist(), "soft": during(rec.pcl_c, soft_span).tolist()},
         "accuracy": study,
+        "two_link_crosscheck": cross if cross else f"skipped: no thermovia binary at {args.thermovia}",
         "timing": rec.seconds,
         "frames": frame_note,
         "files": files,
@@ -869,6 +1014,25 @@ def markdown(r: dict) -> str:
                 f"{row['reference_contact_force_n']:.3f} |\n"
             )
         s.append("\n![accuracy](accuracy.png)\n")
+    x = r["two_link_crosscheck"]
+    s.append("## Cross-check with `thermovia arm`\n")
+    if isinstance(x, dict):
+        s.append(
+            "`thermovia arm`'s planar two-link arm (its config, its task, its controller and wall) with its two joints as "
+            "link-driven FMUs in MuJoCo, against `thermovia arm`'s own co-simulation (where the FMUs integrate the links "
+            f"with an effective inertia and the master the arm), both at {x['step_s'] * 1e3:g} ms. The accuracy the coupling "
+            "allows is `thermovia arm`'s own error against its monolithic reference at that step (last column).\n\n"
+            "| scenario | peak contact force (N): MuJoCo / thermovia arm | final force (N) | first contact (s) | thermovia arm's own peak-force error (N) |\n|---|---|---|---|---|\n"
+        )
+        for row in x["rows"]:
+            mj, ta = row["mujoco"], row["thermovia_arm"]
+            s[-1] += (
+                f"| {row['scenario']} | {mj['peak_contact_force_n']:.2f} / {ta['peak_contact_force_n']:.2f} | "
+                f"{mj['final_contact_force_n']:.3f} / {ta['final_contact_force_n']:.3f} | {mj['first_contact_s']:.3f} / "
+                f"{ta['first_contact_s']:.3f} | {row['thermovia_arm_coupling_error']['peak_force_error_n']:.2f} |\n"
+            )
+    else:
+        s.append(f"{x}.\n")
     t = r["timing"]
     s.append("## Speed\n")
     s.append(

@@ -160,3 +160,26 @@ def test_a_missing_rendering_backend_skips_the_frames_and_says_so(tmp_path):
     r = json.loads((out / "report.json").read_text())
     assert "unavailable" in r["frames"] and "frames.png" not in r["files"], r["frames"]
     assert "Frames: off-screen rendering unavailable" in (out / "report.md").read_text()
+
+
+THERMOVIA = ROOT / "target" / "release" / "thermovia"
+
+
+def test_the_two_link_arm_through_mujoco_agrees_with_thermovia_arm(fmu, tmp_path):
+    import json
+
+    assert THERMOVIA.exists(), "cargo build --release --bin thermovia (cargo test builds it)"
+    run = subprocess.run([str(THERMOVIA), "arm", "--out", str(tmp_path / "arm")], capture_output=True, text=True, timeout=300)
+    assert run.returncode == 0, run.stderr
+    report = json.loads((tmp_path / "arm" / "report.json").read_text())
+    x = tm.two_link_crosscheck(report, *fmu, h=1e-3)
+    assert [r["scenario"] for r in x["rows"]] == ["cold", "hot"]
+    for r in x["rows"]:
+        mj, ta = r["mujoco"], r["thermovia_arm"]
+        # the two co-simulations differ by at most twice thermovia arm's own coupling error at 1 ms
+        allowed = 2.0 * r["thermovia_arm_coupling_error"]["peak_force_error_n"]
+        assert abs(mj["peak_contact_force_n"] - ta["peak_contact_force_n"]) <= allowed, r
+        assert abs(mj["final_contact_force_n"] - ta["final_contact_force_n"]) <= 0.01, r
+        assert abs(mj["first_contact_s"] - ta["first_contact_s"]) <= 3e-3 + 1e-9, r
+    cold, hot = x["rows"]
+    assert hot["mujoco"]["peak_contact_force_n"] < 0.6 * cold["mujoco"]["peak_contact_force_n"]
