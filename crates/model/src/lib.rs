@@ -675,7 +675,7 @@ impl Model {
         let (motor_start, link_start, torque_start) = (
             [self.mechanics[mechanics::MOTOR_ANGLE], self.mechanics[mechanics::MOTOR_SPEED]],
             [self.mechanics[mechanics::LINK_ANGLE], self.mechanics[mechanics::LINK_SPEED]],
-            if self.mean_torque_needs_start() { self.transmitted_torque() } else { 0.0 },
+            self.step_start_torque(),
         );
         let drive = Drive::new(self.inputs.motor_torque, self.inputs.load_torque);
         let thermal_inputs = ThermalInputs {
@@ -728,24 +728,39 @@ impl Model {
         Ok(())
     }
 
-    /// Whether [`Model::step_mean_torque`] needs the transmission's torque at the start of the step:
-    /// neither side's momentum balance gives the impulse (the motor prescribed, and the link
-    /// prescribed too or under a nonlinear law).
-    fn mean_torque_needs_start(&self) -> bool {
+    /// What [`Model::step_mean_torque`] needs from the start of a step where neither side's momentum
+    /// balance is exact: both sides prescribed, the transmission's torque; a prescribed motor and a
+    /// link under a nonlinear law, that law's torque on the link (friction, gravity: cheap, no moduli).
+    fn step_start_torque(&mut self) -> f64 {
         let p = &self.params;
-        p.motor_drive == MotorDrive::PrescribedAngle
-            && p.transmission == Transmission::Compliant
-            && (p.link_drive == LinkDrive::Prescribed || !p.link_torque_is_linear())
+        if p.motor_drive != MotorDrive::PrescribedAngle || p.transmission != Transmission::Compliant {
+            return 0.0;
+        }
+        if p.link_drive == LinkDrive::Prescribed {
+            return self.transmitted_torque();
+        }
+        if p.link_torque_is_linear() {
+            return 0.0;
+        }
+        self.link_law_torque()
+    }
+
+    /// Friction and gravity on the link, the nonlinear part of its law.
+    fn link_law_torque(&self) -> f64 {
+        let x = &self.mechanics;
+        mechanics::link_friction(&self.params, x[mechanics::LINK_SPEED])
+            + mechanics::link_gravity(&self.params, x[mechanics::LINK_ANGLE])
     }
 
     /// The transmission's torque on the link averaged over a step of `h` that started with motor
-    /// and link states `motor_start`, `link_start`. From a momentum balance where one holds, exact
-    /// whatever the transmission (backlash, Maxwell branch, a moving PCL temperature): the motor's,
-    /// J_m Δθm' = ∫(τ_m − B_m θm' − τ) dt, when it is torque-driven; else the link's,
-    /// J_l Δθl' = ∫(τ + τ_load − B_l θl') dt, when its law is linear. Otherwise the mean of the
-    /// torques at both ends (`torque_start`, and now): exact for springs and Kelvin–Voigt PCL at a
+    /// and link states `motor_start`, `link_start` (`start`: [`Model::step_start_torque`]). From a
+    /// momentum balance, exact whatever the transmission (backlash, Maxwell branch, a moving PCL
+    /// temperature): the motor's, J_m Δθm' = ∫(τ_m − B_m θm' − τ) dt, when it is torque-driven; else
+    /// the link's, J_l Δθl' = ∫(τ + τ_load − B_l θl' + f) dt, when it is integrated, with the
+    /// nonlinear part f (friction, gravity) by the trapezoid rule. With both sides prescribed, the
+    /// mean of the transmission's torques at both ends: exact for springs and Kelvin–Voigt PCL at a
     /// steady temperature, whose torque is then linear over the step.
-    fn step_mean_torque(&mut self, h: f64, motor_start: [f64; 2], link_start: [f64; 2], torque_start: f64) -> f64 {
+    fn step_mean_torque(&mut self, h: f64, motor_start: [f64; 2], link_start: [f64; 2], start: f64) -> f64 {
         let p = &self.params;
         let x = &self.mechanics;
         if p.motor_drive == MotorDrive::Torque {
@@ -756,12 +771,16 @@ impl Model {
         if p.transmission == Transmission::Rigid {
             return 0.0;
         }
-        if !self.mean_torque_needs_start() {
-            return p.link_inertia * (x[mechanics::LINK_SPEED] - link_start[1]) / h
-                + p.link_damping * (x[mechanics::LINK_ANGLE] - link_start[0]) / h
-                - self.inputs.load_torque;
+        if p.link_drive == LinkDrive::Prescribed {
+            return 0.5 * (start + self.transmitted_torque());
         }
-        0.5 * (torque_start + self.transmitted_torque())
+        let nonlinear = if p.link_torque_is_linear() { 0.0 } else { 0.5 * (start + self.link_law_torque()) };
+        let p = &self.params;
+        let x = &self.mechanics;
+        p.link_inertia * (x[mechanics::LINK_SPEED] - link_start[1]) / h
+            + p.link_damping * (x[mechanics::LINK_ANGLE] - link_start[0]) / h
+            - self.inputs.load_torque
+            - nonlinear
     }
 
     /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical

@@ -19,7 +19,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::material::TABLE_TEMPERATURES_C;
-use super::params::{MotorDrive, Params, Transmission};
+use super::params::{LinkDrive, MotorDrive, Params, Transmission};
 
 pub const N_STATE: usize = 5;
 pub type State = SVector<f64, N_STATE>;
@@ -143,10 +143,10 @@ pub fn linear_system_with(
     }
     a[(LINK_ANGLE, LINK_SPEED)] = 1.0;
     for (j, t) in tau_row.iter().enumerate() {
-        a[(LINK_SPEED, j)] = t * p.link_mobility();
+        a[(LINK_SPEED, j)] = p.per_link_inertia(*t);
     }
-    a[(LINK_SPEED, LINK_SPEED)] -= p.link_damping * p.link_mobility();
-    b[(LINK_SPEED, 1)] = p.link_mobility();
+    a[(LINK_SPEED, LINK_SPEED)] -= p.per_link_inertia(p.link_damping);
+    b[(LINK_SPEED, 1)] = p.per_link_inertia(1.0);
     if coupling != Coupling::Free {
         a[(MAXWELL_DEFLECTION, MOTOR_ANGLE)] = 1.0 / lam;
         a[(MAXWELL_DEFLECTION, LINK_ANGLE)] = -1.0 / lam;
@@ -433,7 +433,7 @@ impl EtdStep {
     /// The step for the mechanics coupled as `coupling`.
     pub fn with(p: &Params, c: &Coefficients, h: f64, coupling: Coupling) -> Self {
         let (a, b) = linear_system_with(p, c, coupling);
-        let half = phi_blocks(&a, &b, p.link_mobility(), 0.5 * h).fixed_rows::<N_STATE>(0).into_owned();
+        let half = phi_blocks(&a, &b, p.per_link_inertia(1.0), 0.5 * h).fixed_rows::<N_STATE>(0).into_owned();
         EtdStep::from_rows(&half, &doubled(&half), c, h)
     }
 
@@ -480,7 +480,7 @@ pub type PhiRows = SMatrix<f64, N_STATE, 10>;
 /// filled from them does not depend on which of its levels were built first.
 pub fn phi_chain(p: &Params, c: &Coefficients, key: f64, levels: u32) -> Vec<PhiRows> {
     let (a, b) = linear_system_with(p, c, Coupling::Engaged);
-    let deepest = phi_blocks(&a, &b, p.link_mobility(), key / (1u64 << (levels + 1)) as f64);
+    let deepest = phi_blocks(&a, &b, p.per_link_inertia(1.0), key / (1u64 << (levels + 1)) as f64);
     let mut rows = vec![PhiRows::zeros(); levels as usize + 2];
     rows[levels as usize + 1] = deepest.fixed_rows::<N_STATE>(0).into_owned();
     for l in (0..=levels as usize).rev() {
@@ -768,7 +768,11 @@ impl EtdStep {
             let zone = SIGN_SATURATION * p.friction_smoothing_velocity;
             let speeds = [x[LINK_SPEED], a[1], b[1], c[1], x4[LINK_SPEED], b3[1]];
             let near = speeds.iter().any(|v| v.abs() < zone) || speeds.iter().any(|v| v.signum() != speeds[0].signum());
-            let slope = (p.coulomb_friction + p.stribeck_friction) * p.link_mobility() / p.friction_smoothing_velocity;
+            let slope = if p.link_drive == LinkDrive::Prescribed {
+                0.0 // the link's speed is held: friction cannot flip it
+            } else {
+                (p.coulomb_friction + p.stribeck_friction) / (p.friction_smoothing_velocity * p.link_inertia)
+            };
             if near && self.length() * slope > 0.1 {
                 return (x4, f64::INFINITY);
             }
@@ -802,7 +806,7 @@ pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State 
         MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
         MotorDrive::PrescribedAngle => 0.0,
     };
-    let link_accel = (tau + u[1] - p.link_damping * x[LINK_SPEED]) * p.link_mobility();
+    let link_accel = p.per_link_inertia(tau + u[1] - p.link_damping * x[LINK_SPEED]);
     State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_accel, (delta - q) / p.maxwell_relaxation_time])
 }
 
@@ -1352,7 +1356,7 @@ pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
     };
     let link_torque =
         tau + u[1] - p.link_damping * x[LINK_SPEED] + link_friction(p, x[LINK_SPEED]) + link_gravity(p, x[LINK_ANGLE]);
-    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque * p.link_mobility(), q_rate])
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], p.per_link_inertia(link_torque), q_rate])
 }
 
 /// [`derivative`] of the compliant transmission with the smooth link torque (gravity and friction,
@@ -1364,7 +1368,7 @@ pub fn derivative_with_link_torque(p: &Params, c: &Coefficients, x: &State, u: &
         MotorDrive::PrescribedAngle => 0.0,
     };
     let link_torque = tau + u[1] - p.link_damping * x[LINK_SPEED] + smooth;
-    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_torque * p.link_mobility(), q_rate])
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], p.per_link_inertia(link_torque), q_rate])
 }
 
 /// Where, as a fraction of the step from x0 to x1, the contact function that x1 has crossed out of

@@ -165,12 +165,13 @@ impl Default for Params {
 }
 
 impl Params {
-    /// 1/J_l, the link's acceleration per unit torque; 0 when the link is prescribed
+    /// `torque` / J_l, the link's acceleration under a torque; 0 when the link is prescribed
     /// ([`LinkDrive::Prescribed`]): its speed is then held over the step whatever acts on it, which
     /// is the limit J_l → ∞ of every step of the mechanics (exact, exponential and adaptive alike).
-    pub fn link_mobility(&self) -> f64 {
+    /// A division, as before the mode existed, so integrated links keep their results bit for bit.
+    pub fn per_link_inertia(&self, torque: f64) -> f64 {
         match self.link_drive {
-            LinkDrive::Integrated => 1.0 / self.link_inertia,
+            LinkDrive::Integrated => torque / self.link_inertia,
             LinkDrive::Prescribed => 0.0,
         }
     }
