@@ -3,6 +3,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod crystallisation;
 pub mod material;
 pub mod mechanics;
 pub mod params;
@@ -13,7 +14,7 @@ use std::sync::Arc;
 use mechanics::{
     Coefficients, Contact, Coupling, Drive, EtdStep, FineCell, LinearStep, PropagatorTable, State, Tabulated,
 };
-pub use params::{MotorDrive, Params, ThermalDrive, Transmission};
+pub use params::{Crystallisation, MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -121,7 +122,7 @@ fn etd_level(key: f64, last: f64) -> u32 {
 }
 
 /// Length of [`Model::state`].
-pub const STATE_LEN: usize = mechanics::N_STATE + 9;
+pub const STATE_LEN: usize = mechanics::N_STATE + 10;
 
 /// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
 /// and the outputs read the moduli, K.
@@ -275,7 +276,7 @@ impl Model {
     /// Transmission coefficients at the current PCL temperature (on the same lattice the
     /// mechanics uses, so outputs and steps share one cached evaluation).
     pub fn coefficients(&mut self) -> Coefficients {
-        self.coefficients_at(on_temperature_lattice(self.thermal.pcl_temperature))
+        self.coefficients_at(on_temperature_lattice(self.thermal.modulus_temperature(&self.params)))
     }
 
     fn coefficients_at(&mut self, pcl_temperature: f64) -> Coefficients {
@@ -697,8 +698,10 @@ impl Model {
 
     /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical
     /// state [θm, θm', θl, θl', q], the thermal state [T_h, H_p, T_p, E_heater, E_lost] and the
-    /// adaptive solver's last step, and gravity's sine anchor [φa, sin φa, cos φa]
-    /// ([`mechanics::SineAnchor`]; NaN before the first sub-step). Parameters and inputs are not in it.
+    /// adaptive solver's last step, gravity's sine anchor [φa, sin φa, cos φa]
+    /// ([`mechanics::SineAnchor`]; NaN before the first sub-step), and the PCL's structural
+    /// temperature T_f, which holds its crystallinity X = X_c (1 − χ(T_f)). Parameters and inputs
+    /// are not in it.
     pub fn state(&self) -> [f64; STATE_LEN] {
         let m = &self.mechanics;
         let th = &self.thermal;
@@ -717,6 +720,7 @@ impl Model {
             self.sine_anchor.angle,
             self.sine_anchor.sin,
             self.sine_anchor.cos,
+            th.pcl_structural_temperature,
         ]
     }
 
@@ -730,6 +734,7 @@ impl Model {
         self.thermal.heat_lost = x[9];
         self.adaptive_step = x[10];
         self.sine_anchor = mechanics::SineAnchor { angle: x[11], sin: x[12], cos: x[13] };
+        self.thermal.pcl_structural_temperature = x[14];
     }
 
     pub fn motor_angle(&self) -> f64 {
@@ -797,8 +802,13 @@ impl Model {
         let c = self.coefficients();
         c.effective(&self.params).1
     }
+    /// Molten (amorphous) share of the crystallisable PCL, 1 − X/X_c = χ(T_f).
     pub fn melt_fraction(&self) -> f64 {
-        thermal::melt_fraction(&self.params, self.thermal.pcl_temperature)
+        thermal::melt_fraction(&self.params, self.thermal.pcl_structural_temperature)
+    }
+    /// Crystallinity X of the PCL (mass fraction of crystal).
+    pub fn crystallinity(&self) -> f64 {
+        crystallisation::crystallinity(&self.params, self.thermal.pcl_structural_temperature)
     }
 }
 
