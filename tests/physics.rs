@@ -192,7 +192,7 @@ fn exact_steps(seconds: f64) -> Vec<f64> {
 
 /// Independent of the model's mechanics: the thermal network advanced by the model's own thermal
 /// step (not under test here), and over each communication step a fine fixed-step RK4 (100 sub-steps)
-/// (1000 with backlash) on the full right-hand side with the moduli at the PCL temperature interpolated linearly in
+/// (1000 with backlash) on the full right-hand side with the moduli at the modulus temperature interpolated linearly in
 /// time across the step (no lattice, no table, no frozen coefficients).
 fn reference_run<F: Fn(f64) -> StepInput>(s: &Scenario<F>) -> Vec<f64> {
     let p = &s.params;
@@ -215,9 +215,11 @@ fn reference_run<F: Fn(f64) -> StepInput>(s: &Scenario<F>) -> Vec<f64> {
             x[mechanics::MOTOR_SPEED] = i.speed;
         }
         let u = Drive::new(i.torque, 0.0);
-        let t0 = thermal.pcl_temperature;
+        // the temperature the moduli are read at (the PCL's on the heating branch, mixed towards
+        // the amorphous row while the melt is supercooled: docs/physics.md §5b)
+        let t0 = thermal.modulus_temperature(p);
         thermal.advance(p, &thermal_inputs, h);
-        let t1 = thermal.pcl_temperature;
+        let t1 = thermal.modulus_temperature(p);
         let c0 = Coefficients::at(p, t0);
         let c = |frac: f64| if t1 == t0 { c0 } else { Coefficients::at(p, t0 + (t1 - t0) * frac) };
         // Backlash switches the torque (its damper) on and off: RK4's error at each switch is

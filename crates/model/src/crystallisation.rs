@@ -12,7 +12,7 @@
 //!
 //! with the isothermal half-time from Hoffman–Lauritzen's growth law,
 //!
-//!   1/t½(T) ∝ exp(−U* / (R (T − T∞))) · exp(−K_g / (T ΔT f)),   ΔT = T_m⁰ − T,  f = 2T/(T + T_m⁰),
+//!   1/t½(T) ∝ exp(−(U*/R) / (T − T∞)) · exp(−K_g / (T ΔT f)),   ΔT = T_m⁰ − T,  f = 2T/(T + T_m⁰),
 //!
 //! scaled to `crystallisation_half_time` at `crystallisation_reference_temperature`; K = 0 at and
 //! above T_m⁰ and at and below T∞ = T_g − 30 K. Since 1 − α = χ(T_f), θⁿ = −ln χ(T_f): advancing θ
@@ -21,9 +21,6 @@
 
 use super::material::TABLE_TEMPERATURES_C;
 use super::params::{Crystallisation, Params, ZERO_CELSIUS};
-
-/// Gas constant, J/(mol·K) [CODATA].
-const GAS_CONSTANT: f64 = 8.314_462_618;
 
 /// ln(1 + eˣ) without overflow or loss of digits.
 fn softplus(x: f64) -> f64 {
@@ -38,7 +35,7 @@ fn softplus(x: f64) -> f64 {
 fn hl_exponent(p: &Params, t: f64) -> f64 {
     let t_inf = p.pcl_glass_transition_temperature - 30.0;
     let tm0 = p.pcl_equilibrium_melting_temperature;
-    -p.crystallisation_activation_energy / (GAS_CONSTANT * (t - t_inf))
+    -p.crystallisation_activation_temperature / (t - t_inf)
         - p.crystallisation_nucleation_constant * (t + tm0) / (2.0 * t * t * (tm0 - t))
 }
 

@@ -95,8 +95,8 @@ pub struct Params {
     /// Hoffman–Lauritzen's equilibrium melting temperature T_m⁰, K: the rate vanishes there.
     pub pcl_equilibrium_melting_temperature: f64,
     pub pcl_glass_transition_temperature: f64,
-    /// U*, J/mol (T∞ = T_g − 30 K).
-    pub crystallisation_activation_energy: f64,
+    /// U*/R, K (T∞ = T_g − 30 K).
+    pub crystallisation_activation_temperature: f64,
     /// K_g, K².
     pub crystallisation_nucleation_constant: f64,
     /// Isothermal half-time t½ at `crystallisation_reference_temperature`, s.
@@ -163,7 +163,7 @@ impl Default for Params {
             avrami_exponent: 2.5,
             pcl_equilibrium_melting_temperature: ZERO_CELSIUS + 69.0,
             pcl_glass_transition_temperature: ZERO_CELSIUS - 60.0,
-            crystallisation_activation_energy: 6270.0,
+            crystallisation_activation_temperature: 1500.0 * 4.184 / 8.314_462_618,
             crystallisation_nucleation_constant: 9.782e4,
             crystallisation_half_time: 60.0,
             crystallisation_reference_temperature: ZERO_CELSIUS + 35.0,
