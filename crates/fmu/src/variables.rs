@@ -252,8 +252,16 @@ pub static THERMAL_DRIVE: Enumeration = Enumeration {
 pub static CRYSTALLISATION: Enumeration = Enumeration {
     name: "Crystallisation",
     items: &[
-        (0, "equilibrium", "crystallinity on the melting curve at the PCL temperature, heating and cooling (no hysteresis)"),
-        (1, "nakamura", "melting on the melting curve, crystallisation by Nakamura/Hoffman–Lauritzen kinetics (default)"),
+        (
+            0,
+            "equilibrium",
+            "crystallinity on the melting curve at the PCL temperature, heating and cooling (no hysteresis)",
+        ),
+        (
+            1,
+            "nakamura",
+            "melting on the melting curve, crystallisation by Nakamura/Hoffman–Lauritzen kinetics (default)",
+        ),
     ],
 };
 
