@@ -332,7 +332,7 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(250, avrami_exponent, Fixed, "", 1.0, 4.0, "n of Nakamura's law α = 1 − exp(−(∫K dt)ⁿ)", "EST: 2.5 (PCL 2–3, LIT)"),
     real_param!(251, pcl_equilibrium_melting_temperature, Fixed, "K", T_MIN, T_MAX, "T_m⁰ of Hoffman–Lauritzen: the crystallisation rate vanishes there", "LIT: 342 K (69 °C); Gibbs–Thomson estimates reach 376 K"),
     real_param!(252, pcl_glass_transition_temperature, Fixed, "K", T_MIN, T_MAX, "T_g: Hoffman–Lauritzen's T∞ = T_g − 30 K", "LIT: ≈ −60 °C"),
-    real_param!(253, crystallisation_activation_temperature, Fixed, "K", 0.0, 1e5, "U*/R, Hoffman–Lauritzen's transport activation energy over the gas constant", "LIT: U* = 1500 cal/mol (Hoffman's universal value): 755 K"),
+    real_param!(253, crystallisation_activation_temperature, Fixed, "K", 0.0, 1e5, "U*/R, Hoffman–Lauritzen's transport activation energy over the gas constant", "LIT: U* = 1500 cal/mol = 6276 J/mol (Hoffman's universal value), U*/R = 755 K"),
     real_param!(254, crystallisation_nucleation_constant, Fixed, "K2", 0.0, 1e8, "K_g, Hoffman–Lauritzen's nucleation constant", "EST: 9.782e4 K², fitted with the half-time to t½(35 °C) = 60 s and t½(45 °C) = 1200 s (PCL 0.5–3e5, LIT)"),
     real_param!(255, crystallisation_half_time, Fixed, "s", 1e-6, 1e9, "Isothermal crystallisation half-time t½ at crystallisation_reference_temperature", "EST: 60 s at 35 °C (gives Tc ≈ 30 °C at 10 K/min, 37 °C at 2 K/min)"),
     real_param!(256, crystallisation_reference_temperature, Fixed, "K", T_MIN, T_MAX, "Temperature of crystallisation_half_time", "EST: 35 °C"),

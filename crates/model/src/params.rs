@@ -163,7 +163,7 @@ impl Default for Params {
             avrami_exponent: 2.5,
             pcl_equilibrium_melting_temperature: ZERO_CELSIUS + 69.0,
             pcl_glass_transition_temperature: ZERO_CELSIUS - 60.0,
-            crystallisation_activation_temperature: 1500.0 * 4.184 / 8.314_462_618,
+            crystallisation_activation_temperature: 755.0,
             crystallisation_nucleation_constant: 9.782e4,
             crystallisation_half_time: 60.0,
             crystallisation_reference_temperature: ZERO_CELSIUS + 35.0,
