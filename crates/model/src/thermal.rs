@@ -105,7 +105,8 @@ pub fn pcl_temperature_at(p: &Params, enthalpy: f64, structural: f64, guess: f64
 
 /// Newton in a bracket on h (`sensible` false) or h_s (true).
 fn invert(p: &Params, sensible: bool, enthalpy: f64, guess: f64) -> f64 {
-    let (h, dh): (fn(&Params, f64) -> f64, fn(&Params, f64) -> f64) =
+    type Curve = fn(&Params, f64) -> f64;
+    let (h, dh): (Curve, Curve) =
         if sensible { (pcl_sensible_enthalpy, pcl_sensible_heat_capacity) } else { (pcl_enthalpy, pcl_heat_capacity) };
     let c_min = p.pcl_mass * p.pcl_specific_heat_solid.min(p.pcl_specific_heat_melt);
     let r0 = enthalpy - h(p, guess);

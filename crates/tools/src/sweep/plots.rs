@@ -274,7 +274,8 @@ fn cooling_cycle(r: &SweepResult, path: &Path) -> R {
     let (x0, x1) = range(r.cooling_cycles.iter().flat_map(|c| c.trace.crystallinity.clone()).chain([0.0]));
     let (p0, p1) = range(r.cooling_cycles.iter().flat_map(|c| c.trace.pcl_c.clone()));
     type Pick = fn(&super::cycle::CycleTrace) -> &Vec<f64>;
-    let specs: [(&str, &str, Pick, Pick, (f64, f64), (f64, f64)); 4] = [
+    type Panel = (&'static str, &'static str, Pick, Pick, (f64, f64), (f64, f64));
+    let specs: [Panel; 4] = [
         ("K_eff against time", "time (s)", |t| &t.time_s, |t| &t.k_eff, (0.0, t_end), (k0, k1)),
         ("crystallinity X against time", "time (s)", |t| &t.time_s, |t| &t.crystallinity, (0.0, t_end), (x0, x1)),
         ("K_eff against PCL temperature", "PCL temperature (°C)", |t| &t.pcl_c, |t| &t.k_eff, (p0, p1), (k0, k1)),
