@@ -714,6 +714,9 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
         return Err(format!("heater energy {} is not a finite non-negative number", th.heater_energy));
     }
     finite(th.pcl_structural_temperature, "PCL structural temperature")?;
+    if !(th.pcl_crystallisation_integral >= 0.0 && th.pcl_crystallisation_integral.is_finite()) {
+        return Err(format!("Nakamura's integral {} is not a finite number ≥ 0", th.pcl_crystallisation_integral));
+    }
     if th.pcl_structural_temperature < th.pcl_temperature {
         return Err(format!(
             "PCL structural temperature {} K is below the PCL temperature {} K (more crystal than the heating branch holds)",
@@ -997,14 +1000,18 @@ mod tests {
                 forge(&bytes, |p| put(p, states_at + 16, f64::NAN))
             }),
             ("gravity's sine anchor", {
-                // [.., adaptive step, anchor angle, sine, cosine, T_f]: a sine without its angle
+                // [.., adaptive step, anchor angle, sine, cosine, T_f, θ]: a sine without its angle
                 let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
-                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 3), 0.5))
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 4), 0.5))
             }),
             ("crystallinity above the heating branch's", {
                 // T_f below the PCL temperature (22 °C)
                 let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
-                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 1), 250.0))
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 2), 250.0))
+            }),
+            ("negative Nakamura integral", {
+                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 1), -1.0))
             }),
         ];
         for (what, forged) in cases {

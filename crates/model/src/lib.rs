@@ -122,7 +122,7 @@ fn etd_level(key: f64, last: f64) -> u32 {
 }
 
 /// Length of [`Model::state`].
-pub const STATE_LEN: usize = mechanics::N_STATE + 10;
+pub const STATE_LEN: usize = mechanics::N_STATE + 11;
 
 /// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
 /// and the outputs read the moduli, K.
@@ -700,8 +700,8 @@ impl Model {
     /// state [θm, θm', θl, θl', q], the thermal state [T_h, H_p, T_p, E_heater, E_lost] and the
     /// adaptive solver's last step, gravity's sine anchor [φa, sin φa, cos φa]
     /// ([`mechanics::SineAnchor`]; NaN before the first sub-step), and the PCL's structural
-    /// temperature T_f, which holds its crystallinity X = X_c (1 − χ(T_f)). Parameters and inputs
-    /// are not in it.
+    /// temperature T_f, which holds its crystallinity X = X_c (1 − χ(T_f)), with Nakamura's integral θ
+    /// of the crystallisation under way. Parameters and inputs are not in it.
     pub fn state(&self) -> [f64; STATE_LEN] {
         let m = &self.mechanics;
         let th = &self.thermal;
@@ -721,6 +721,7 @@ impl Model {
             self.sine_anchor.sin,
             self.sine_anchor.cos,
             th.pcl_structural_temperature,
+            th.pcl_crystallisation_integral,
         ]
     }
 
@@ -735,6 +736,7 @@ impl Model {
         self.adaptive_step = x[10];
         self.sine_anchor = mechanics::SineAnchor { angle: x[11], sin: x[12], cos: x[13] };
         self.thermal.pcl_structural_temperature = x[14];
+        self.thermal.pcl_crystallisation_integral = x[15];
     }
 
     pub fn motor_angle(&self) -> f64 {

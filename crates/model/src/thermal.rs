@@ -30,6 +30,10 @@ pub struct ThermalState {
     /// T_f ≥ T_p: the heating branch's temperature for the PCL's crystallinity, X = X_c (1 − χ(T_f));
     /// T_f = T_p on the heating branch (equilibrium), above it while the melt is supercooled.
     pub pcl_structural_temperature: f64,
+    /// Nakamura's integral θ = ∫K dt of the crystallisation under way (α = 1 − exp(−θⁿ)); below
+    /// θ(T_f) it stands for θ(T_f), and it is 0 on the heating branch
+    /// ([`crystallisation::Kinetics::advance`]).
+    pub pcl_crystallisation_integral: f64,
     pub heater_energy: f64,
     pub heat_lost: f64,
 }
@@ -235,11 +239,17 @@ pub struct InversionCache {
     inversion: Option<Inversion>,
     /// The same for h_s (cooling off the heating branch).
     sensible: Option<Inversion>,
+    /// The crystallisation kinetics' constants and the current structural temperature's quantities.
+    kinetics: Option<crystallisation::Kinetics>,
 }
 
 impl InversionCache {
     fn about(&mut self, p: &Params, pcl_temperature: f64) -> &Inversion {
         Self::anchored(&mut self.inversion, p, pcl_temperature, false)
+    }
+
+    fn kinetics(&mut self, p: &Params) -> &mut crystallisation::Kinetics {
+        self.kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p))
     }
 
     fn about_sensible(&mut self, p: &Params, pcl_temperature: f64) -> &Inversion {
@@ -305,6 +315,7 @@ impl ThermalState {
             pcl_enthalpy: pcl_enthalpy(p, t_p),
             pcl_temperature: t_p,
             pcl_structural_temperature: t_p,
+            pcl_crystallisation_integral: 0.0,
             heater_energy: 0.0,
             heat_lost: 0.0,
         }
@@ -342,11 +353,14 @@ impl ThermalState {
             ThermalDrive::Heater => self.advance_network(p, u, h, cache),
             ThermalDrive::PrescribedHousing => {
                 let start = self.pcl_temperature;
-                self.advance_prescribed(p, u, h);
+                self.advance_prescribed(p, u, h, cache);
                 0.5 * (start + self.pcl_temperature)
             }
         };
-        crystallisation::modulus_temperature(p, mid, structural)
+        if structural <= mid || p.crystallisation == Crystallisation::Equilibrium {
+            return mid;
+        }
+        cache.kinetics(p).modulus_temperature(mid, structural)
     }
 
     /// The heater network's step; returns the midpoint PCL temperature as its Runge–Kutta step's
@@ -389,7 +403,7 @@ impl ThermalState {
         let base = (start_h - eq.h0) * eq.inv_slope;
         // h_s's inverse series about the same anchor, with the latent heat held (cooling only).
         let sensible = if kinetic && (!on_branch || self.housing_temperature < start_t) {
-            let latent = p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, structural);
+            let latent = cache.kinetics(p).latent_heat(structural);
             let si = cache.about_sensible(p, start_t).clone();
             let bs = (start_h - latent - si.h0) * si.inv_slope;
             Some((si, bs, latent))
@@ -439,10 +453,11 @@ impl ThermalState {
                 // on the heating branch: melting keeps up
                 self.pcl_structural_temperature = t_end;
             } else {
-                let next = crystallisation::crystallise(p, structural, midpoint, h, t_end);
+                let kinetics = cache.kinetics(p);
+                let next = kinetics.advance(&mut self.pcl_crystallisation_integral, structural, midpoint, h, t_end);
                 if next != structural {
                     // Latent heat released at fixed enthalpy: T_p from h_s with the new latent term.
-                    let released = p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, next);
+                    let released = if next > t_end { kinetics.latent_heat(next) } else { 0.0 };
                     let t = match &sensible {
                         Some((si, bs, latent)) => {
                             si.temperature_at(p, bs + (new_enthalpy - start_h + latent - released) * si.inv_slope)
@@ -462,10 +477,13 @@ impl ThermalState {
         } else {
             self.pcl_structural_temperature = self.pcl_temperature;
         }
+        if self.pcl_structural_temperature <= self.pcl_temperature {
+            self.pcl_crystallisation_integral = 0.0;
+        }
         midpoint
     }
 
-    fn advance_prescribed(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
+    fn advance_prescribed(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) {
         let t_h = u.housing_temperature_command;
         self.housing_temperature = t_h;
         let start = self.pcl_temperature;
@@ -474,7 +492,14 @@ impl ThermalState {
         } else {
             t_h
         };
-        let structural = crystallisation::crystallise(p, self.pcl_structural_temperature, 0.5 * (start + t_p), h, t_p);
+        let structural = if p.crystallisation == Crystallisation::Equilibrium || self.pcl_structural_temperature <= t_p
+        {
+            self.pcl_crystallisation_integral = 0.0;
+            t_p
+        } else {
+            let theta = &mut self.pcl_crystallisation_integral;
+            cache.kinetics(p).advance(theta, self.pcl_structural_temperature, 0.5 * (start + t_p), h, t_p)
+        };
         if t_p != start || structural != self.pcl_structural_temperature {
             self.pcl_temperature = t_p;
             self.pcl_structural_temperature = structural;
