@@ -244,16 +244,8 @@ pub struct InversionCache {
 }
 
 impl InversionCache {
-    fn about(&mut self, p: &Params, pcl_temperature: f64) -> &Inversion {
-        Self::anchored(&mut self.inversion, p, pcl_temperature, false)
-    }
-
     fn kinetics(&mut self, p: &Params) -> &mut crystallisation::Kinetics {
         self.kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p))
-    }
-
-    fn about_sensible(&mut self, p: &Params, pcl_temperature: f64) -> &Inversion {
-        Self::anchored(&mut self.sensible, p, pcl_temperature, true)
     }
 
     fn anchored<'a>(slot: &'a mut Option<Inversion>, p: &Params, t: f64, sensible: bool) -> &'a Inversion {
@@ -304,6 +296,32 @@ impl Inversion {
     #[inline(never)]
     fn newton(&self, p: &Params, a: f64) -> f64 {
         invert(p, self.sensible, self.h0 + a / self.inv_slope, self.t0 + a)
+    }
+}
+
+/// T_p at enthalpy `start_h + offset` with the structural temperature held (a cooling or
+/// supercooled PCL): from h_s while below T_f, else the heating branch's. Out of line: the heating
+/// step never calls it.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn off_branch(
+    p: &Params,
+    eq: &Inversion,
+    base: f64,
+    sensible: Option<&(&Inversion, f64, f64)>,
+    start_h: f64,
+    offset: f64,
+    structural: f64,
+    start_t: f64,
+) -> f64 {
+    let t = match sensible {
+        Some((si, bs, _)) => si.temperature_at(p, bs + offset * si.inv_slope),
+        None => pcl_temperature_at(p, start_h + offset, structural, start_t),
+    };
+    if t < structural {
+        t
+    } else {
+        eq.temperature_at(p, base + offset * eq.inv_slope)
     }
 }
 
@@ -399,12 +417,14 @@ impl ThermalState {
         // whose series argument is base + x/h'.
         let start_t = self.pcl_temperature;
         let start_h = self.pcl_enthalpy;
-        let eq = cache.about(p, start_t).clone();
+        // disjoint borrows of the cache's parts (no copies on the hot path)
+        let InversionCache { inversion, sensible: sensible_slot, kinetics } = cache;
+        let eq = InversionCache::anchored(inversion, p, start_t, false);
         let base = (start_h - eq.h0) * eq.inv_slope;
         // h_s's inverse series about the same anchor, with the latent heat held (cooling only).
         let sensible = if kinetic && (!on_branch || self.housing_temperature < start_t) {
-            let latent = cache.kinetics(p).latent_heat(structural);
-            let si = cache.about_sensible(p, start_t).clone();
+            let latent = kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p)).latent_heat(structural);
+            let si = InversionCache::anchored(sensible_slot, p, start_t, true);
             let bs = (start_h - latent - si.h0) * si.inv_slope;
             Some((si, bs, latent))
         } else {
@@ -412,18 +432,10 @@ impl ThermalState {
         };
         // T_p at enthalpy start_h + offset with the structural temperature held.
         let pcl_at = |offset: f64| {
-            let equilibrium = || eq.temperature_at(p, base + offset * eq.inv_slope);
             if on_branch && (offset >= 0.0 || !kinetic) {
-                return equilibrium();
-            }
-            let t = match &sensible {
-                Some((si, bs, _)) => si.temperature_at(p, bs + offset * si.inv_slope),
-                None => pcl_temperature_at(p, start_h + offset, structural, start_t),
-            };
-            if t < structural {
-                t
+                eq.temperature_at(p, base + offset * eq.inv_slope)
             } else {
-                equilibrium()
+                off_branch(p, eq, base, sensible.as_ref(), start_h, offset, structural, start_t)
             }
         };
         let (g_hp, g_ha) = (p.heater_pcl_conductance, p.housing_ambient_conductance);
@@ -453,7 +465,7 @@ impl ThermalState {
                 // on the heating branch: melting keeps up
                 self.pcl_structural_temperature = t_end;
             } else {
-                let kinetics = cache.kinetics(p);
+                let kinetics = kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p));
                 let next = kinetics.advance(&mut self.pcl_crystallisation_integral, structural, midpoint, h, t_end);
                 if next != structural {
                     // Latent heat released at fixed enthalpy: T_p from h_s with the new latent term.
