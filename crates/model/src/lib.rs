@@ -7,6 +7,7 @@ pub mod crystallisation;
 pub mod material;
 pub mod mechanics;
 pub mod params;
+pub mod prony;
 pub mod thermal;
 
 use std::sync::Arc;
