@@ -84,7 +84,7 @@ fn start_values_are_what_the_binary_uses() {
         let used = inst.get(&v.name).unwrap();
         assert_eq!(declared, used, "{}", v.name);
     }
-    assert_eq!(VARIABLES.iter().filter(|v| v.causality == Causality::Output).count(), 15);
+    assert_eq!(VARIABLES.iter().filter(|v| v.causality == Causality::Output).count(), 17);
 }
 
 #[test]

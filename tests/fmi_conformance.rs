@@ -471,3 +471,56 @@ fn a_step_too_small_to_resolve_is_discarded_with_that_reason() {
     assert!(log.contains("too small to resolve"), "{log}");
     assert_eq!(raw.get_real_status_last_successful_time(), (FMI2_OK, 0.0));
 }
+
+/// The crystallinity is in the FMU state (issue 20): a melt cooling from 60 °C, saved while still
+/// supercooled (less crystal than the heating branch holds at its temperature), continues
+/// bit-identically after GetFMUstate/SetFMUstate and after serialization into a fresh instance.
+#[test]
+fn fmu_state_holds_the_crystallinity_of_a_supercooled_melt() {
+    let f = common::fmu();
+    let hot = 273.15 + 60.0;
+    let start = |f: &thermovia_importer::Fmu| {
+        let mut i = f.instantiate(None).unwrap();
+        i.initialize(
+            0.0,
+            None,
+            &[("initial_pcl_temperature", hot), ("initial_housing_temperature", hot), ("max_internal_step", 0.1)],
+        )
+        .unwrap();
+        i.set("ambient_temperature", 273.15 + 22.0).unwrap();
+        i
+    };
+    let cool = |i: &mut thermovia_importer::Instance, n: usize| -> Vec<[f64; 3]> {
+        (0..n)
+            .map(|_| {
+                i.step(0.1).unwrap();
+                [
+                    i.get("pcl_temperature").unwrap(),
+                    i.get("pcl_crystallinity").unwrap(),
+                    i.get("effective_stiffness").unwrap(),
+                ]
+            })
+            .collect()
+    };
+    let mut a = start(&f);
+    cool(&mut a, 3000);
+    let (t, x, tf) = (
+        a.get("pcl_temperature").unwrap(),
+        a.get("pcl_crystallinity").unwrap(),
+        a.get("pcl_structural_temperature").unwrap(),
+    );
+    let xc = a.get("pcl_ultimate_crystallinity").unwrap();
+    assert!(tf > t + 5.0 && x < 0.5 * xc, "supercooled at the save: T {t} K, T_f {tf} K, X {x}");
+    let saved = a.save_state().unwrap();
+    let continued = cool(&mut a, 6000);
+    assert!(continued.last().unwrap()[1] > 0.9 * xc, "crystallised after the save");
+    a.restore_state(&saved).unwrap();
+    assert_eq!(a.get("pcl_crystallinity").unwrap(), x);
+    assert_eq!(cool(&mut a, 6000), continued, "GetFMUstate/SetFMUstate");
+    let bytes = a.serialize_state(&saved).unwrap();
+    let mut b = start(&f);
+    let restored = b.deserialize_state(&bytes, saved.time).unwrap();
+    b.restore_state(&restored).unwrap();
+    assert_eq!(b.get("pcl_crystallinity").unwrap(), x);
+    assert_eq!(cool(&mut b, 6000), continued, "serialized into a fresh instance");
+}

@@ -192,7 +192,7 @@ fn exact_steps(seconds: f64) -> Vec<f64> {
 
 /// Independent of the model's mechanics: the thermal network advanced by the model's own thermal
 /// step (not under test here), and over each communication step a fine fixed-step RK4 (100 sub-steps)
-/// (1000 with backlash) on the full right-hand side with the moduli at the PCL temperature interpolated linearly in
+/// (1000 with backlash) on the full right-hand side with the moduli at the modulus temperature interpolated linearly in
 /// time across the step (no lattice, no table, no frozen coefficients).
 fn reference_run<F: Fn(f64) -> StepInput>(s: &Scenario<F>) -> Vec<f64> {
     let p = &s.params;
@@ -215,9 +215,11 @@ fn reference_run<F: Fn(f64) -> StepInput>(s: &Scenario<F>) -> Vec<f64> {
             x[mechanics::MOTOR_SPEED] = i.speed;
         }
         let u = Drive::new(i.torque, 0.0);
-        let t0 = thermal.pcl_temperature;
+        // the temperature the moduli are read at (the PCL's on the heating branch, mixed towards
+        // the amorphous row while the melt is supercooled: docs/physics.md §5b)
+        let t0 = thermal.modulus_temperature(p);
         thermal.advance(p, &thermal_inputs, h);
-        let t1 = thermal.pcl_temperature;
+        let t1 = thermal.modulus_temperature(p);
         let c0 = Coefficients::at(p, t0);
         let c = |frac: f64| if t1 == t0 { c0 } else { Coefficients::at(p, t0 + (t1 - t0) * frac) };
         // Backlash switches the torque (its damper) on and off: RK4's error at each switch is
@@ -498,6 +500,35 @@ fn caches_do_not_change_the_trajectory() {
             assert!(a == b, "{p:?}: diverged at step {k}");
         }
     }
+    // A supercooled melt crystallising (issue 20): the kinetics' caches (rate anchors, T_f's χ and
+    // θ) must not change the trajectory either; Nakamura's integral is part of the state.
+    let p = Params::default();
+    let mut a = Model::new(p.clone());
+    a.inputs.ambient_temperature = celsius(22.0);
+    let (t, melt) = (celsius(38.0), celsius(60.0));
+    a.thermal.pcl_temperature = t;
+    a.thermal.housing_temperature = t;
+    a.thermal.pcl_structural_temperature = melt;
+    a.thermal.pcl_enthalpy = thermovia_model::thermal::pcl_sensible_enthalpy(&p, t)
+        + p.pcl_mass * p.pcl_latent_heat * thermovia_model::thermal::melt_fraction(&p, melt);
+    let x0 = a.crystallinity();
+    let drive = |m: &mut Model, k: usize| {
+        m.inputs.motor_torque = 1.5 * (k as f64 * 1e-3 * 6.0).sin();
+        m.step((k + 1) as f64 * 1e-3 - k as f64 * 1e-3).unwrap();
+    };
+    for k in 0..1500 {
+        drive(&mut a, k);
+    }
+    let mut b = Model::new(a.params().clone());
+    b.inputs = a.inputs.clone();
+    b.set_state(&a.state());
+    for k in 1500..3000 {
+        drive(&mut a, k);
+        drive(&mut b, k);
+        assert!(a == b, "crystallising: diverged at step {k}");
+    }
+    assert!(a.crystallinity() > x0 + 1e-4, "crystallised {x0} -> {}", a.crystallinity());
+    assert!(a.thermal.pcl_structural_temperature > a.thermal.pcl_temperature, "still supercooled");
 }
 
 /// The work budget covers the exponential Runge–Kutta path too (found by the fuzzer after the

@@ -324,3 +324,31 @@ fn a_negative_step_is_called_negative() {
     let e = sweep::simulate(&a, |_| {}).unwrap_err().to_string();
     assert!(e.contains("--step -1") && e.contains("> 0") && !e.contains("divide"), "{e}");
 }
+
+/// The paper's sweeps are heated up and held, so the PCL stays on the heating branch: with the
+/// crystallisation kinetics (the default) they give what the equilibrium law gives (the model
+/// before issue 20).
+#[test]
+fn paper_sweeps_are_unchanged_by_the_crystallisation_kinetics() {
+    let a = SweepArgs { heating_powers: vec![], cycle_power: 0.0, ..args() };
+    let kinetic = sweep::simulate(&a, |_| {}).expect("sweep with kinetics");
+    let equilibrium = sweep::simulate(&SweepArgs { crystallisation: 0, ..a }, |_| {}).expect("sweep, equilibrium law");
+    assert_eq!(kinetic.conditions.len(), 8);
+    let mut worst: f64 = 0.0;
+    for (k, e) in kinetic.conditions.iter().zip(&equilibrium.conditions) {
+        let pairs = [
+            (k.k_eff_nm_per_rad, e.k_eff_nm_per_rad),
+            (k.c_eff_nms_per_rad, e.c_eff_nms_per_rad),
+            (k.decay_rad, e.decay_rad),
+            (k.phase_deg, e.phase_deg),
+            (k.model_e_storage_kpa, e.model_e_storage_kpa),
+            (k.model_e_loss_kpa, e.model_e_loss_kpa),
+            (k.pcl_temperature_c, e.pcl_temperature_c),
+        ];
+        for (x, y) in pairs {
+            worst = worst.max((x - y).abs() / y.abs().max(1e-300));
+        }
+    }
+    println!("largest relative difference, kinetics vs equilibrium law: {worst:e}");
+    assert!(worst < 1e-9, "{worst:e}");
+}

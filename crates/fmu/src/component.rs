@@ -713,7 +713,22 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
     if !(th.heater_energy.is_finite() && th.heater_energy >= 0.0) {
         return Err(format!("heater energy {} is not a finite non-negative number", th.heater_energy));
     }
-    let back = thermovia_model::thermal::pcl_temperature_from_enthalpy(m.params(), th.pcl_enthalpy, th.pcl_temperature);
+    finite(th.pcl_structural_temperature, "PCL structural temperature")?;
+    if !(th.pcl_crystallisation_integral >= 0.0 && th.pcl_crystallisation_integral.is_finite()) {
+        return Err(format!("Nakamura's integral {} is not a finite number ≥ 0", th.pcl_crystallisation_integral));
+    }
+    if th.pcl_structural_temperature < th.pcl_temperature {
+        return Err(format!(
+            "PCL structural temperature {} K is below the PCL temperature {} K (more crystal than the heating branch holds)",
+            th.pcl_structural_temperature, th.pcl_temperature
+        ));
+    }
+    let back = thermovia_model::thermal::pcl_temperature_at(
+        m.params(),
+        th.pcl_enthalpy,
+        th.pcl_structural_temperature,
+        th.pcl_temperature,
+    );
     if (back - th.pcl_temperature).abs() > 1e-6 * th.pcl_temperature.abs().max(1.0) {
         return Err(format!(
             "PCL temperature {} K does not belong to PCL enthalpy {} J ({back} K)",
@@ -741,7 +756,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 // ---- serialized FMU state: versioned, pointer-free, checked ----
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
-pub const STATE_FORMAT_VERSION: u32 = 3;
+pub const STATE_FORMAT_VERSION: u32 = 4;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;
@@ -985,9 +1000,18 @@ mod tests {
                 forge(&bytes, |p| put(p, states_at + 16, f64::NAN))
             }),
             ("gravity's sine anchor", {
-                // [.., adaptive step, anchor angle, sine, cosine, mean torque]: a sine without its angle
+                // [.., adaptive step, anchor angle, sine, cosine, T_f, θ, mean torque]: a sine without its angle
                 let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
-                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 3), 0.5))
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 5), 0.5))
+            }),
+            ("crystallinity above the heating branch's", {
+                // T_f below the PCL temperature (22 °C)
+                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 3), 250.0))
+            }),
+            ("negative Nakamura integral", {
+                let states_at = bytes.len() - 8 - (8 + 4 + 4 + guid().len() + 8) - 8 * STATE_LEN;
+                forge(&bytes, |p| put(p, states_at + 8 * (STATE_LEN - 2), -1.0))
             }),
         ];
         for (what, forged) in cases {

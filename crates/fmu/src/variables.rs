@@ -3,7 +3,7 @@
 //! so they cannot disagree. Start values are read from `Model::default()` through each row's getter.
 
 use thermovia_model::material::MaterialTable;
-use thermovia_model::{LinkDrive, Model, MotorDrive, ThermalDrive, Transmission};
+use thermovia_model::{Crystallisation, LinkDrive, Model, MotorDrive, ThermalDrive, Transmission};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Causality {
@@ -257,6 +257,22 @@ pub static THERMAL_DRIVE: Enumeration = Enumeration {
     ],
 };
 
+pub static CRYSTALLISATION: Enumeration = Enumeration {
+    name: "Crystallisation",
+    items: &[
+        (
+            0,
+            "equilibrium",
+            "crystallinity on the melting curve at the PCL temperature, heating and cooling (no hysteresis)",
+        ),
+        (
+            1,
+            "nakamura",
+            "melting on the melting curve, crystallisation by Nakamura/Hoffman–Lauritzen kinetics (default)",
+        ),
+    ],
+};
+
 pub static VARIABLES: &[Variable] = &[
     // ---- inputs
     real_input!(0, heater_power, "W", 0.0, 1e4, "Electrical power into the heaters (>= 0)"),
@@ -280,7 +296,9 @@ pub static VARIABLES: &[Variable] = &[
     real_output!(108, effective_damping, "N.m.s/rad", "C_eff = Im K*(ω)/ω at the excitation frequency and current PCL temperature", |m| m.effective_damping()),
     real_output!(109, storage_modulus, "Pa", "E'(T) of the PCL at its current temperature", |m| m.coefficients().storage_modulus),
     real_output!(110, loss_modulus, "Pa", "E''(T) of the PCL at its current temperature", |m| m.coefficients().loss_modulus),
-    real_output!(111, pcl_melt_fraction, "", "Melt fraction χ of the PCL (0 solid, 1 melt)", |m| m.melt_fraction()),
+    real_output!(111, pcl_melt_fraction, "", "Molten share of the crystallisable PCL, 1 − X/X_c = χ(T_f) (0 solid, 1 melt; a supercooled melt stays molten below the melting range)", |m| m.melt_fraction()),
+    real_output!(114, pcl_crystallinity, "", "Crystallinity X of the PCL (crystal mass fraction; X_c on the heating branch when cold)", |m| m.crystallinity()),
+    real_output!(115, pcl_structural_temperature, "K", "T_f ≥ T_p: the heating branch's temperature for the PCL's crystallinity (= pcl_temperature on the heating branch)", |m| m.thermal.pcl_structural_temperature),
     real_output!(112, heater_energy, "J", "Electrical energy into the heaters since initialisation", |m| m.thermal.heater_energy),
     real_output!(113, heat_lost, "J", "Heat lost to ambient since initialisation", |m| m.thermal.heat_lost),
     real_output!(120, transmitted_torque_mean, "N.m", "Transmission torque on the link averaged over the last step: its impulse over the step / h, what an engine that integrates the link applies over its next step (link_drive = 1)", |m| m.transmitted_torque_mean),
@@ -320,6 +338,15 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(243, pcl_latent_heat, Fixed, "J/kg", 0.0, 1e7, "Heat of fusion of this PCL", "LIT/PAPER: ≈ 70 J/g"),
     real_param!(244, pcl_melting_temperature, Fixed, "K", T_MIN, T_MAX, "Centre of the melting range", "LIT: melting 56–64 °C; 58 °C"),
     real_param!(245, pcl_melting_width, Fixed, "K", 1e-3, 1e3, "Half-width of the tanh melting step", "EST: 2.5 K (onset 50–55 °C, LIT)"),
+    real_param!(249, pcl_perfect_crystal_latent_heat, Fixed, "J/kg", 1.0, 1e7, "ΔH₁₀₀, heat of fusion of a perfect PCL crystal: ultimate crystallinity X_c = pcl_latent_heat / this", "LIT: 139.5 J/g"),
+    real_calculated!(282, pcl_ultimate_crystallinity, "", "X_c = pcl_latent_heat / pcl_perfect_crystal_latent_heat: crystallinity of the cold PCL on the heating branch", "from pcl_latent_heat, pcl_perfect_crystal_latent_heat (0.50; DSC of a commercial PCL at 10 K/min: 86.2/139.5 = 0.62, LIT)", |m| thermovia_model::crystallisation::ultimate_crystallinity(m.params())),
+    real_param!(250, avrami_exponent, Fixed, "", 1.0, 4.0, "n of Nakamura's law α = 1 − exp(−(∫K dt)ⁿ)", "EST: 2.5 (PCL 2–3, LIT)"),
+    real_param!(251, pcl_equilibrium_melting_temperature, Fixed, "K", T_MIN, T_MAX, "T_m⁰ of Hoffman–Lauritzen: the crystallisation rate vanishes there", "LIT: 342 K (69 °C); Gibbs–Thomson estimates reach 376 K"),
+    real_param!(252, pcl_glass_transition_temperature, Fixed, "K", T_MIN, T_MAX, "T_g: Hoffman–Lauritzen's T∞ = T_g − 30 K", "LIT: ≈ −60 °C"),
+    real_param!(253, crystallisation_activation_temperature, Fixed, "K", 0.0, 1e5, "U*/R, Hoffman–Lauritzen's transport activation energy over the gas constant", "LIT: U* = 1500 cal/mol = 6276 J/mol (Hoffman's universal value), U*/R = 755 K"),
+    real_param!(254, crystallisation_nucleation_constant, Fixed, "K2", 0.0, 1e8, "K_g, Hoffman–Lauritzen's nucleation constant", "EST: 9.782e4 K², fitted with the half-time to t½(35 °C) = 60 s and t½(45 °C) = 1200 s (PCL 0.5–3e5, LIT)"),
+    real_param!(255, crystallisation_half_time, Fixed, "s", 1e-6, 1e9, "Isothermal crystallisation half-time t½ at crystallisation_reference_temperature", "EST: 60 s at 35 °C (gives Tc ≈ 30 °C at 10 K/min, 37 °C at 2 K/min)"),
+    real_param!(256, crystallisation_reference_temperature, Fixed, "K", T_MIN, T_MAX, "Temperature of crystallisation_half_time", "EST: 35 °C"),
     real_param!(246, housing_heat_capacity, Fixed, "J/K", 1e-6, 1e7, "C_h of heater foils and housing skin that heat quickly", "EST: the paper's 250–500 J budget leaves room for little more than the PCL"),
     real_param!(247, heater_pcl_conductance, Fixed, "W/K", 1e-9, 1e4, "G_hp from heaters into the PCL", "EST: k = 0.2 W/(m·K) (LIT) over ≈ 18 cm² heater contact, 3 mm path, ×3 for the slab mean"),
     real_param!(248, housing_ambient_conductance, Fixed, "W/K", 0.0, 1e4, "G_ha from housing to ambient", "EST: natural convection ≈ 8 W/(m²·K) over ≈ 25 cm² exposed"),
@@ -372,7 +399,7 @@ pub static VARIABLES: &[Variable] = &[
     },
     Variable {
         name: "link_drive",
-        value_reference: 304,
+        value_reference: 305,
         causality: Causality::Parameter,
         variability: Variability::Fixed,
         unit: "",
@@ -424,6 +451,25 @@ pub static VARIABLES: &[Variable] = &[
             }),
         },
         enumeration: Some(&THERMAL_DRIVE),
+    },
+    Variable {
+        name: "crystallisation",
+        value_reference: 304,
+        causality: Causality::Parameter,
+        variability: Variability::Fixed,
+        unit: "",
+        min: Some(0.0),
+        max: Some(1.0),
+        description: "0: crystallinity follows the melting curve both ways; 1: melting on the curve, crystallisation by Nakamura's kinetics on cooling (supercooling, rate-dependent Tc)",
+        source: "MODE: 1 (docs/physics.md §5a); the heating branch is the same in both",
+        access: Access::Integer {
+            get: |m| m.params().crystallisation as i32,
+            set: Some(|m, v| {
+                m.params_mut().crystallisation =
+                    if v == 0 { Crystallisation::Equilibrium } else { Crystallisation::Nakamura }
+            }),
+        },
+        enumeration: Some(&CRYSTALLISATION),
     },
 ];
 

@@ -3,9 +3,11 @@
 
 #![forbid(unsafe_code)]
 
+pub mod crystallisation;
 pub mod material;
 pub mod mechanics;
 pub mod params;
+pub mod prony;
 pub mod thermal;
 
 use std::sync::Arc;
@@ -13,7 +15,7 @@ use std::sync::Arc;
 use mechanics::{
     Coefficients, Contact, Coupling, Drive, EtdStep, FineCell, LinearStep, PropagatorTable, State, Tabulated,
 };
-pub use params::{LinkDrive, MotorDrive, Params, ThermalDrive, Transmission};
+pub use params::{Crystallisation, LinkDrive, MotorDrive, Params, ThermalDrive, Transmission};
 use thermal::{ThermalInputs, ThermalState};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -126,7 +128,7 @@ fn etd_level(key: f64, last: f64) -> u32 {
 }
 
 /// Length of [`Model::state`].
-pub const STATE_LEN: usize = mechanics::N_STATE + 10;
+pub const STATE_LEN: usize = mechanics::N_STATE + 12;
 
 /// Spacing of the temperature lattice on which the Dormand–Prince path (backlash, or a fallback)
 /// and the outputs read the moduli, K.
@@ -285,7 +287,7 @@ impl Model {
     /// Transmission coefficients at the current PCL temperature (on the same lattice the
     /// mechanics uses, so outputs and steps share one cached evaluation).
     pub fn coefficients(&mut self) -> Coefficients {
-        self.coefficients_at(on_temperature_lattice(self.thermal.pcl_temperature))
+        self.coefficients_at(on_temperature_lattice(self.thermal.modulus_temperature(&self.params)))
     }
 
     fn coefficients_at(&mut self, pcl_temperature: f64) -> Coefficients {
@@ -785,8 +787,11 @@ impl Model {
 
     /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical
     /// state [θm, θm', θl, θl', q], the thermal state [T_h, H_p, T_p, E_heater, E_lost] and the
-    /// adaptive solver's last step, and gravity's sine anchor [φa, sin φa, cos φa]
-    /// ([`mechanics::SineAnchor`]; NaN before the first sub-step). Parameters and inputs are not in it.
+    /// adaptive solver's last step, gravity's sine anchor [φa, sin φa, cos φa]
+    /// ([`mechanics::SineAnchor`]; NaN before the first sub-step), and the PCL's structural
+    /// temperature T_f, which holds its crystallinity X = X_c (1 − χ(T_f)), with Nakamura's integral θ
+    /// of the crystallisation under way, and the transmission's mean torque over the last step.
+    /// Parameters and inputs are not in it.
     pub fn state(&self) -> [f64; STATE_LEN] {
         let m = &self.mechanics;
         let th = &self.thermal;
@@ -805,6 +810,8 @@ impl Model {
             self.sine_anchor.angle,
             self.sine_anchor.sin,
             self.sine_anchor.cos,
+            th.pcl_structural_temperature,
+            th.pcl_crystallisation_integral,
             self.transmitted_torque_mean,
         ]
     }
@@ -819,7 +826,9 @@ impl Model {
         self.thermal.heat_lost = x[9];
         self.adaptive_step = x[10];
         self.sine_anchor = mechanics::SineAnchor { angle: x[11], sin: x[12], cos: x[13] };
-        self.transmitted_torque_mean = x[14];
+        self.thermal.pcl_structural_temperature = x[14];
+        self.thermal.pcl_crystallisation_integral = x[15];
+        self.transmitted_torque_mean = x[16];
     }
 
     pub fn motor_angle(&self) -> f64 {
@@ -887,8 +896,13 @@ impl Model {
         let c = self.coefficients();
         c.effective(&self.params).1
     }
+    /// Molten (amorphous) share of the crystallisable PCL, 1 − X/X_c = χ(T_f).
     pub fn melt_fraction(&self) -> f64 {
-        thermal::melt_fraction(&self.params, self.thermal.pcl_temperature)
+        thermal::melt_fraction(&self.params, self.thermal.pcl_structural_temperature)
+    }
+    /// Crystallinity X of the PCL (mass fraction of crystal).
+    pub fn crystallinity(&self) -> f64 {
+        crystallisation::crystallinity(&self.params, self.thermal.pcl_structural_temperature)
     }
 }
 

@@ -48,6 +48,18 @@ pub enum ThermalDrive {
     PrescribedHousing = 1,
 }
 
+/// How the PCL's crystallinity follows temperature.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Crystallisation {
+    /// Crystallinity is the melting curve's at the PCL temperature, heating and cooling alike
+    /// (the model before issue 20: stiffness returns at the melting temperature).
+    Equilibrium = 0,
+    /// Melting on the melting curve, crystallisation by Nakamura's non-isothermal kinetics with a
+    /// Hoffman–Lauritzen rate (docs/physics.md §5a): a supercooled melt that recrystallises well
+    /// below the melting temperature, at a temperature that depends on the cooling rate.
+    Nakamura = 1,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Params {
     // mechanics
@@ -88,6 +100,21 @@ pub struct Params {
     pub pcl_latent_heat: f64,
     pub pcl_melting_temperature: f64,
     pub pcl_melting_width: f64,
+    // crystallisation kinetics (docs/physics.md §5a)
+    pub crystallisation: Crystallisation,
+    /// ΔH of a perfect PCL crystal, J/kg: crystallinity X = X_c (1 − χ), X_c = L / this.
+    pub pcl_perfect_crystal_latent_heat: f64,
+    pub avrami_exponent: f64,
+    /// Hoffman–Lauritzen's equilibrium melting temperature T_m⁰, K: the rate vanishes there.
+    pub pcl_equilibrium_melting_temperature: f64,
+    pub pcl_glass_transition_temperature: f64,
+    /// U*/R, K (T∞ = T_g − 30 K).
+    pub crystallisation_activation_temperature: f64,
+    /// K_g, K².
+    pub crystallisation_nucleation_constant: f64,
+    /// Isothermal half-time t½ at `crystallisation_reference_temperature`, s.
+    pub crystallisation_half_time: f64,
+    pub crystallisation_reference_temperature: f64,
     pub housing_heat_capacity: f64,
     pub heater_pcl_conductance: f64,
     pub housing_ambient_conductance: f64,
@@ -145,6 +172,15 @@ impl Default for Params {
             pcl_latent_heat: 70e3,
             pcl_melting_temperature: ZERO_CELSIUS + 58.0,
             pcl_melting_width: 2.5,
+            crystallisation: Crystallisation::Nakamura,
+            pcl_perfect_crystal_latent_heat: 139.5e3,
+            avrami_exponent: 2.5,
+            pcl_equilibrium_melting_temperature: ZERO_CELSIUS + 69.0,
+            pcl_glass_transition_temperature: ZERO_CELSIUS - 60.0,
+            crystallisation_activation_temperature: 755.0,
+            crystallisation_nucleation_constant: 9.782e4,
+            crystallisation_half_time: 60.0,
+            crystallisation_reference_temperature: ZERO_CELSIUS + 35.0,
             housing_heat_capacity: 2.0,
             heater_pcl_conductance: 0.35,
             housing_ambient_conductance: 0.02,

@@ -4,12 +4,19 @@
 //!   C_h T_h' = P − G_hp (T_h − T_p) − G_ha (T_h − T_amb)
 //!   H_p'     = G_hp (T_h − T_p),           T_p = h⁻¹(H_p)
 //!
-//! h(T) = m [c_s (T − T_r) + (c_l − c_s) ∫χ + L χ(T)], with melt fraction χ a tanh step of
-//! half-width `pcl_melting_width` around `pcl_melting_temperature`. Heater energy and the loss to
-//! ambient are integrated by the same Runge–Kutta step, which preserves the linear invariant
-//! E_in = ΔU_h + ΔH_p + E_loss to rounding.
+//! H_p = h_s(T_p) + m L χ(T_f): the sensible enthalpy h_s(T) = m [c_s (T − T_r) + (c_l − c_s) ∫χ]
+//! plus the latent heat of the molten part. χ is the melting curve (a tanh step of half-width
+//! `pcl_melting_width` around `pcl_melting_temperature`, the logistic CDF), and the PCL's molten
+//! fraction is χ(T_f) at its structural temperature T_f ≥ T_p: the temperature at which the heating
+//! branch holds the PCL's crystallinity X = X_c (1 − χ(T_f)) (docs/physics.md §5a). On heating T_f
+//! follows T_p (melting is fast and rate-independent) and h_s + m L χ(T_p) = h(T_p) is the old
+//! equilibrium enthalpy exactly; on cooling T_f falls only as Nakamura's kinetics crystallise the
+//! melt, whose latent heat m L Δχ stays inside H_p and so is released into T_p. Heater energy and
+//! the loss to ambient are integrated by the same Runge–Kutta step, which preserves the linear
+//! invariant E_in = ΔU_h + ΔH_p + E_loss to rounding, latent heat included.
 
-use super::params::{Params, ThermalDrive, ZERO_CELSIUS};
+use super::crystallisation;
+use super::params::{Crystallisation, Params, ThermalDrive, ZERO_CELSIUS};
 
 /// Reference temperature of the enthalpy scale, K (its value cancels in every balance).
 const ENTHALPY_REFERENCE: f64 = ZERO_CELSIUS;
@@ -18,8 +25,15 @@ const ENTHALPY_REFERENCE: f64 = ZERO_CELSIUS;
 pub struct ThermalState {
     pub housing_temperature: f64,
     pub pcl_enthalpy: f64,
-    /// h⁻¹(pcl_enthalpy), kept in step with it.
+    /// T_p from pcl_enthalpy and the structural temperature, kept in step with them.
     pub pcl_temperature: f64,
+    /// T_f ≥ T_p: the heating branch's temperature for the PCL's crystallinity, X = X_c (1 − χ(T_f));
+    /// T_f = T_p on the heating branch (equilibrium), above it while the melt is supercooled.
+    pub pcl_structural_temperature: f64,
+    /// Nakamura's integral θ = ∫K dt of the crystallisation under way (α = 1 − exp(−θⁿ)); below
+    /// θ(T_f) it stands for θ(T_f), and it is 0 on the heating branch
+    /// ([`crystallisation::Kinetics::advance`]).
+    pub pcl_crystallisation_integral: f64,
     pub heater_energy: f64,
     pub heat_lost: f64,
 }
@@ -43,16 +57,26 @@ pub fn melt_fraction(p: &Params, t: f64) -> f64 {
     0.5 * (1.0 + ((t - p.pcl_melting_temperature) / p.pcl_melting_width).tanh())
 }
 
-/// PCL enthalpy relative to 0 °C, J.
+/// Equilibrium PCL enthalpy relative to 0 °C (the heating branch, T_f = T), J.
 pub fn pcl_enthalpy(p: &Params, t: f64) -> f64 {
+    pcl_sensible_enthalpy(p, t) + p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, t)
+}
+
+/// Sensible part h_s of the PCL enthalpy relative to 0 °C (no latent heat), J.
+pub fn pcl_sensible_enthalpy(p: &Params, t: f64) -> f64 {
     let w = p.pcl_melting_width;
     let x = (t - p.pcl_melting_temperature) / w;
     let xr = (ENTHALPY_REFERENCE - p.pcl_melting_temperature) / w;
     let melt_integral = 0.5 * (t - ENTHALPY_REFERENCE) + 0.5 * w * (ln_cosh(x) - ln_cosh(xr));
     p.pcl_mass
         * (p.pcl_specific_heat_solid * (t - ENTHALPY_REFERENCE)
-            + (p.pcl_specific_heat_melt - p.pcl_specific_heat_solid) * melt_integral
-            + p.pcl_latent_heat * melt_fraction(p, t))
+            + (p.pcl_specific_heat_melt - p.pcl_specific_heat_solid) * melt_integral)
+}
+
+/// dh_s/dT, J/K.
+pub fn pcl_sensible_heat_capacity(p: &Params, t: f64) -> f64 {
+    let chi = melt_fraction(p, t);
+    p.pcl_mass * (p.pcl_specific_heat_solid + (p.pcl_specific_heat_melt - p.pcl_specific_heat_solid) * chi)
 }
 
 /// Apparent heat capacity dh/dT, J/K (sensible + latent).
@@ -66,10 +90,30 @@ pub fn pcl_heat_capacity(p: &Params, t: f64) -> f64 {
             + p.pcl_latent_heat * 0.5 * sech * sech / w)
 }
 
-/// Inverts the enthalpy by Newton's method kept inside a bracket (h is monotone, h' ≥ m·min c).
+/// Inverts the equilibrium enthalpy by Newton's method kept inside a bracket (h is monotone,
+/// h' ≥ m·min c).
 pub fn pcl_temperature_from_enthalpy(p: &Params, enthalpy: f64, guess: f64) -> f64 {
+    invert(p, false, enthalpy, guess)
+}
+
+/// The PCL temperature of enthalpy H at structural temperature T_f: h_s⁻¹(H − m L χ(T_f)) while
+/// that lies below T_f, else (the melt caught up: the heating branch) h⁻¹(H).
+pub fn pcl_temperature_at(p: &Params, enthalpy: f64, structural: f64, guess: f64) -> f64 {
+    let t = invert(p, true, enthalpy - p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, structural), guess);
+    if t < structural {
+        t
+    } else {
+        invert(p, false, enthalpy, guess)
+    }
+}
+
+/// Newton in a bracket on h (`sensible` false) or h_s (true).
+fn invert(p: &Params, sensible: bool, enthalpy: f64, guess: f64) -> f64 {
+    type Curve = fn(&Params, f64) -> f64;
+    let (h, dh): (Curve, Curve) =
+        if sensible { (pcl_sensible_enthalpy, pcl_sensible_heat_capacity) } else { (pcl_enthalpy, pcl_heat_capacity) };
     let c_min = p.pcl_mass * p.pcl_specific_heat_solid.min(p.pcl_specific_heat_melt);
-    let r0 = enthalpy - pcl_enthalpy(p, guess);
+    let r0 = enthalpy - h(p, guess);
     if r0 == 0.0 {
         return guess;
     }
@@ -77,13 +121,13 @@ pub fn pcl_temperature_from_enthalpy(p: &Params, enthalpy: f64, guess: f64) -> f
     let (mut lo, mut hi) = if r0 > 0.0 { (guess, guess + span) } else { (guess - span, guess) };
     let mut t = guess;
     for _ in 0..100 {
-        let r = enthalpy - pcl_enthalpy(p, t);
+        let r = enthalpy - h(p, t);
         if r > 0.0 {
             lo = t
         } else {
             hi = t
         }
-        let mut next = t + r / pcl_heat_capacity(p, t);
+        let mut next = t + r / dh(p, t);
         if !(next > lo && next < hi) {
             next = 0.5 * (lo + hi);
         }
@@ -110,6 +154,15 @@ struct EnthalpyCurve {
 }
 
 impl EnthalpyCurve {
+    /// h_s (`sensible`) or h.
+    fn of(p: &Params, sensible: bool) -> Self {
+        let mut c = Self::new(p);
+        if sensible {
+            c.latent = 0.0;
+        }
+        c
+    }
+
     fn new(p: &Params) -> Self {
         EnthalpyCurve {
             mass: p.pcl_mass,
@@ -173,6 +226,8 @@ pub struct Inversion {
     h0: f64,
     inv_slope: f64,
     c: [f64; 4],
+    /// Of h_s instead of h (the supercooled melt: latent heat held at m L χ(T_f)).
+    sensible: bool,
 }
 
 /// The inverse series of the enthalpy about the anchor nearest the PCL temperature, kept while
@@ -182,23 +237,30 @@ pub struct Inversion {
 #[derive(Clone, Debug, Default)]
 pub struct InversionCache {
     inversion: Option<Inversion>,
+    /// The same for h_s (cooling off the heating branch).
+    sensible: Option<Inversion>,
+    /// The crystallisation kinetics' constants and the current structural temperature's quantities.
+    kinetics: Option<crystallisation::Kinetics>,
 }
 
 impl InversionCache {
-    fn about(&mut self, p: &Params, pcl_temperature: f64) -> &Inversion {
+    fn kinetics(&mut self, p: &Params) -> &mut crystallisation::Kinetics {
+        self.kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p))
+    }
+
+    fn anchored<'a>(slot: &'a mut Option<Inversion>, p: &Params, t: f64, sensible: bool) -> &'a Inversion {
         // x + 2^52 − 2^52 rounds x to an integer (|x| < 2^51) without a libm call.
         const SHIFT: f64 = 4_503_599_627_370_496.0;
-        let anchor = ((pcl_temperature / ANCHOR_LATTICE + SHIFT) - SHIFT) * ANCHOR_LATTICE;
-        match &mut self.inversion {
-            Some(inv) if inv.t0 == anchor => {}
-            slot => *slot = Some(Inversion::at(&EnthalpyCurve::new(p), anchor)),
+        let anchor = ((t / ANCHOR_LATTICE + SHIFT) - SHIFT) * ANCHOR_LATTICE;
+        if !matches!(slot, Some(inv) if inv.t0 == anchor) {
+            *slot = Some(Inversion::at(&EnthalpyCurve::of(p, sensible), anchor, sensible));
         }
-        self.inversion.as_ref().expect("set above")
+        slot.as_ref().expect("set above")
     }
 }
 
 impl Inversion {
-    fn at(curve: &EnthalpyCurve, t0: f64) -> Self {
+    fn at(curve: &EnthalpyCurve, t0: f64, sensible: bool) -> Self {
         let [h0, d1, d2, d3, d4, d5] = curve.eval(t0);
         let inv_slope = 1.0 / d1;
         // h(T0 + δ) − h0 = d1 (δ + b2 δ² + b3 δ³ + b4 δ⁴ + b5 δ⁵ + …); its reversion:
@@ -210,7 +272,7 @@ impl Inversion {
             -5.0 * b2 * b2 * b2 + 5.0 * b2 * b3 - b4,
             14.0 * b2 * b2 * b2 * b2 - 21.0 * b2 * b2 * b3 + 6.0 * b2 * b4 + 3.0 * b3 * b3 - b5,
         ];
-        Inversion { t0, h0, inv_slope, c }
+        Inversion { t0, h0, inv_slope, c, sensible }
     }
 
     #[cfg(test)]
@@ -233,7 +295,33 @@ impl Inversion {
 
     #[inline(never)]
     fn newton(&self, p: &Params, a: f64) -> f64 {
-        pcl_temperature_from_enthalpy(p, self.h0 + a / self.inv_slope, self.t0 + a)
+        invert(p, self.sensible, self.h0 + a / self.inv_slope, self.t0 + a)
+    }
+}
+
+/// T_p at enthalpy `start_h + offset` with the structural temperature held (a cooling or
+/// supercooled PCL): from h_s while below T_f, else the heating branch's. Out of line: the heating
+/// step never calls it.
+#[inline(never)]
+#[allow(clippy::too_many_arguments)]
+fn off_branch(
+    p: &Params,
+    eq: &Inversion,
+    base: f64,
+    sensible: Option<&(&Inversion, f64, f64)>,
+    start_h: f64,
+    offset: f64,
+    structural: f64,
+    start_t: f64,
+) -> f64 {
+    let t = match sensible {
+        Some((si, bs, _)) => si.temperature_at(p, bs + offset * si.inv_slope),
+        None => pcl_temperature_at(p, start_h + offset, structural, start_t),
+    };
+    if t < structural {
+        t
+    } else {
+        eq.temperature_at(p, base + offset * eq.inv_slope)
     }
 }
 
@@ -244,14 +332,26 @@ impl ThermalState {
             housing_temperature: p.initial_housing_temperature,
             pcl_enthalpy: pcl_enthalpy(p, t_p),
             pcl_temperature: t_p,
+            pcl_structural_temperature: t_p,
+            pcl_crystallisation_integral: 0.0,
             heater_energy: 0.0,
             heat_lost: 0.0,
         }
     }
 
-    /// Heat stored in both nodes relative to 0 °C, J.
+    /// Heat stored in both nodes relative to 0 °C, J (latent heat of the molten part included).
     pub fn stored_heat(&self, p: &Params) -> f64 {
         p.housing_heat_capacity * (self.housing_temperature - ENTHALPY_REFERENCE) + self.pcl_enthalpy
+    }
+
+    /// Latent heat held by the molten part of the PCL, m L χ(T_f), J.
+    pub fn latent_heat(&self, p: &Params) -> f64 {
+        p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, self.pcl_structural_temperature)
+    }
+
+    /// The temperature the material table is read at ([`crystallisation::modulus_temperature`]).
+    pub fn modulus_temperature(&self, p: &Params) -> f64 {
+        crystallisation::modulus_temperature(p, self.pcl_temperature, self.pcl_structural_temperature)
     }
 
     /// Advances by `h` seconds (one third-order Runge–Kutta step: the network's time constants are
@@ -261,17 +361,24 @@ impl ThermalState {
     }
 
     /// [`ThermalState::advance`] keeping the enthalpy's inverse series in `cache` (same result).
-    /// Returns the PCL temperature at the step's midpoint, the one the mechanics reads its moduli
-    /// at (see [`ThermalState::advance_network`]).
+    /// Returns the temperature the mechanics reads its moduli at over the step: the PCL temperature
+    /// at the step's midpoint (see [`ThermalState::advance_network`]), moved towards the amorphous
+    /// row by the crystallinity the PCL lacks at the step's start
+    /// ([`crystallisation::modulus_temperature`]; the midpoint itself on the heating branch).
     pub fn advance_cached(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) -> f64 {
-        match p.thermal_drive {
+        let structural = self.pcl_structural_temperature;
+        let mid = match p.thermal_drive {
             ThermalDrive::Heater => self.advance_network(p, u, h, cache),
             ThermalDrive::PrescribedHousing => {
                 let start = self.pcl_temperature;
-                self.advance_prescribed(p, u, h);
+                self.advance_prescribed(p, u, h, cache);
                 0.5 * (start + self.pcl_temperature)
             }
+        };
+        if structural <= mid || p.crystallisation == Crystallisation::Equilibrium {
+            return mid;
         }
+        cache.kinetics(p).modulus_temperature(mid, structural)
     }
 
     /// The heater network's step; returns the midpoint PCL temperature as its Runge–Kutta step's
@@ -280,10 +387,19 @@ impl ThermalState {
     /// thermal step (the mean of the start and end temperatures would serialise the two). It
     /// differs from that mean by about h²/4·T_p'': at most 1.2e-7 K at 1 ms heating at 15 W
     /// through the melt (a unit test below), 3e-8 of the moduli.
+    ///
+    /// With crystallisation kinetics, a stage whose enthalpy lies below the heating branch's at T_f
+    /// (a cooling PCL, or one still supercooled) takes its temperature from h_s with the latent heat
+    /// held at m L χ(T_f); the crystallisation step follows the thermal step at fixed enthalpy, so
+    /// the latent heat it releases raises T_p and no energy is made or lost.
     fn advance_network(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) -> f64 {
+        let kinetic = p.crystallisation == Crystallisation::Nakamura;
+        let structural = self.pcl_structural_temperature;
+        let on_branch = !kinetic || structural <= self.pcl_temperature;
         if u.heater_power == 0.0
             && self.housing_temperature == self.pcl_temperature
             && self.housing_temperature == u.ambient_temperature
+            && on_branch
         {
             // Exact equilibrium: every flux is zero, so the Runge–Kutta step would change nothing.
             return self.pcl_temperature;
@@ -299,16 +415,36 @@ impl ThermalState {
         // stage comes from the inverse series about the anchor nearest the step's start
         // temperature: with x the stage's enthalpy offset from the stored H_p, T_p = h⁻¹(H_p + x),
         // whose series argument is base + x/h'.
-        let inversion = cache.about(p, self.pcl_temperature);
-        let base = (self.pcl_enthalpy - inversion.h0) * inversion.inv_slope;
-        let pcl_at = |offset: f64| inversion.temperature_at(p, base + offset * inversion.inv_slope);
+        let start_t = self.pcl_temperature;
+        let start_h = self.pcl_enthalpy;
+        // disjoint borrows of the cache's parts (no copies on the hot path)
+        let InversionCache { inversion, sensible: sensible_slot, kinetics } = cache;
+        let eq = InversionCache::anchored(inversion, p, start_t, false);
+        let base = (start_h - eq.h0) * eq.inv_slope;
+        // h_s's inverse series about the same anchor, with the latent heat held (cooling only).
+        let sensible = if kinetic && (!on_branch || self.housing_temperature < start_t) {
+            let latent = kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p)).latent_heat(structural);
+            let si = InversionCache::anchored(sensible_slot, p, start_t, true);
+            let bs = (start_h - latent - si.h0) * si.inv_slope;
+            Some((si, bs, latent))
+        } else {
+            None
+        };
+        // T_p at enthalpy start_h + offset with the structural temperature held.
+        let pcl_at = |offset: f64| {
+            if on_branch && (offset >= 0.0 || !kinetic) {
+                eq.temperature_at(p, base + offset * eq.inv_slope)
+            } else {
+                off_branch(p, eq, base, sensible.as_ref(), start_h, offset, structural, start_t)
+            }
+        };
         let (g_hp, g_ha) = (p.heater_pcl_conductance, p.housing_ambient_conductance);
         let (power, ambient) = (u.heater_power, u.ambient_temperature);
         let hc = h / p.housing_heat_capacity;
         let t0 = self.housing_temperature;
         // Stage fluxes (into the PCL, lost to ambient), W; the housing gets P minus both.
         let flux = |t_h: f64, t_p: f64| (g_hp * (t_h - t_p), g_ha * (t_h - ambient));
-        let (p1, l1) = flux(t0, self.pcl_temperature);
+        let (p1, l1) = flux(t0, start_t);
         let midpoint = pcl_at(0.5 * h * p1);
         let (p2, l2) = flux(t0 + 0.5 * hc * (power - p1 - l1), midpoint);
         let (p3, l3) = flux(t0 + hc * (2.0 * (power - p2 - l2) - (power - p1 - l1)), pcl_at(h * (2.0 * p2 - p1)));
@@ -316,27 +452,74 @@ impl ThermalState {
         let pcl = SIXTH * (p1 + 4.0 * p2 + p3);
         let lost = SIXTH * (l1 + 4.0 * l2 + l3);
         self.housing_temperature = t0 + hc * (power - pcl - lost);
-        let new_enthalpy = self.pcl_enthalpy + h * pcl;
-        if new_enthalpy != self.pcl_enthalpy {
-            self.pcl_temperature = pcl_at(new_enthalpy - self.pcl_enthalpy);
+        let new_enthalpy = start_h + h * pcl;
+        if new_enthalpy != start_h {
+            self.pcl_temperature = pcl_at(new_enthalpy - start_h);
             self.pcl_enthalpy = new_enthalpy;
         }
         self.heater_energy += h * power;
         self.heat_lost += h * lost;
+        if kinetic {
+            let t_end = self.pcl_temperature;
+            if structural <= t_end {
+                // on the heating branch: melting keeps up
+                self.pcl_structural_temperature = t_end;
+            } else {
+                let kinetics = kinetics.get_or_insert_with(|| crystallisation::Kinetics::new(p));
+                let next = kinetics.advance(&mut self.pcl_crystallisation_integral, structural, midpoint, h, t_end);
+                if next != structural {
+                    // Latent heat released at fixed enthalpy: T_p from h_s with the new latent term.
+                    let released = if next > t_end { kinetics.latent_heat(next) } else { 0.0 };
+                    let t = match &sensible {
+                        Some((si, bs, latent)) => {
+                            si.temperature_at(p, bs + (new_enthalpy - start_h + latent - released) * si.inv_slope)
+                        }
+                        None => invert(p, true, new_enthalpy - released, t_end),
+                    };
+                    if t < next {
+                        self.pcl_temperature = t;
+                        self.pcl_structural_temperature = next;
+                    } else {
+                        // crystallised up to the heating branch
+                        self.pcl_temperature = pcl_temperature_from_enthalpy(p, new_enthalpy, t_end);
+                        self.pcl_structural_temperature = self.pcl_temperature;
+                    }
+                }
+            }
+        } else {
+            self.pcl_structural_temperature = self.pcl_temperature;
+        }
+        if self.pcl_structural_temperature <= self.pcl_temperature {
+            self.pcl_crystallisation_integral = 0.0;
+        }
         midpoint
     }
 
-    fn advance_prescribed(&mut self, p: &Params, u: &ThermalInputs, h: f64) {
+    fn advance_prescribed(&mut self, p: &Params, u: &ThermalInputs, h: f64, cache: &mut InversionCache) {
         let t_h = u.housing_temperature_command;
         self.housing_temperature = t_h;
+        let start = self.pcl_temperature;
         let t_p = if p.thermal_lag_time_constant > 0.0 {
-            t_h + (self.pcl_temperature - t_h) * (-h / p.thermal_lag_time_constant).exp()
+            t_h + (start - t_h) * (-h / p.thermal_lag_time_constant).exp()
         } else {
             t_h
         };
-        if t_p != self.pcl_temperature {
+        let structural = if p.crystallisation == Crystallisation::Equilibrium || self.pcl_structural_temperature <= t_p
+        {
+            self.pcl_crystallisation_integral = 0.0;
+            t_p
+        } else {
+            let theta = &mut self.pcl_crystallisation_integral;
+            cache.kinetics(p).advance(theta, self.pcl_structural_temperature, 0.5 * (start + t_p), h, t_p)
+        };
+        if t_p != start || structural != self.pcl_structural_temperature {
             self.pcl_temperature = t_p;
-            self.pcl_enthalpy = pcl_enthalpy(p, t_p);
+            self.pcl_structural_temperature = structural;
+            self.pcl_enthalpy = if structural > t_p {
+                pcl_sensible_enthalpy(p, t_p) + p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, structural)
+            } else {
+                pcl_enthalpy(p, t_p)
+            };
         }
     }
 }
@@ -438,7 +621,7 @@ mod tests {
         let mut worst: f64 = 0.0;
         for k in 0..800 {
             let t0 = ZERO_CELSIUS + 10.0 + 0.1 * k as f64 + 0.0123;
-            let inv = Inversion::at(&curve, t0);
+            let inv = Inversion::at(&curve, t0, false);
             for frac in [-1.0, -0.5, -0.1, 0.01, 0.3, 0.99] {
                 let target = t0 + frac * SERIES_LIMIT * 0.9;
                 worst = worst.max((inv.temperature(&p, pcl_enthalpy(&p, target)) - target).abs());

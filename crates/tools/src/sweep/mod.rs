@@ -12,6 +12,7 @@
 //! - [`report`]: summary.json, CSVs, the Markdown report; [`plots`]: SVG figures.
 
 pub mod analysis;
+pub mod cycle;
 pub mod estimator;
 pub mod plots;
 pub mod report;
@@ -95,6 +96,18 @@ pub struct SweepArgs {
     /// constant power), W (comma-separated).
     #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', default_value = "5,10,15"))]
     pub heating_powers: Vec<f64>,
+    /// Heater power of the heating–cooling cycle study, W (0: no cycle study).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 10.0))]
+    pub cycle_power: f64,
+    /// PCL temperature at which the cycle's heater goes off, °C.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 60.0))]
+    pub cycle_target: f64,
+    /// Longest cycle, s (heating and passive cooling).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 20000.0))]
+    pub cycle_max_s: f64,
+    /// The FMU's `crystallisation` parameter for the sweep's runs (0 equilibrium, 1 Nakamura).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = 1))]
+    pub crystallisation: i32,
     /// No progress bar (also hidden when stderr is not a terminal or CI=true).
     #[cfg_attr(feature = "cli", arg(long))]
     pub quiet: bool,
@@ -175,6 +188,8 @@ pub struct SweepResult {
     pub conditions: Vec<Condition>,
     pub warmups: Vec<(WarmupResult, Trace)>,
     pub heating: Vec<rig::HeatingResult>,
+    /// Heating–cooling cycles (issue 20): crystallisation kinetics and the equilibrium law.
+    pub cooling_cycles: Vec<cycle::CycleResult>,
     pub known: Known,
     pub link_inertia: f64,
     pub ambient_c: f64,
@@ -222,6 +237,15 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
     if a.cycles < 1 {
         return Err(format!("--cycles {}: must be ≥ 1", a.cycles));
     }
+    if !(a.cycle_power >= 0.0) || !a.cycle_power.is_finite() {
+        return Err(format!("--cycle-power {}: must be a finite number ≥ 0 W", a.cycle_power));
+    }
+    if !(a.cycle_max_s > 0.0) || !a.cycle_max_s.is_finite() {
+        return Err(format!("--cycle-max-s {}: must be a finite number > 0 s", a.cycle_max_s));
+    }
+    if !(0..=1).contains(&a.crystallisation) {
+        return Err(format!("--crystallisation {}: 0 (equilibrium) or 1 (Nakamura)", a.crystallisation));
+    }
     for &f in &a.frequencies {
         if !(f > 0.0) || !f.is_finite() {
             return Err(format!("--frequencies {f}: each frequency must be a finite number > 0 Hz"));
@@ -256,7 +280,11 @@ fn temperature_block(
     inst.initialize(
         0.0,
         None,
-        &[("excitation_frequency", args.frequencies[0]), ("max_internal_step", args.warmup_step.max(args.step))],
+        &[
+            ("excitation_frequency", args.frequencies[0]),
+            ("max_internal_step", args.warmup_step.max(args.step)),
+            ("crystallisation", args.crystallisation as f64),
+        ],
     )?;
     let vrs = Vrs::resolve(&inst)?;
     let (jm, bm) = (inst.get("motor_inertia")?, inst.get("motor_damping")?);
@@ -378,6 +406,22 @@ pub fn simulate(args: &SweepArgs, progress: impl FnMut(&str) + Send) -> Result<S
         }
         progress("heating study");
     }
+    // Heating–cooling cycle, new law and old side by side (cheap: coarse step, motor at rest).
+    let mut cooling_cycles = Vec::new();
+    if args.cycle_power > 0.0 {
+        for law in [1, 0] {
+            cooling_cycles.push(cycle::cycle_study(
+                &fmu,
+                law,
+                args.cycle_power,
+                args.cycle_target,
+                args.warmup_step,
+                args.cycle_max_s,
+                1.0,
+            )?);
+        }
+        progress("heating–cooling cycle");
+    }
     let heating_seconds = started.elapsed().as_secs_f64();
     normalize_decay(&mut conditions, args.temperatures[0]);
     Ok(SweepResult {
@@ -385,6 +429,7 @@ pub fn simulate(args: &SweepArgs, progress: impl FnMut(&str) + Send) -> Result<S
         conditions,
         warmups,
         heating,
+        cooling_cycles,
         known: known.expect("at least one temperature"),
         link_inertia,
         ambient_c,
@@ -539,7 +584,9 @@ fn normalize_decay(conditions: &mut [Condition], reference_c: f64) {
 pub fn run(args: &SweepArgs, progress: &dyn crate::output::Progress) -> Result<(), SweepError> {
     validate(args).map_err(SweepError::Options)?;
     crate::output::make_parent(&args.out)?;
-    let total = args.temperatures.len() * (args.frequencies.len() + 1) + usize::from(!args.heating_powers.is_empty());
+    let total = args.temperatures.len() * (args.frequencies.len() + 1)
+        + usize::from(!args.heating_powers.is_empty())
+        + usize::from(args.cycle_power > 0.0);
     progress.start(total as u64);
     let mut done = 0;
     let result = simulate(args, |label| {

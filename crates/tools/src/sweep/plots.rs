@@ -25,6 +25,10 @@ pub fn write_all(r: &SweepResult, dir: &Path) -> Result<usize, Box<dyn Error>> {
         warmup(r, &dir.join("warmup.svg"))?;
         n += 1;
     }
+    if !r.cooling_cycles.is_empty() {
+        cooling_cycle(r, &dir.join("heating_cooling_cycle.svg"))?;
+        n += 1;
+    }
     Ok(n)
 }
 
@@ -245,6 +249,66 @@ fn warmup(r: &SweepResult, path: &Path) -> R {
     for (i, (_, t)) in r.warmups.iter().enumerate() {
         let col = PALETTE[i % PALETTE.len()];
         ch.draw_series(LineSeries::new(thin(&t.time, &t.heater_power, 2000), col.stroke_width(1)))?;
+    }
+    root.present()?;
+    Ok(())
+}
+
+/// The heating–cooling cycle: K_eff and crystallinity against time and against PCL temperature,
+/// crystallisation kinetics (thick) and the equilibrium law (thin).
+fn cooling_cycle(r: &SweepResult, path: &Path) -> R {
+    let root = SVGBackend::new(path, (1200, 820)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let (title, body) = root.split_vertically(36);
+    title.draw(&Text::new(
+        format!(
+            "Heating–cooling cycle: {} W until the PCL reaches {} °C, then heater off (thick: Nakamura kinetics, thin: equilibrium law)",
+            r.cooling_cycles[0].power_w, r.cooling_cycles[0].target_c
+        ),
+        (10, 10),
+        ("sans-serif", 16),
+    ))?;
+    let panels = body.split_evenly((2, 2));
+    let t_end = r.cooling_cycles.iter().map(|c| *c.trace.time_s.last().unwrap_or(&1.0)).fold(1.0, f64::max);
+    let (k0, k1) = range(r.cooling_cycles.iter().flat_map(|c| c.trace.k_eff.clone()));
+    let (x0, x1) = range(r.cooling_cycles.iter().flat_map(|c| c.trace.crystallinity.clone()).chain([0.0]));
+    let (p0, p1) = range(r.cooling_cycles.iter().flat_map(|c| c.trace.pcl_c.clone()));
+    type Pick = fn(&super::cycle::CycleTrace) -> &Vec<f64>;
+    type Panel = (&'static str, &'static str, Pick, Pick, (f64, f64), (f64, f64));
+    let specs: [Panel; 4] = [
+        ("K_eff against time", "time (s)", |t| &t.time_s, |t| &t.k_eff, (0.0, t_end), (k0, k1)),
+        ("crystallinity X against time", "time (s)", |t| &t.time_s, |t| &t.crystallinity, (0.0, t_end), (x0, x1)),
+        ("K_eff against PCL temperature", "PCL temperature (°C)", |t| &t.pcl_c, |t| &t.k_eff, (p0, p1), (k0, k1)),
+        (
+            "crystallinity X against PCL temperature",
+            "PCL temperature (°C)",
+            |t| &t.pcl_c,
+            |t| &t.crystallinity,
+            (p0, p1),
+            (x0, x1),
+        ),
+    ];
+    for (panel, (caption, xdesc, fx, fy, (xa, xb), (ya, yb))) in panels.iter().zip(specs) {
+        let mut ch = ChartBuilder::on(panel)
+            .caption(caption, ("sans-serif", 15))
+            .margin(8)
+            .x_label_area_size(30)
+            .y_label_area_size(56)
+            .build_cartesian_2d(xa..xb, ya..yb)?;
+        let ydesc = if caption.starts_with("K_eff") { "N·m/rad" } else { "X" };
+        ch.configure_mesh().x_desc(xdesc).y_desc(ydesc).draw()?;
+        for (i, c) in r.cooling_cycles.iter().enumerate() {
+            let col = PALETTE[i % PALETTE.len()];
+            let width = if c.law == "nakamura" { 2 } else { 1 };
+            ch.draw_series(LineSeries::new(thin(fx(&c.trace), fy(&c.trace), 3000), col.stroke_width(width)))?
+                .label(c.law)
+                .legend(legend(col));
+        }
+        ch.configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .draw()?;
     }
     root.present()?;
     Ok(())

@@ -50,6 +50,7 @@ fn summary_json(r: &SweepResult) -> serde_json::Value {
         "conditions": r.conditions,
         "warmups": warmups,
         "heating": r.heating,
+        "heating_cooling_cycles": r.cooling_cycles,
         "paper_comparison": comparison(r).iter().map(|c| serde_json::json!({
             "claim": c.claim, "paper": c.paper, "model": c.model, "agrees": c.agrees,
         })).collect::<Vec<_>>(),
@@ -432,6 +433,36 @@ pub fn markdown(r: &SweepResult) -> String {
                 opt(h.pcl_reached_s, 1),
                 opt(h.pcl_reached_energy_j, 0),
                 h.peak_housing_c
+            );
+        }
+        let _ = writeln!(s);
+    }
+    if !r.cooling_cycles.is_empty() {
+        let c0 = &r.cooling_cycles[0];
+        let _ = writeln!(s, "### Heating–cooling cycle (issue 20)\n");
+        let _ = writeln!(
+            s,
+            "{} W from room temperature until the PCL reaches {} °C, then the heater off and passive cooling, motor at rest. \
+             `nakamura`: the FMU's default, melting on the melting curve and crystallisation by Nakamura/Hoffman–Lauritzen kinetics \
+             (docs/physics.md §5a); `equilibrium`: crystallinity on the melting curve both ways (the model before issue 20). \
+             Regain: K_eff back to 90 % of its cold value, counted from heater off. Plot: `heating_cooling_cycle.svg`.\n",
+            c0.power_w, c0.target_c
+        );
+        let _ = writeln!(s, "| law | heater off at s | heater energy J | cold K_eff N·m/rad | min K_eff | 90 % regained after s | PCL then °C | crystallisation peak °C | exotherm rise K | final X |\n|---|---|---|---|---|---|---|---|---|---|");
+        for c in &r.cooling_cycles {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {:.0} | {:.2} | {:.2} | {} | {} | {} | {:.3} | {:.3} |",
+                c.law,
+                opt(c.heater_off_s, 1),
+                c.heater_energy_j,
+                c.cold_k_eff,
+                c.min_k_eff,
+                opt(c.regain_90_after_off_s, 0),
+                opt(c.regain_90_pcl_c, 1),
+                opt(c.crystallisation_peak_c, 1),
+                c.exotherm_rise_k,
+                c.final_crystallinity
             );
         }
         let _ = writeln!(s);
