@@ -172,6 +172,29 @@ macro_rules! real_calculated {
     };
 }
 
+/// An Integer parameter of the FMU's mode enumerations: `field` of the model's parameters, read as
+/// its discriminant, set from an integer the range check has already admitted.
+macro_rules! mode_param {
+    ($vr:expr, $field:ident, $min:expr, $max:expr, $enumeration:ident, $desc:expr, $source:expr, |$v:ident| $from:expr) => {
+        Variable {
+            name: stringify!($field),
+            value_reference: $vr,
+            causality: Causality::Parameter,
+            variability: Variability::Fixed,
+            unit: "",
+            min: Some($min),
+            max: Some($max),
+            description: $desc,
+            source: $source,
+            access: Access::Integer {
+                get: |m| m.params().$field as i32,
+                set: Some(|m, $v| m.params_mut().$field = $from),
+            },
+            enumeration: Some(&$enumeration),
+        }
+    };
+}
+
 macro_rules! real_input {
     ($vr:expr, $field:ident, $unit:expr, $min:expr, $max:expr, $desc:expr) => {
         Variable {
@@ -361,116 +384,12 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(270, max_internal_step, Fixed, "s", 1e-7, 10.0, "Longest internal sub-step, independent of the communication step", "NUMERICS"),
     real_param!(271, solver_tolerance, Fixed, "", 1e-14, 1e-2, "Local error tolerance per step, relative to 1 + the magnitude of each state, used when friction, backlash or gravity is on: Dormand–Prince accepts an estimate ≤ tol; exponential Runge–Kutta keeps its 4th-order solution x4 when the embedded estimate x4 − x3 (the 3rd-order solution's error) is ≤ 2·tol (0.01·tol with Stribeck friction)", "NUMERICS"),
     // ---- modes (Integer)
-    Variable {
-        name: "material_table",
-        value_reference: 300,
-        causality: Causality::Parameter,
-        variability: Variability::Fixed,
-        unit: "",
-        min: Some(1.0),
-        max: Some(4.0),
-        description: "PCL moduli: 1 repaired experimental (default), 2 printed experimental, 3 repaired estimated, 4 printed estimated",
-        source: "PAPER Table 2; repair EST (docs/physics.md §4)",
-        access: Access::Integer {
-            get: |m| m.params().material_table as i32,
-            set: Some(|m, v| {
-                m.params_mut().material_table = MaterialTable::from_index(v).expect("range-checked")
-            }),
-        },
-        enumeration: Some(&MATERIAL_TABLE),
-    },
-    Variable {
-        name: "motor_drive",
-        value_reference: 301,
-        causality: Causality::Parameter,
-        variability: Variability::Fixed,
-        unit: "",
-        min: Some(0.0),
-        max: Some(1.0),
-        description: "0: motor_torque drives the motor; 1: the motor follows motor_angle_command",
-        source: "MODE",
-        access: Access::Integer {
-            get: |m| m.params().motor_drive as i32,
-            set: Some(|m, v| {
-                m.params_mut().motor_drive = if v == 0 { MotorDrive::Torque } else { MotorDrive::PrescribedAngle }
-            }),
-        },
-        enumeration: Some(&MOTOR_DRIVE),
-    },
-    Variable {
-        name: "link_drive",
-        value_reference: 305,
-        causality: Causality::Parameter,
-        variability: Variability::Fixed,
-        unit: "",
-        min: Some(0.0),
-        max: Some(1.0),
-        description: "0: the FMU integrates the link; 1: an engine integrates it and the FMU follows link_angle_command / link_speed_command (a force element: transmitted_torque_mean is the torque on the link)",
-        source: "MODE",
-        access: Access::Integer {
-            get: |m| m.params().link_drive as i32,
-            set: Some(|m, v| {
-                m.params_mut().link_drive = if v == 0 { LinkDrive::Integrated } else { LinkDrive::Prescribed }
-            }),
-        },
-        enumeration: Some(&LINK_DRIVE),
-    },
-    Variable {
-        name: "transmission",
-        value_reference: 303,
-        causality: Causality::Parameter,
-        variability: Variability::Fixed,
-        unit: "",
-        min: Some(0.0),
-        max: Some(1.0),
-        description: "0: springs and PCL couple motor and link; 1: rigid, motor and link one body of inertia motor_inertia + link_inertia, damping motor_damping + link_damping",
-        source: "MODE",
-        access: Access::Integer {
-            get: |m| m.params().transmission as i32,
-            set: Some(|m, v| {
-                m.params_mut().transmission = if v == 0 { Transmission::Compliant } else { Transmission::Rigid }
-            }),
-        },
-        enumeration: Some(&TRANSMISSION),
-    },
-    Variable {
-        name: "thermal_drive",
-        value_reference: 302,
-        causality: Causality::Parameter,
-        variability: Variability::Fixed,
-        unit: "",
-        min: Some(0.0),
-        max: Some(1.0),
-        description: "0: heater_power drives the thermal network; 1: the housing follows housing_temperature_command",
-        source: "MODE",
-        access: Access::Integer {
-            get: |m| m.params().thermal_drive as i32,
-            set: Some(|m, v| {
-                m.params_mut().thermal_drive =
-                    if v == 0 { ThermalDrive::Heater } else { ThermalDrive::PrescribedHousing }
-            }),
-        },
-        enumeration: Some(&THERMAL_DRIVE),
-    },
-    Variable {
-        name: "crystallisation",
-        value_reference: 304,
-        causality: Causality::Parameter,
-        variability: Variability::Fixed,
-        unit: "",
-        min: Some(0.0),
-        max: Some(1.0),
-        description: "0: crystallinity follows the melting curve both ways; 1: melting on the curve, crystallisation by Nakamura's kinetics on cooling (supercooling, rate-dependent Tc)",
-        source: "MODE: 1 (docs/physics.md §5a); the heating branch is the same in both",
-        access: Access::Integer {
-            get: |m| m.params().crystallisation as i32,
-            set: Some(|m, v| {
-                m.params_mut().crystallisation =
-                    if v == 0 { Crystallisation::Equilibrium } else { Crystallisation::Nakamura }
-            }),
-        },
-        enumeration: Some(&CRYSTALLISATION),
-    },
+    mode_param!(300, material_table, 1.0, 4.0, MATERIAL_TABLE, "PCL moduli: 1 repaired experimental (default), 2 printed experimental, 3 repaired estimated, 4 printed estimated", "PAPER Table 2; repair EST (docs/physics.md §4)", |v| MaterialTable::from_index(v).expect("range-checked")),
+    mode_param!(301, motor_drive, 0.0, 1.0, MOTOR_DRIVE, "0: motor_torque drives the motor; 1: the motor follows motor_angle_command", "MODE", |v| if v == 0 { MotorDrive::Torque } else { MotorDrive::PrescribedAngle }),
+    mode_param!(305, link_drive, 0.0, 1.0, LINK_DRIVE, "0: the FMU integrates the link; 1: an engine integrates it and the FMU follows link_angle_command / link_speed_command (a force element: transmitted_torque_mean is the torque on the link)", "MODE", |v| if v == 0 { LinkDrive::Integrated } else { LinkDrive::Prescribed }),
+    mode_param!(303, transmission, 0.0, 1.0, TRANSMISSION, "0: springs and PCL couple motor and link; 1: rigid, motor and link one body of inertia motor_inertia + link_inertia, damping motor_damping + link_damping", "MODE", |v| if v == 0 { Transmission::Compliant } else { Transmission::Rigid }),
+    mode_param!(302, thermal_drive, 0.0, 1.0, THERMAL_DRIVE, "0: heater_power drives the thermal network; 1: the housing follows housing_temperature_command", "MODE", |v| if v == 0 { ThermalDrive::Heater } else { ThermalDrive::PrescribedHousing }),
+    mode_param!(304, crystallisation, 0.0, 1.0, CRYSTALLISATION, "0: crystallinity follows the melting curve both ways; 1: melting on the curve, crystallisation by Nakamura's kinetics on cooling (supercooling, rate-dependent Tc)", "MODE: 1 (docs/physics.md §5a); the heating branch is the same in both", |v| if v == 0 { Crystallisation::Equilibrium } else { Crystallisation::Nakamura }),
 ];
 
 /// The row with this name.
