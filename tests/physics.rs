@@ -581,11 +581,13 @@ fn a_step_too_small_to_resolve_is_refused_with_that_reason() {
 /// the transmission from the motor, minus out to the link at the engine's speeds — must equal what
 /// the transmission stores plus what it dissipates.
 fn link_driven(motor: MotorDrive, loss_scale: f64) -> Model {
-    let mut p = Params::default();
-    p.link_drive = thermovia_model::LinkDrive::Prescribed;
-    p.motor_drive = motor;
-    p.motor_damping = 0.0;
-    p.loss_modulus_scale = loss_scale;
+    let p = Params {
+        link_drive: thermovia_model::LinkDrive::Prescribed,
+        motor_drive: motor,
+        motor_damping: 0.0,
+        loss_modulus_scale: loss_scale,
+        ..Params::default()
+    };
     at_temperature(p, 40.0)
 }
 
