@@ -224,12 +224,13 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     }
 }
 
-/// One ranked candidate (the ranking every rig shares: `stepwise::linearised`).
+/// One ranked candidate (the ranking every rig shares: `stepwise::Linearised`).
 pub type Candidate = super::stepwise::Ranked<Effect>;
 
 /// Score test of every effect not yet in the model; best first.
 pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
-    let sse_now = super::stepwise::linearised(&fit.jacobian, &fit.residual, &DMatrix::zeros(fit.n, 0)).0;
+    let lin = super::stepwise::Linearised::new(&fit.jacobian, &fit.residual);
+    let sse_now = lin.sse;
     // a lag behind a constant thermocouple changes nothing: no simulation needed to know that
     let heating = thermocouple_varies(prob);
     let mut out = Vec::new();
@@ -299,7 +300,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
                     }
                 }
             }
-            let (_, sse_aug, beta) = super::stepwise::linearised(&fit.jacobian, &fit.residual, &s);
+            let (sse_aug, beta) = lin.with(&s);
             let mut start = p0[base..].to_vec();
             let mut physical = true;
             for (ci, &j) in probe_cols.iter().enumerate() {

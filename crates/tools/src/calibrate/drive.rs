@@ -724,7 +724,7 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     })
 }
 
-/// One candidate's score test (the ranking every rig shares: `stepwise::linearised`).
+/// One candidate's score test (the ranking every rig shares: `stepwise::Linearised`).
 pub type DriveCandidate = Ranked<DriveEffect>;
 
 /// A refit's evidence beyond BIC: the held-out relerr (%) of the model before and after (scored,
@@ -785,6 +785,8 @@ fn residual_corr_sign(prob: &DriveProblem, fit: &DriveFit) -> f64 {
 }
 
 fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> Vec<DriveCandidate> {
+    let lin = super::stepwise::Linearised::new(&fit.jacobian, &fit.residual);
+    let sse_now = lin.sse;
     let mut out = Vec::new();
     for effect in DriveEffect::ALL {
         if fit.effects.contains(&effect) {
@@ -828,7 +830,7 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
             continue;
         }
         let probes = DMatrix::from_fn(fit.n(), cols.len(), |i, j| cols[j][i]);
-        let (sse_now, sse_aug, beta) = super::stepwise::linearised(&fit.jacobian, &fit.residual, &probes);
+        let (sse_aug, beta) = lin.with(&probes);
         let mut start = init.clone();
         for (c, &i) in probed.iter().enumerate() {
             start[i] += beta[base + c];

@@ -22,7 +22,7 @@ pub mod sim;
 pub mod stepwise;
 pub mod synthetic;
 
-pub use conditioning::{group_runs, held_out_groups, initial_speed, sim_input, smoothing_half_width};
+use conditioning::{group_runs, held_out_groups, sim_input, smoothing_half_width};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -153,11 +153,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let groups = prob.group.clone();
     let (outcome, references) = std::thread::scope(|scope| {
         let refs = scope.spawn(|| reference::black_box(&runs, &groups));
-        let budget = search::Budget::seconds(args.search_budget);
+        let budget = stepwise::Budget::seconds(args.search_budget);
         (search::calibrate(&mut prob, &laws, &budget), refs.join())
     });
     let mut outcome = outcome?;
-    search::debug(format_args!("search and reference: {:?}", t0.elapsed()));
+    stepwise::debug(format_args!("search and reference: {:?}", t0.elapsed()));
     let references = references.map_err(|_| "the black-box reference panicked")?;
     let mut notes: Vec<String> = Vec::new();
     let held_prob = (!held.is_empty()).then(|| {
@@ -190,7 +190,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let (held_base, held_final) =
         (search::blocked_fold_rmse(&prob, &outcome.baseline)?, search::blocked_fold_rmse(&prob, &outcome.final_fit)?);
     let method = "a blocked fold: refitted on the first half of every run, scored on the second half (the --validate runs, if any, are scored under validation and choose nothing)";
-    search::debug(format_args!("held-out: {:?}", t0.elapsed()));
+    stepwise::debug(format_args!("held-out: {:?}", t0.elapsed()));
     let mut held_final = held_final;
     let mut dropped: Vec<fit::Effect> = Vec::new();
     if !outcome.final_fit.spec.effects.is_empty() && held_final >= held_base {
@@ -241,7 +241,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     let (trivial, arx) = &references;
     let box_beats_model = excess(model_rmse) > REFERENCE_MARGIN * excess(arx.rmse);
     let leftover = outcome.final_signatures.leftover_harmonics(&prob.lengths(), prob.sinusoidal());
-    search::debug(format_args!("leftover harmonics over noise: {leftover:?}"));
+    stepwise::debug(format_args!("leftover harmonics over noise: {leftover:?}"));
     let harmonics_left = leftover.is_some_and(|r| r > diagnose::NONLINEAR_HARMONIC_LIMIT);
     outcome.unexplained = !outcome.final_signatures.white() && (box_beats_model || harmonics_left);
     report["unexplained"] = serde_json::json!(outcome.unexplained);

@@ -520,7 +520,7 @@ pub fn black_box(runs: &[super::data::Run], group: &[usize]) -> (Reference, Refe
         runs.iter().map(|r| RunSignals { time: &r.time, motor: &r.motor, link: &r.link }).collect();
     let t = std::time::Instant::now();
     let out = (trivial(&signals), arx_grouped(&signals, group, BLACK_BOX_MAX_ORDER));
-    super::search::debug(format_args!("black box: {:?}", t.elapsed()));
+    super::stepwise::debug(format_args!("black box: {:?}", t.elapsed()));
     out
 }
 

@@ -7,7 +7,7 @@ use super::fit::{
     Problem, SpringBank, EQUATION_ERROR_EFFECTS,
 };
 
-use super::stepwise::{Attempt, Ranked, Record, Rig, Verdict};
+use super::stepwise::{debug, Attempt, Ranked, Record, Rig, Verdict};
 pub use super::stepwise::{
     Budget, BIC_MARGIN, COMBINATION_PASSES, MAX_EFFECTS, PAIR_POOL, PRUNE_SKIP, SHORTLIST_SHARE, TRIES_PER_ROUND,
 };
@@ -483,7 +483,7 @@ pub struct LawRow {
     pub bic: f64,
 }
 
-/// Runs started moving (`calibrate::initial_speed` saw the link moving at its first sample) are
+/// Runs started moving (`conditioning::initial_speed` saw the link moving at its first sample) are
 /// fitted again at rest with `fit`'s structure; a run keeps the moving start only when it lowers
 /// that run's BIC by more than `BIC_MARGIN` (one more number per run). A link that starts at rest
 /// and catches up with the motor within a millisecond looks moving over the estimator's window,
@@ -528,13 +528,6 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
     }
     let start = if resting.sse < moving.sse { resting.p.clone() } else { moving.p.clone() };
     levenberg_marquardt(prob, moving.spec.clone(), start, MAX_ITERATIONS).unwrap_or(moving)
-}
-
-/// `THERMOVIA_DEBUG=1`: where the loop's time goes, on stderr.
-pub fn debug(what: std::fmt::Arguments) {
-    if std::env::var_os("THERMOVIA_DEBUG").is_some() {
-        eprintln!("{what}");
-    }
 }
 
 /// Simulations run so far (for `debug`).

@@ -41,6 +41,13 @@ pub const SHORTLIST_SHARE: f64 = 0.25;
 /// many BIC margins.
 pub const PRUNE_SKIP: f64 = 10.0;
 
+/// `THERMOVIA_DEBUG=1`: where the loop's time goes, on stderr.
+pub fn debug(what: std::fmt::Arguments) {
+    if std::env::var_os("THERMOVIA_DEBUG").is_some() {
+        eprintln!("{what}");
+    }
+}
+
 /// The time the effect search may take. Checked between refits: a refit under way finishes.
 pub struct Budget {
     pub start: std::time::Instant,
@@ -80,28 +87,43 @@ pub struct Ranked<E> {
 }
 
 /// The ranking's core, the same for every rig: the residual r projected on the model's Jacobian J
-/// alone and on [J, S], with S the effect's sensitivity columns (secant probes through the FMU).
-/// Returns (SSE on J, SSE on [J, S], the coefficients on [J, S]).
-pub fn linearised(jacobian: &DMatrix<f64>, residual: &[f64], probes: &DMatrix<f64>) -> (f64, f64, DVector<f64>) {
-    let r = DVector::from_column_slice(residual);
-    let project = |m: &DMatrix<f64>| {
-        if m.ncols() == 0 {
-            return (r.norm_squared(), DVector::zeros(0));
-        }
-        let beta = spd_inverse(&(m.transpose() * m)) * (m.transpose() * &r);
-        ((&r - m * &beta).norm_squared(), beta)
-    };
-    let (sse_now, _) = project(jacobian);
-    let base = jacobian.ncols();
-    let m = DMatrix::from_fn(jacobian.nrows(), base + probes.ncols(), |i, j| {
-        if j < base {
-            jacobian[(i, j)]
-        } else {
-            probes[(i, j - base)]
-        }
-    });
-    let (sse_aug, beta) = project(&m);
-    (sse_now, sse_aug, beta)
+/// alone (once per ranking, `new`) and on [J, S] for each candidate's sensitivity columns S (secant
+/// probes through the FMU, `with`).
+pub struct Linearised<'a> {
+    jacobian: &'a DMatrix<f64>,
+    residual: DVector<f64>,
+    /// SSE of r on J alone.
+    pub sse: f64,
+}
+
+impl<'a> Linearised<'a> {
+    pub fn new(jacobian: &'a DMatrix<f64>, residual: &[f64]) -> Self {
+        let residual = DVector::from_column_slice(residual);
+        let sse = project(jacobian, &residual).0;
+        Linearised { jacobian, residual, sse }
+    }
+
+    /// (SSE on [J, S], the coefficients on [J, S]).
+    pub fn with(&self, probes: &DMatrix<f64>) -> (f64, DVector<f64>) {
+        let base = self.jacobian.ncols();
+        let m = DMatrix::from_fn(self.jacobian.nrows(), base + probes.ncols(), |i, j| {
+            if j < base {
+                self.jacobian[(i, j)]
+            } else {
+                probes[(i, j - base)]
+            }
+        });
+        project(&m, &self.residual)
+    }
+}
+
+/// Least squares of r on the columns of m: (SSE, coefficients).
+fn project(m: &DMatrix<f64>, r: &DVector<f64>) -> (f64, DVector<f64>) {
+    if m.ncols() == 0 {
+        return (r.norm_squared(), DVector::zeros(0));
+    }
+    let beta = spd_inverse(&(m.transpose() * m)) * (m.transpose() * r);
+    ((r - m * &beta).norm_squared(), beta)
 }
 
 /// BIC change of a fit with `n` samples whose SSE goes from `sse_now` to `sse_now − gain` with `k`
@@ -286,7 +308,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                         let Some(refit) = rig.refit_with(&current, &[a, b]) else { continue };
                         let verdict = rig.judge(&current, &refit);
                         let keep = verdict.keep;
-                        super::search::debug(format_args!("pair {:?} + {:?}: kept {keep}", a.effect, b.effect));
+                        debug(format_args!("pair {:?} + {:?}: kept {keep}", a.effect, b.effect));
                         combinations.push(Attempt {
                             stage: "pair after a round",
                             effects: vec![a.effect, b.effect],
@@ -572,11 +594,13 @@ mod tests {
         }
         fn state(&self, _m: &Model) {}
         fn rank(&self, m: &Model) -> Vec<Ranked<usize>> {
+            let design = self.design(&m.cols);
+            let lin = Linearised::new(&design, &m.residual);
+            let now = lin.sse;
             let mut out: Vec<Ranked<usize>> = (0..self.x.len())
                 .filter(|c| !m.cols.contains(c))
                 .map(|c| {
-                    let probe = self.design(&[c]);
-                    let (now, aug, beta) = linearised(&self.design(&m.cols), &m.residual, &probe);
+                    let (aug, beta) = lin.with(&self.design(&[c]));
                     Ranked {
                         effect: c,
                         score: (now - aug) / now,
