@@ -763,6 +763,12 @@ impl Model {
     /// mean of the transmission's torques at both ends: exact for springs and Kelvin–Voigt PCL at a
     /// steady temperature, whose torque is then linear over the step.
     fn step_mean_torque(&mut self, h: f64, motor_start: [f64; 2], link_start: [f64; 2], start: f64) -> f64 {
+        let both_prescribed = self.params.motor_drive == MotorDrive::PrescribedAngle
+            && self.params.transmission == Transmission::Compliant
+            && self.params.link_drive == LinkDrive::Prescribed;
+        if both_prescribed {
+            return 0.5 * (start + self.transmitted_torque());
+        }
         let p = &self.params;
         let x = &self.mechanics;
         if p.motor_drive == MotorDrive::Torque {
@@ -773,12 +779,7 @@ impl Model {
         if p.transmission == Transmission::Rigid {
             return 0.0;
         }
-        if p.link_drive == LinkDrive::Prescribed {
-            return 0.5 * (start + self.transmitted_torque());
-        }
         let nonlinear = if p.link_torque_is_linear() { 0.0 } else { 0.5 * (start + self.link_law_torque()) };
-        let p = &self.params;
-        let x = &self.mechanics;
         p.link_inertia * (x[mechanics::LINK_SPEED] - link_start[1]) / h
             + p.link_damping * (x[mechanics::LINK_ANGLE] - link_start[0]) / h
             - self.inputs.load_torque
