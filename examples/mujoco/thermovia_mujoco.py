@@ -245,6 +245,14 @@ class FmuJoint:
         self.call_seconds += (c1 - c0) + (c3 - c2)
         return self.y["transmitted_torque_mean"]
 
+    def apply(self, m, d, dof_index: int, tau: float) -> None:
+        """Hands the step's mean torque to MuJoCo on the joint's dof. The transmission's damping on the
+        link goes to MuJoCo's implicit joint damping: the FMU's torque at the step's start speed is
+        given back (C_eff q'(t)), and the engine takes −C_eff q'(t + h)."""
+        damping = self.y["effective_damping"]
+        m.dof_damping[dof_index] = damping
+        d.qfrc_applied[dof_index] += tau + damping * d.qvel[dof_index]
+
     def close(self):
         self.fmu.terminate()
         self.fmu.freeInstance()
@@ -399,7 +407,6 @@ class Record:
     t: list = field(default_factory=list)
     q: list = field(default_factory=list)
     torque: list = field(default_factory=list)
-    motor_torque: list = field(default_factory=list)
     pcl_c: list = field(default_factory=list)
     stiffness: list = field(default_factory=list)
     contact: list = field(default_factory=list)
@@ -423,7 +430,9 @@ def run_cosim(
     renderer=None,
     stop_when=None,
 ) -> Record:
-    """The arm with a ThermoVIA FMU at every joint, co-simulated at step h for `duration` s."""
+    """The arm with a ThermoVIA FMU at every joint, co-simulated at step h for `duration` s. `plan`
+    gives `reference(t)` (joint angles) and `heater` (None, or (t, PCL temperatures °C) -> W per joint):
+    a `Plan` or a `TouchTask`."""
     m.opt.timestep = h
     d = mujoco.MjData(m)
     cols = [dof(m, j) for j in JOINTS]
@@ -447,18 +456,14 @@ def run_cosim(
             ref = plan.reference(t)
             temps = [j.y["pcl_temperature"] - ZERO_C for j in joints]
             heat = plan.heater(t, temps) if plan.heater else [0.0] * len(joints)
-            taus, tms = [], []
+            taus = []
+            d.qfrc_applied[:] = 0.0
             for i, j in enumerate(joints):
                 c = cols[i]
                 tm = j.motor_torque(ref[i], d.qfrc_bias[c])
                 tau = j.step(t, h, float(d.qpos[c]), float(d.qvel[c]), tm, heat[i])
-                # the transmission's damping on the link goes to MuJoCo's implicit joint damping: the
-                # FMU's torque at the step's start speed is given back, the engine takes −C q'(t + h)
-                damping = j.y["effective_damping"]
-                m.dof_damping[c] = damping
-                d.qfrc_applied[c] = tau + damping * d.qvel[c]
+                j.apply(m, d, c, tau)
                 taus.append(tau)
-                tms.append(tm)
             e0 = time.perf_counter()
             mujoco.mj_step(m, d)
             engine_s += time.perf_counter() - e0
@@ -468,7 +473,6 @@ def run_cosim(
                 rec.t.append(t + h)
                 rec.q.append(d.qpos[cols].copy())
                 rec.torque.append(taus)
-                rec.motor_torque.append(tms)
                 rec.pcl_c.append([j.y["pcl_temperature"] - ZERO_C for j in joints])
                 rec.stiffness.append([j.y["effective_stiffness"] for j in joints])
                 rec.contact.append(contact_force(m, d, "tip", "table"))
@@ -607,10 +611,10 @@ def accuracy_study(xml_path, unzipdir, md, plan, duration, settings, steps=(0.5e
 # cross-check: `thermovia arm`'s planar two-link arm through this MuJoCo path
 
 
-def two_link_xml(cfg: dict) -> str:
-    """`thermovia arm`'s arm in MJCF (crates/tools/src/arm/dynamics.rs): two bodies in the x–z plane,
-    gravity along −z, each with the mass, centre of mass and inertia that file gives it (rod, the
-    elbow actuator on link 1, the payload on link 2, each hub), and a tip site."""
+def two_link_bodies(cfg: dict) -> tuple:
+    """(mass, centre-of-mass distance from its joint, inertia about the centre) of `thermovia arm`'s
+    two bodies (crates/tools/src/arm/dynamics.rs, `body1`/`body2`): a uniform rod, a point mass at
+    its end (the elbow actuator; the payload), the hub."""
 
     def body(m_rod, l, m_end):
         m = m_rod + m_end
@@ -618,8 +622,13 @@ def two_link_xml(cfg: dict) -> str:
         i = m_rod * l * l / 12.0 + m_rod * (0.5 * l - lc) ** 2 + m_end * (l - lc) ** 2 + cfg["hub_inertia"]
         return m, lc, i
 
-    m1, lc1, i1 = body(cfg["m1"], cfg["l1"], cfg["elbow_mass"])
-    m2, lc2, i2 = body(cfg["m2"], cfg["l2"], cfg["payload_mass"])
+    return body(cfg["m1"], cfg["l1"], cfg["elbow_mass"]), body(cfg["m2"], cfg["l2"], cfg["payload_mass"])
+
+
+def two_link_xml(cfg: dict) -> str:
+    """`thermovia arm`'s arm in MJCF: two bodies in the x–z plane, gravity along −z, each with the
+    mass, centre of mass and inertia `two_link_bodies` gives it, and a tip site."""
+    (m1, lc1, i1), (m2, lc2, i2) = two_link_bodies(cfg)
     return f"""<mujoco model="thermovia_arm2">
   <compiler angle="radian"/>
   <option gravity="0 0 {-cfg['gravity']}" integrator="implicitfast"/>
@@ -648,9 +657,7 @@ def two_link_run(cfg: dict, unzipdir, md, h: float, temps_c, holding_w) -> dict:
     d = mujoco.MjData(m)
     names = ("shoulder", "elbow")
     l1, l2, g0 = cfg["l1"], cfg["l2"], cfg["gravity"]
-    mA, lcA, _ = (cfg["m1"] + cfg["elbow_mass"], (cfg["m1"] * 0.5 * l1 + cfg["elbow_mass"] * l1) / (cfg["m1"] + cfg["elbow_mass"]), 0)
-    mB = cfg["m2"] + cfg["payload_mass"]
-    lcB = (cfg["m2"] * 0.5 * l2 + cfg["payload_mass"] * l2) / mB
+    (mA, lcA, _), (mB, lcB, _) = two_link_bodies(cfg)
 
     def gravity(q):
         c12 = math.cos(q[0] + q[1])
@@ -689,8 +696,7 @@ def two_link_run(cfg: dict, unzipdir, md, h: float, temps_c, holding_w) -> dict:
                 y = j.y
                 tm_ = cfg["kp"] * (qs[i] + gs[i] / y["effective_stiffness"] - y["motor_angle"]) + cfg["kd"] * (qsd[i] - y["motor_speed"]) + gs[i]
                 tau = j.step(t, h, float(d.qpos[i]), float(d.qvel[i]), tm_, holding_w[i])
-                m.dof_damping[i] = y["effective_damping"]
-                d.qfrc_applied[i] += tau + j.y["effective_damping"] * d.qvel[i]
+                j.apply(m, d, i, tau)
             # the compliant wall at x = wall_x pushes the tip back (never pulls)
             x = d.site_xpos[site][0]
             jp = np.zeros((3, m.nv))
@@ -908,10 +914,8 @@ def run_example(args) -> str:
     stability = check_step(m, unzipdir, md, args.step, settings)
     p = postures(m)
     task = TouchTask(p, args.heater_power, args.soft_c)
-    plan = Plan([], heater=task.heater)
-    plan.reference = task.reference
     renderer, why = (None, "frames not asked for (--no-frames)") if args.no_frames else make_renderer(m)
-    rec = run_cosim(m, unzipdir, md, plan, args.max_seconds, args.step, settings, record_every=20,
+    rec = run_cosim(m, unzipdir, md, task, args.max_seconds, args.step, settings, record_every=20,
                     frame_label=task.frame_label, renderer=renderer, stop_when=lambda t, j, d: task.done(t))
     if task.heated_at is None:
         raise CouplingError(f"the elbow did not reach {args.soft_c} °C within {args.max_seconds} s at {args.heater_power} W")
