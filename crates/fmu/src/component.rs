@@ -395,6 +395,9 @@ impl Component {
     }
 
     pub fn exit_initialization_mode(&mut self) -> Status {
+        if let Some(why) = self.s.model.params().conflict() {
+            return self.error(&format!("fmi2ExitInitializationMode: {why}"));
+        }
         self.transition(Phase::StepComplete, true, "exited initialization mode")
     }
 
@@ -756,7 +759,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 // ---- serialized FMU state: versioned, pointer-free, checked ----
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
-pub const STATE_FORMAT_VERSION: u32 = 4;
+pub const STATE_FORMAT_VERSION: u32 = 5;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;

@@ -15,7 +15,7 @@ use std::sync::Arc;
 use mechanics::{
     Coefficients, Contact, Coupling, Drive, EtdStep, FineCell, LinearStep, PropagatorTable, State, Tabulated,
 };
-pub use params::{Crystallisation, LinkDrive, MotorDrive, Params, ThermalDrive, Transmission};
+pub use params::{Crystallisation, LinkDrive, MotorDrive, Params, ThermalDrive, Transmission, ViscoelasticLaw};
 use thermal::{ThermalInputs, ThermalState};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -245,6 +245,14 @@ impl Model {
         m
     }
 
+    /// Fits the Prony law once per parameter set, when it is the law in use and not yet fitted
+    /// (parameters changed through [`Model::params_mut`] drop the fit).
+    fn fit_viscoelastic_law(&mut self) {
+        if self.params.viscoelastic_law == ViscoelasticLaw::Prony && self.params.prony.is_none() {
+            self.params.prony = Some(self.params.fit_prony_law());
+        }
+    }
+
     pub fn params(&self) -> &Params {
         &self.params
     }
@@ -260,6 +268,7 @@ impl Model {
         self.contact_etd.clear();
         self.inversion = thermal::InversionCache::default();
         self.torque_bounds = None;
+        self.params.prony = None;
         // anchored at the link angle less gravity_offset, which may change
         self.sine_anchor = mechanics::SineAnchor::NONE;
         &mut self.params
@@ -267,6 +276,7 @@ impl Model {
 
     /// Sets every state from the `initial_*` parameters (start of a run).
     pub fn initialize(&mut self) {
+        self.fit_viscoelastic_law();
         let p = &self.params;
         self.mechanics = if p.transmission == Transmission::Rigid {
             State::from([
@@ -294,6 +304,7 @@ impl Model {
         match self.coefficients {
             Some((t, c)) if t == pcl_temperature => c,
             _ => {
+                self.fit_viscoelastic_law();
                 let c = Coefficients::at(&self.params, pcl_temperature);
                 self.coefficients = Some((pcl_temperature, c));
                 c
@@ -641,6 +652,7 @@ impl Model {
         if h < MIN_RESOLVABLE_STEP {
             return Err(StepFailure::StepTooSmall { h });
         }
+        self.fit_viscoelastic_law();
         let substeps = if h <= self.params.max_internal_step {
             1
         } else {
@@ -871,13 +883,24 @@ impl Model {
         if self.params.transmission == Transmission::Compliant {
             let p = &self.params;
             let [k, c, km] = *self.torque_bounds.get_or_insert_with(|| {
-                let (e1, e2) = p.material_table.rows_kpa();
-                let max = |v: [f64; 4]| v.iter().fold(0.0_f64, |a, x| a.max(x.abs())) * 1e3;
+                let max = |v: [f64; 4]| v.iter().fold(0.0_f64, |a, x| a.max(x.abs()));
                 let kappa = p.modulus_to_torsion().abs();
-                let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
-                let km = p.maxwell_stiffness.abs();
-                let k = p.spring_torsional_stiffness().abs() + max(e1) * p.storage_modulus_scale.abs() * kappa + km;
-                [k, max(e2) * p.loss_modulus_scale.abs() * kappa / omega.abs(), km]
+                let springs = p.spring_torsional_stiffness().abs();
+                match p.viscoelastic_law {
+                    ViscoelasticLaw::Hysteretic => {
+                        let (e1, e2) = p.material_table.rows_kpa();
+                        let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
+                        let km = p.maxwell_stiffness.abs();
+                        let k = springs + max(e1) * 1e3 * p.storage_modulus_scale.abs() * kappa + km;
+                        [k, max(e2) * 1e3 * p.loss_modulus_scale.abs() * kappa / omega.abs(), km]
+                    }
+                    // the rows' coefficients bound the geometric (and linear) mix between them
+                    ViscoelasticLaw::Prony => {
+                        let rows = p.prony_law().rows;
+                        let km = max(rows.map(|r| r.e_branch)) * kappa;
+                        [springs + max(rows.map(|r| r.e_inf)) * kappa + km, max(rows.map(|r| r.viscosity)) * kappa, km]
+                    }
+                }
             });
             let x = &self.mechanics;
             let delta = (x[mechanics::MOTOR_ANGLE] - x[mechanics::LINK_ANGLE]).abs() + 0.5 * p.backlash_width.abs();

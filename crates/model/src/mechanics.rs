@@ -19,7 +19,7 @@
 use nalgebra::{SMatrix, SVector};
 
 use super::material::TABLE_TEMPERATURES_C;
-use super::params::{LinkDrive, MotorDrive, Params, Transmission};
+use super::params::{LinkDrive, MotorDrive, Params, Transmission, ViscoelasticLaw};
 
 pub const N_STATE: usize = 5;
 pub type State = SVector<f64, N_STATE>;
@@ -38,37 +38,57 @@ pub struct Coefficients {
     pub loss_modulus: f64,
     /// K_s r_s² + K'(T), N·m/rad.
     pub stiffness: f64,
-    /// C(T) = K''(T)/ω at the excitation frequency, N·m·s/rad.
+    /// C(T) = K''(T)/ω at the excitation frequency (hysteretic law), or the Prony law's dashpot ηκ,
+    /// N·m·s/rad.
     pub damping: f64,
+    /// K_M of the relaxing branch: the Maxwell effect's, or the Prony law's E_1(T)κ, N·m/rad. Its
+    /// relaxation time is [`Params::branch_relaxation_time`].
+    pub maxwell_stiffness: f64,
 }
 
 impl Coefficients {
     pub const ZERO: Coefficients =
-        Coefficients { storage_modulus: 0.0, loss_modulus: 0.0, stiffness: 0.0, damping: 0.0 };
+        Coefficients { storage_modulus: 0.0, loss_modulus: 0.0, stiffness: 0.0, damping: 0.0, maxwell_stiffness: 0.0 };
 
     pub fn at(p: &Params, pcl_temperature_k: f64) -> Self {
-        let (e1, e2) = p.material_table.moduli_pa(pcl_temperature_k - super::params::ZERO_CELSIUS);
-        let (e1, e2) = (e1 * p.storage_modulus_scale, e2 * p.loss_modulus_scale);
         let kappa = p.modulus_to_torsion();
         let omega = 2.0 * std::f64::consts::PI * p.excitation_frequency;
-        Coefficients {
-            storage_modulus: e1,
-            loss_modulus: e2,
-            stiffness: p.spring_torsional_stiffness() + e1 * kappa,
-            damping: e2 * kappa / omega,
+        let temperature_c = pcl_temperature_k - super::params::ZERO_CELSIUS;
+        match p.viscoelastic_law {
+            ViscoelasticLaw::Hysteretic => {
+                let (e1, e2) = p.material_table.moduli_pa(temperature_c);
+                let (e1, e2) = (e1 * p.storage_modulus_scale, e2 * p.loss_modulus_scale);
+                Coefficients {
+                    storage_modulus: e1,
+                    loss_modulus: e2,
+                    stiffness: p.spring_torsional_stiffness() + e1 * kappa,
+                    damping: e2 * kappa / omega,
+                    maxwell_stiffness: p.maxwell_stiffness,
+                }
+            }
+            ViscoelasticLaw::Prony => {
+                let law = p.prony_law();
+                let row = law.at(temperature_c);
+                let (e1, e2) = row.complex_modulus(law.relaxation_time, omega);
+                Coefficients {
+                    storage_modulus: e1,
+                    loss_modulus: e2,
+                    stiffness: p.spring_torsional_stiffness() + row.e_inf * kappa,
+                    damping: row.viscosity * kappa,
+                    maxwell_stiffness: row.e_branch * kappa,
+                }
+            }
         }
     }
 
     /// Re and Im/ω of the transmission's complex stiffness at the excitation frequency,
-    /// including the Maxwell branch: the K_eff and C_eff the paper estimates.
+    /// including the relaxing branch: the K_eff and C_eff the paper estimates.
     pub fn effective(&self, p: &Params) -> (f64, f64) {
         let w = 2.0 * std::f64::consts::PI * p.excitation_frequency;
-        let wl = w * p.maxwell_relaxation_time;
+        let lambda = p.branch_relaxation_time();
+        let wl = w * lambda;
         let d = 1.0 + wl * wl;
-        (
-            self.stiffness + p.maxwell_stiffness * wl * wl / d,
-            self.damping + p.maxwell_stiffness * p.maxwell_relaxation_time / d,
-        )
+        (self.stiffness + self.maxwell_stiffness * wl * wl / d, self.damping + self.maxwell_stiffness * lambda / d)
     }
 }
 
@@ -111,8 +131,8 @@ pub fn linear_system_with(
     coupling: Coupling,
 ) -> (SMatrix<f64, N_STATE, N_STATE>, SMatrix<f64, N_STATE, 2>) {
     let (k, d, km, lam) = match coupling {
-        Coupling::Engaged => (c.stiffness, c.damping, p.maxwell_stiffness, p.maxwell_relaxation_time),
-        Coupling::Free | Coupling::Clipped => (0.0, 0.0, 0.0, p.maxwell_relaxation_time),
+        Coupling::Engaged => (c.stiffness, c.damping, c.maxwell_stiffness, p.branch_relaxation_time()),
+        Coupling::Free | Coupling::Clipped => (0.0, 0.0, 0.0, p.branch_relaxation_time()),
     };
     let mut a = SMatrix::<f64, N_STATE, N_STATE>::zeros();
     let mut b = SMatrix::<f64, N_STATE, 2>::zeros();
@@ -128,7 +148,7 @@ pub fn linear_system_with(
                 b[(speed, 1)] = 1.0 / j;
             }
         }
-        a[(MAXWELL_DEFLECTION, MAXWELL_DEFLECTION)] = -1.0 / p.maxwell_relaxation_time;
+        a[(MAXWELL_DEFLECTION, MAXWELL_DEFLECTION)] = -1.0 / lam;
         return (a, b);
     }
     // τ_t = (k + km) θm + d ωm − (k + km) θl − d ωl − km q
@@ -264,7 +284,7 @@ pub fn canonical_step(h: f64) -> f64 {
 }
 
 const N_PROP: usize = N_STATE * N_AUG;
-const N_NODE: usize = N_PROP + 2;
+const N_NODE: usize = N_PROP + 3;
 
 /// [Φ | Γ] (5×7, row-major) of one step, followed by the transmission's stiffness and damping it
 /// was built for.
@@ -292,12 +312,18 @@ impl LinearStep {
         }
         v[N_PROP] = c.stiffness;
         v[N_PROP + 1] = c.damping;
+        v[N_PROP + 2] = c.maxwell_stiffness;
         LinearStep { v }
     }
 
     /// K_s r_s² + K'(T) and C(T) this step was built (or interpolated) for.
     pub fn coefficients(&self) -> Coefficients {
-        Coefficients { stiffness: self.v[N_PROP], damping: self.v[N_PROP + 1], ..Coefficients::ZERO }
+        Coefficients {
+            stiffness: self.v[N_PROP],
+            damping: self.v[N_PROP + 1],
+            maxwell_stiffness: self.v[N_PROP + 2],
+            ..Coefficients::ZERO
+        }
     }
 
     pub fn apply(&self, x: &State, u: &Drive) -> State {
@@ -349,9 +375,9 @@ const P1_LINK: usize = 53; // h φ1(Ah) b, link rows
 const F1: usize = 55; // h (φ1 − 3φ2 + 4φ3)(Ah) b
 const F2: usize = 60; // h (φ2 − 2φ3)(Ah) b
 const F3: usize = 65; // h (−φ2 + 4φ3)(Ah) b
-const COEFFS: usize = 70; // stiffness, damping
-const LENGTH: usize = 72; // h
-const N_ETD: usize = 73;
+const COEFFS: usize = 70; // stiffness, damping, Maxwell stiffness
+const LENGTH: usize = 73; // h
+const N_ETD: usize = 74;
 /// The state's link rows, in the order the link-row blocks hold them.
 const LINK_ROWS: [usize; 2] = [LINK_ANGLE, LINK_SPEED];
 
@@ -465,6 +491,7 @@ impl EtdStep {
         }
         v[COEFFS] = c.stiffness;
         v[COEFFS + 1] = c.damping;
+        v[COEFFS + 2] = c.maxwell_stiffness;
         v[LENGTH] = h;
         EtdStep { v }
     }
@@ -710,7 +737,12 @@ impl EtdStep {
 
     /// K_s r_s² + K'(T) and C(T) this step was built (or interpolated) for.
     pub fn coefficients(&self) -> Coefficients {
-        Coefficients { stiffness: self.v[COEFFS], damping: self.v[COEFFS + 1], ..Coefficients::ZERO }
+        Coefficients {
+            stiffness: self.v[COEFFS],
+            damping: self.v[COEFFS + 1],
+            maxwell_stiffness: self.v[COEFFS + 2],
+            ..Coefficients::ZERO
+        }
     }
 
     /// Row `i` of M x + G u for the 5-column block at `m` and the 2-column block at `g`.
@@ -801,13 +833,13 @@ pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State 
     let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
     let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
     let q = x[MAXWELL_DEFLECTION];
-    let tau = c.stiffness * delta + c.damping * rate + p.maxwell_stiffness * (delta - q);
+    let tau = c.stiffness * delta + c.damping * rate + c.maxwell_stiffness * (delta - q);
     let motor_accel = match p.motor_drive {
         MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
         MotorDrive::PrescribedAngle => 0.0,
     };
     let link_accel = p.per_link_inertia(tau + u[1] - p.link_damping * x[LINK_SPEED]);
-    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_accel, (delta - q) / p.maxwell_relaxation_time])
+    State::from([x[MOTOR_SPEED], motor_accel, x[LINK_SPEED], link_accel, (delta - q) / p.branch_relaxation_time()])
 }
 
 /// Exact linear steps of one length tabulated on a lattice of the PCL temperature
@@ -1071,7 +1103,12 @@ impl PropagatorTable<EtdStep> {
                 Some(lo + frac * (hi - lo))
             }
         };
-        Some(Coefficients { stiffness: value(COEFFS)?, damping: value(COEFFS + 1)?, ..Coefficients::ZERO })
+        Some(Coefficients {
+            stiffness: value(COEFFS)?,
+            damping: value(COEFFS + 1)?,
+            maxwell_stiffness: value(COEFFS + 2)?,
+            ..Coefficients::ZERO
+        })
     }
 }
 
@@ -1082,9 +1119,9 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
     let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
     let q = x[MAXWELL_DEFLECTION];
-    let lam = p.maxwell_relaxation_time;
+    let lam = p.branch_relaxation_time();
     if p.backlash_width <= 0.0 {
-        let tau = c.stiffness * delta + c.damping * rate + p.maxwell_stiffness * (delta - q);
+        let tau = c.stiffness * delta + c.damping * rate + c.maxwell_stiffness * (delta - q);
         return (tau, (delta - q) / lam);
     }
     let half = 0.5 * p.backlash_width;
@@ -1095,7 +1132,7 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     } else {
         return (0.0, -q / lam);
     };
-    let tau = c.stiffness * engaged + c.damping * rate + p.maxwell_stiffness * (engaged - q);
+    let tau = c.stiffness * engaged + c.damping * rate + c.maxwell_stiffness * (engaged - q);
     let tau = if engaged > 0.0 { tau.max(0.0) } else { tau.min(0.0) };
     (tau, (engaged - q) / lam)
 }
@@ -1149,7 +1186,7 @@ fn engaged_torque(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     let half = 0.5 * p.backlash_width;
     let engaged = if delta > half { delta - half } else { delta + half };
     let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
-    let tau = c.stiffness * engaged + c.damping * rate + p.maxwell_stiffness * (engaged - x[MAXWELL_DEFLECTION]);
+    let tau = c.stiffness * engaged + c.damping * rate + c.maxwell_stiffness * (engaged - x[MAXWELL_DEFLECTION]);
     (engaged, tau)
 }
 
@@ -1202,7 +1239,7 @@ pub fn may_leave(
             }
             let (_, t0) = engaged_torque(p, c, x0);
             let (_, t1) = engaged_torque(p, c, x1);
-            let km = p.maxwell_stiffness;
+            let km = c.maxwell_stiffness;
             let slope =
                 |x: &State, r: &State| (c.stiffness + km) * rate(x) + c.damping * accel(r) - km * r[MAXWELL_DEFLECTION];
             // inside: s·τ ≥ 0 engaged, s·τ < 0 clipped
@@ -1347,7 +1384,7 @@ pub fn derivative(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State {
             }
             MotorDrive::PrescribedAngle => 0.0,
         };
-        return State::from([v, accel, v, accel, -x[MAXWELL_DEFLECTION] / p.maxwell_relaxation_time]);
+        return State::from([v, accel, v, accel, -x[MAXWELL_DEFLECTION] / p.branch_relaxation_time()]);
     }
     let (tau, q_rate) = transmission(p, c, x);
     let motor_accel = match p.motor_drive {

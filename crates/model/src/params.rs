@@ -2,6 +2,7 @@
 //! variable table (`crate::variables`); this struct only holds the values.
 
 use super::material::MaterialTable;
+use super::prony::PronyLaw;
 
 /// How the motor side is driven.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -60,6 +61,17 @@ pub enum Crystallisation {
     Nakamura = 1,
 }
 
+/// The PCL's viscoelastic law (docs/physics.md §5c).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ViscoelasticLaw {
+    /// Kelvin–Voigt with the table's E′, E″ and C = K″/ω at `excitation_frequency` (the paper's
+    /// law: exact in steady harmonic motion at that frequency).
+    Hysteretic = 0,
+    /// A spring, a dashpot and one Maxwell branch per table row ([`PronyLaw`]): causal at every
+    /// frequency, for transients; no `excitation_frequency`.
+    Prony = 1,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Params {
     // mechanics
@@ -77,6 +89,10 @@ pub struct Params {
     /// Multiplies the table's E' and E'' (calibration: measured moduli per run).
     pub storage_modulus_scale: f64,
     pub loss_modulus_scale: f64,
+    pub viscoelastic_law: ViscoelasticLaw,
+    /// The Prony law fitted to the scaled table, kept so it is fitted once per parameter set
+    /// (`Model` fills it; `None` means fit when asked, see [`Params::prony_law`]).
+    pub prony: Option<PronyLaw>,
     // effects (all off by default)
     pub maxwell_stiffness: f64,
     pub maxwell_relaxation_time: f64,
@@ -153,6 +169,8 @@ impl Default for Params {
             excitation_frequency: 0.5,
             storage_modulus_scale: 1.0,
             loss_modulus_scale: 1.0,
+            viscoelastic_law: ViscoelasticLaw::Hysteretic,
+            prony: None,
             maxwell_stiffness: 0.0,
             maxwell_relaxation_time: 0.1,
             coulomb_friction: 0.0,
@@ -210,6 +228,38 @@ impl Params {
             LinkDrive::Integrated => torque / self.link_inertia,
             LinkDrive::Prescribed => 0.0,
         }
+    }
+
+    /// The Prony law of the scaled material table: the kept fit, or a new one.
+    pub fn prony_law(&self) -> PronyLaw {
+        self.prony.unwrap_or_else(|| self.fit_prony_law())
+    }
+
+    pub fn fit_prony_law(&self) -> PronyLaw {
+        let (e1, e2) = self.material_table.rows_kpa();
+        PronyLaw::fit(
+            e1.map(|e| e * 1e3 * self.storage_modulus_scale),
+            e2.map(|e| e * 1e3 * self.loss_modulus_scale),
+        )
+    }
+
+    /// λ of the transmission's relaxing branch: the Prony law's, or the Maxwell effect's.
+    pub fn branch_relaxation_time(&self) -> f64 {
+        match self.viscoelastic_law {
+            ViscoelasticLaw::Hysteretic => self.maxwell_relaxation_time,
+            ViscoelasticLaw::Prony => self.prony_law().relaxation_time,
+        }
+    }
+
+    /// Why these parameters cannot run together, if they cannot.
+    pub fn conflict(&self) -> Option<String> {
+        (self.viscoelastic_law == ViscoelasticLaw::Prony && self.maxwell_stiffness != 0.0).then(|| {
+            format!(
+                "viscoelastic_law = 1 (Prony) uses the transmission's relaxing branch for the PCL, so \
+                 maxwell_stiffness must be 0 (it is {})",
+                self.maxwell_stiffness
+            )
+        })
     }
 
     /// K_s r_s²: torsional stiffness of the spring bank, N·m/rad (Eq. 4).
