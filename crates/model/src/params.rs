@@ -237,10 +237,7 @@ impl Params {
 
     pub fn fit_prony_law(&self) -> PronyLaw {
         let (e1, e2) = self.material_table.rows_kpa();
-        PronyLaw::fit(
-            e1.map(|e| e * 1e3 * self.storage_modulus_scale),
-            e2.map(|e| e * 1e3 * self.loss_modulus_scale),
-        )
+        PronyLaw::fit(e1.map(|e| e * 1e3 * self.storage_modulus_scale), e2.map(|e| e * 1e3 * self.loss_modulus_scale))
     }
 
     /// λ of the transmission's relaxing branch: the Prony law's, or the Maxwell effect's.

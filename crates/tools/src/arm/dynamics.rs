@@ -28,6 +28,9 @@ pub struct ArmConfig {
     pub motor_inertia: f64,
     pub motor_damping: f64,
     pub excitation_frequency: f64,
+    /// The FMU's `viscoelastic_law`: 0 hysteretic (C = K''/ω at `excitation_frequency`), 1 Prony
+    /// (causal at every frequency; docs/physics.md §5c).
+    pub viscoelastic_law: u8,
     /// Joint PD on the motor angle: τ_m = kp (θm* − θm) + kd (θm*' − θm') + g_i(q*).
     pub kp: f64,
     pub kd: f64,
@@ -60,6 +63,7 @@ impl Default for ArmConfig {
             motor_inertia: 0.005,
             motor_damping: 0.01,
             excitation_frequency: 0.5,
+            viscoelastic_law: 0,
             kp: 150.0,
             kd: 1.5,
             wall_x: 0.36,
@@ -87,6 +91,9 @@ pub type M2 = [[f64; 2]; 2];
 impl ArmConfig {
     /// Refuses configurations that make no sense, saying why.
     pub fn validate(&self) -> Result<(), String> {
+        if self.viscoelastic_law > 1 {
+            return Err(format!("viscoelastic_law {}: 0 (hysteretic) or 1 (Prony)", self.viscoelastic_law));
+        }
         let positive = [
             ("l1 (link 1 length, m)", self.l1),
             ("l2 (link 2 length, m)", self.l2),

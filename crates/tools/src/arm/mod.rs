@@ -68,9 +68,21 @@ pub struct ArmReport {
     pub one_percent_check: Vec<StepError>,
     pub tasks: Vec<TaskMetrics>,
     pub switching: thermal::SwitchResult,
+    /// The task again, cold and hot, with the joints' Prony law (an impact with a causal damping
+    /// law against the hysteretic one at `excitation_frequency`).
+    pub prony: ImpactLaws,
     pub reference_steps: usize,
     /// Wall-clock time of the task co-simulations per simulated second → real-time factor.
     pub real_time_factor: f64,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ImpactLaws {
+    /// Stability limit of the coupling with the Prony law's K_eff, C_eff (cold, hot), s.
+    pub limit_cold_s: Option<f64>,
+    pub limit_hot_s: Option<f64>,
+    /// Cold and hot, as `ArmReport::tasks` (whose runs use the hysteretic law).
+    pub tasks: Vec<TaskMetrics>,
 }
 
 /// Runs the nonlinear co-simulation at `h` with the limit check off (only for the limit's own
@@ -176,6 +188,32 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
     }
     let real_time_factor = 2.0 * cfg.duration / wall_time;
 
+    // 2b. the same impact with the causal (Prony) law
+    let prony_cfg = ArmConfig { viscoelastic_law: 1, ..cfg.clone() };
+    let mut prony = ImpactLaws { limit_cold_s: None, limit_hot_s: None, tasks: Vec::new() };
+    let mut prony_traces = Vec::new();
+    for sc in [&cold, &hot] {
+        let props = sim::probe(&fmu, &prony_cfg, sc).map_err(ArmError::Simulation)?;
+        let lim = stability::limit(&prony_cfg, &props);
+        if sc.name == cold.name {
+            prony.limit_cold_s = lim;
+        } else {
+            prony.limit_hot_s = lim;
+        }
+        let lim = lim.unwrap_or(f64::INFINITY);
+        if args.step >= lim {
+            return Err(ArmError::Options(format!(
+                "--step {:.3} ms is at or above the coupling's stability limit with the Prony law, {:.3} ms ({} joints): use a smaller --step",
+                args.step * 1e3,
+                lim * 1e3,
+                sc.name
+            )));
+        }
+        let tr = sim::cosimulate(&fmu, &prony_cfg, sc, args.step, Some(lim), |_| {}).map_err(ArmError::Simulation)?;
+        prony.tasks.push(task_metrics(&prony_cfg, sc, props, &tr));
+        prony_traces.push(tr);
+    }
+
     // 3. accuracy against the monolithic reference
     stage(3, "accuracy vs monolithic");
     let ref_dt = 1e-4; // every step tried is a multiple of it
@@ -247,11 +285,12 @@ pub fn run(args: &ArmArgs, progress: &dyn crate::output::Progress) -> Result<(),
         one_percent_check,
         tasks,
         switching,
+        prony,
         reference_steps,
         real_time_factor,
     };
     crate::output::replace_folder(&args.out, |dir| {
-        report::write_report(dir, &cfg, &report, &traces, &refs).map_err(std::io::Error::other)
+        report::write_report(dir, &cfg, &report, &traces, &prony_traces, &refs).map_err(std::io::Error::other)
     })?;
     println!("{}", summary(&report));
     println!("report: {}", args.out.join("report.md").display());

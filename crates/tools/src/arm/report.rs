@@ -61,6 +61,7 @@ pub(super) fn write_report(
     cfg: &ArmConfig,
     r: &ArmReport,
     traces: &[Trace],
+    prony_traces: &[Trace],
     refs: &[Trace],
 ) -> Result<(), String> {
     let w = |name: &str, text: &str| std::fs::write(dir.join(name), text).map_err(|e| format!("{name}: {e}"));
@@ -216,6 +217,30 @@ pub(super) fn write_report(
         &[Series { name: "K_eff", points: col(3), color: BLUE_, markers: false }],
         false,
     )?;
+    // the impact under both damping laws: from 50 ms before the first contact to 0.5 s after it
+    let first = r.tasks.iter().chain(&r.prony.tasks).filter_map(|t| t.first_contact_s).fold(f64::INFINITY, f64::min);
+    if first.is_finite() {
+        let window = |tr: &Trace| -> Vec<(f64, f64)> {
+            tr.t.iter()
+                .zip(&tr.contact_force)
+                .filter(|(t, _)| **t >= first - 0.05 && **t <= first + 0.5)
+                .map(|(t, f)| (*t, *f))
+                .collect()
+        };
+        chart(
+            &dir.join("impact_damping_law.svg"),
+            "Wall force at the impact: hysteretic vs Prony damping",
+            "t (s)",
+            "force (N)",
+            &[
+                Series { name: "cold, hysteretic", points: window(&traces[0]), color: BLUE_, markers: false },
+                Series { name: "cold, Prony", points: window(&prony_traces[0]), color: PURPLE_, markers: false },
+                Series { name: "heated, hysteretic", points: window(&traces[1]), color: RED_, markers: false },
+                Series { name: "heated, Prony", points: window(&prony_traces[1]), color: ORANGE_, markers: false },
+            ],
+            false,
+        )?;
+    }
     w("report.md", &markdown(cfg, r))
 }
 
@@ -340,6 +365,7 @@ fn markdown(cfg: &ArmConfig, r: &ArmReport) -> String {
         format!("{:.2} / {:.2}", t.peak_motor_torque_nm[0], t.peak_motor_torque_nm[1])
     });
     m += "\nPlots: `tip_path.svg`, `tip_x.svg`, `contact_force.svg`, `joint_torques.svg`, `coupling_error.svg`.\n\n";
+    m += &impact_markdown(r);
     let sw = &r.switching;
     m += "## Switching the impedance\n\n";
     m += &format!(
@@ -361,13 +387,43 @@ fn markdown(cfg: &ArmConfig, r: &ArmReport) -> String {
         secs(sw.stiffen_90_s),
         sw.cooling_simulated_s
     );
-    m += "The model's melting is reversible at the same temperature; real PCL recrystallises only at 25–35 °C, so the device \
-          regains its stiffness later than this. Plots: `impedance_switch_temperature.svg`, `impedance_switch_stiffness.svg`.\n\n";
+    m += "The PCL melts on its melting curve but recrystallises by Nakamura's kinetics (`crystallisation` = 1, \
+          docs/physics.md §5a): the supercooled melt stays soft well below the 58 °C melting point, so the stiffness comes back \
+          only as it crystallises, around 40 °C. Plots: `impedance_switch_temperature.svg`, `impedance_switch_stiffness.svg`.\n\n";
     m += &format!(
         "## Speed\n\nTask runs (two FMU instances, {:.1} ms step, master in Rust): real-time factor {:.0}× (wall clock including \
          instantiation; `cargo bench --bench arm` measures the stepping loop).\n",
         r.step_s * 1e3,
         r.real_time_factor
+    );
+    m
+}
+
+/// The task's impact with the joints' two damping laws, side by side.
+fn impact_markdown(r: &ArmReport) -> String {
+    let mut m = String::from("## The impact with a causal damping law (Prony) against the hysteretic one\n\n");
+    m += "The same task with `viscoelastic_law` = 1: each PCL a spring, a dashpot and one Maxwell branch fitted to the \
+          table at 0.5 and 1 Hz (docs/physics.md §5c), instead of C = K''/ω at `excitation_frequency` = 0.5 Hz. An impact \
+          excites the joints far above 0.5 Hz, where the hysteretic law's damping has no meaning and the Prony law's \
+          dashpot and branch set it. K_eff and C_eff below are each law's at 0.5 Hz.\n\n";
+    m += "| | cold, hysteretic | cold, Prony | heated, hysteretic | heated, Prony |\n|---|---|---|---|---|\n";
+    let runs = [&r.tasks[0], &r.prony.tasks[0], &r.tasks[1], &r.prony.tasks[1]];
+    let row = |name: &str, f: &dyn Fn(&TaskMetrics) -> String| {
+        format!("| {name} | {} |\n", runs.iter().map(|t| f(t)).collect::<Vec<_>>().join(" | "))
+    };
+    m += &row("K_eff / C_eff at 0.5 Hz", &|t| format!("{:.2} / {:.2}", t.joints[0].stiffness, t.joints[0].damping));
+    m += &row("impact force, first 50 ms of contact (N)", &|t| format!("{:.2}", t.impact_force_n));
+    m += &row("peak wall force (N)", &|t| format!("{:.2}", t.peak_contact_force_n));
+    m += &row("rebounds", &|t| t.rebounds.to_string());
+    m += &row("settling after contact", &|t| secs(t.settling_time_s));
+    m += &row("final wall force (N)", &|t| format!("{:.2}", t.final_contact_force_n));
+    m += &row("peak transmitted torque shoulder / elbow (N·m)", &|t| {
+        format!("{:.2} / {:.2}", t.peak_transmitted_torque_nm[0], t.peak_transmitted_torque_nm[1])
+    });
+    m += &format!(
+        "\nStability limit of the coupling with the Prony law: {} cold, {} hot. Plot: `impact_damping_law.svg`.\n\n",
+        ms(r.prony.limit_cold_s),
+        ms(r.prony.limit_hot_s)
     );
     m
 }

@@ -43,6 +43,7 @@ pub fn joint_parameters(cfg: &ArmConfig, i: usize, temp_c: f64, initial: Option<
         ("motor_inertia", cfg.motor_inertia),
         ("motor_damping", cfg.motor_damping),
         ("excitation_frequency", cfg.excitation_frequency),
+        ("viscoelastic_law", cfg.viscoelastic_law as f64),
         ("initial_pcl_temperature", t),
         ("initial_housing_temperature", t),
     ];
