@@ -1,16 +1,16 @@
-//! Can a causal, passive viscoelastic law reproduce the material table's moduli at 0.5 and 1 Hz?
-//! (issue 20, item 3; docs/physics.md §5c)
+//! The PCL's causal viscoelastic law (issue 20, item 3; docs/physics.md §5c).
 //!
 //! A generalised Maxwell (Prony) solid has the complex modulus
 //!
-//!   E*(ω) = E_∞ + Σ_k E_k iωλ_k / (1 + iωλ_k),   E_∞, E_k ≥ 0 (passive: it never gives energy back)
+//!   E*(ω) = E_∞ + iωη + Σ_k E_k iωλ_k / (1 + iωλ_k),   E_∞, η, E_k ≥ 0 (passive: it never gives energy back)
 //!
 //! Every branch's storage modulus E_k (ωλ)²/(1 + (ωλ)²) rises with ω, and a branch's loss falls with
 //! ω only where ωλ > 1/√2, where its storage is at least half its loss. The hysteretic law of the
 //! material table has E′ and E″ independent of frequency, with E″ up to 3× E′ (50 °C); no
-//! non-negative Prony series matches that at two frequencies an octave apart. This module fits the
-//! best one (non-negative least squares over a log grid of relaxation times, on the relative errors
-//! at the given frequencies) so that the shortfall is measured, not argued.
+//! non-negative Prony series matches that at two frequencies an octave apart. [`fit`] finds the
+//! best one over a log grid of relaxation times (non-negative least squares on the relative errors)
+//! so that the shortfall is measured, not argued; [`PronyLaw`] is the law the FMU runs with
+//! `viscoelastic_law` = 1: a spring, a dashpot and one branch per table row, as good as that optimum.
 
 use nalgebra::{DMatrix, DVector};
 
