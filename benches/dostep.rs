@@ -36,6 +36,8 @@ const BACKLASH: (&str, f64) = ("backlash_width", 0.01);
 /// The crystallinity on the melting curve both ways (the model before issue 20), for the cost of
 /// the kinetics in the same run.
 const EQUILIBRIUM: (&str, f64) = ("crystallisation", 0.0);
+/// The causal viscoelastic law (docs/physics.md §5c): its branch rides in the same exact step.
+const PRONY: (&str, f64) = ("viscoelastic_law", 1.0);
 
 const REGIMES: &[Regime] = &[
     Regime {
@@ -105,6 +107,22 @@ const REGIMES: &[Regime] = &[
         heater_w: 0.0,
         time_grid: false,
         params: &[BACKLASH],
+    },
+    Regime {
+        label: "heating at 8 W, Prony law",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 8.0,
+        time_grid: false,
+        params: &[PRONY],
+    },
+    Regime {
+        label: "all three while heating, Prony law",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 8.0,
+        time_grid: true,
+        params: &[GRAVITY, FRICTION, BACKLASH, PRONY],
     },
     Regime {
         label: "all three while heating",

@@ -293,10 +293,11 @@ fn solve_small(m: &mut [[f64; 4]; 3], n: usize) -> Option<[f64; 3]> {
         if m[k][k].abs() < 1e-300 {
             return None;
         }
-        for i in k + 1..n {
-            let f = m[i][k] / m[k][k];
-            for j in k..=n {
-                m[i][j] -= f * m[k][j];
+        let pivot = m[k];
+        for row in m.iter_mut().take(n).skip(k + 1) {
+            let f = row[k] / pivot[k];
+            for (a, b) in row[k..=n].iter_mut().zip(&pivot[k..=n]) {
+                *a -= f * b;
             }
         }
     }
