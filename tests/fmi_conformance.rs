@@ -524,3 +524,32 @@ fn fmu_state_holds_the_crystallinity_of_a_supercooled_melt() {
     assert_eq!(b.get("pcl_crystallinity").unwrap(), x);
     assert_eq!(cool(&mut b, 6000), continued, "serialized into a fresh instance");
 }
+
+/// The Prony law's relaxing branch is the transmission's Maxwell branch: setting a Maxwell
+/// stiffness beside it is refused at the write, with the reason, and sets nothing (so every
+/// accepted set of parameters initialises). A Prony run's state restores bit-identically.
+#[test]
+fn a_maxwell_branch_beside_the_prony_law_is_refused_and_a_prony_state_restores() {
+    let f = common::fmu();
+    let mut i = f.instantiate(None).unwrap();
+    let e = i.initialize(0.0, None, &[("viscoelastic_law", 1.0), ("maxwell_stiffness", 2.0)]).unwrap_err().to_string();
+    assert!(e.contains("maxwell_stiffness must be 0"), "{e}");
+
+    let mut i = f.instantiate(None).unwrap();
+    i.initialize(0.0, None, &[("viscoelastic_law", 1.0)]).unwrap();
+    i.set("motor_torque", 0.5).unwrap();
+    i.set("heater_power", 10.0).unwrap();
+    let mut run = |i: &mut Instance| -> Vec<f64> {
+        (0..2000)
+            .map(|_| {
+                i.step(1e-3).unwrap();
+                i.get("transmitted_torque").unwrap()
+            })
+            .collect()
+    };
+    run(&mut i);
+    let saved = i.save_state().unwrap();
+    let continued = run(&mut i);
+    i.restore_state(&saved).unwrap();
+    assert_eq!(run(&mut i), continued, "GetFMUstate/SetFMUstate");
+}

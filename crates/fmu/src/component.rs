@@ -486,9 +486,31 @@ impl Component {
             _ => true,
         };
         if writable && v.check_range(x).is_ok() {
+            if v.causality == Causality::Parameter {
+                if let Some(why) = self.parameter_conflict(v, x) {
+                    return Err(self.error(&format!("{function}: {why}; nothing was set")));
+                }
+            }
             return Ok(());
         }
         Err(self.refused_write(function, v, x))
+    }
+
+    /// Why writing `x` to parameter `v` would leave parameters that cannot run together
+    /// ([`thermovia_model::Params::conflict`]), refused at the write so that every accepted set of
+    /// parameters initialises.
+    #[cold]
+    fn parameter_conflict(&self, v: &Variable, x: f64) -> Option<String> {
+        use thermovia_model::ViscoelasticLaw;
+        let p = self.s.model.params();
+        match v.name {
+            "maxwell_stiffness" => thermovia_model::Params { maxwell_stiffness: x, ..p.clone() }.conflict(),
+            "viscoelastic_law" => {
+                let law = if x == 0.0 { ViscoelasticLaw::Hysteretic } else { ViscoelasticLaw::Prony };
+                thermovia_model::Params { viscoelastic_law: law, ..p.clone() }.conflict()
+            }
+            _ => None,
+        }
     }
 
     #[cold]
