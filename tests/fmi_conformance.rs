@@ -539,7 +539,7 @@ fn a_maxwell_branch_beside_the_prony_law_is_refused_and_a_prony_state_restores()
     i.initialize(0.0, None, &[("viscoelastic_law", 1.0)]).unwrap();
     i.set("motor_torque", 0.5).unwrap();
     i.set("heater_power", 10.0).unwrap();
-    let mut run = |i: &mut Instance| -> Vec<f64> {
+    let run = |i: &mut Instance| -> Vec<f64> {
         (0..2000)
             .map(|_| {
                 i.step(1e-3).unwrap();
