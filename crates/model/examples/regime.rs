@@ -1,5 +1,5 @@
 //! The dostep bench's regimes on the model alone (no FMU), for callgrind and quick timing:
-//!   cargo run --release -p thermovia-model --example regime -- [steps] [all|heating|cooling] [runs]
+//!   cargo run --release -p thermovia-model --example regime -- [steps] [all|heating|cooling][-prony] [runs]
 //! Prints the median and the fastest ns per step over `runs` runs from a fresh model, the k-th
 //! with a torque amplitude of 2 + 0.01·k N·m.
 use thermovia_model::{Model, Params};
@@ -14,7 +14,10 @@ fn run(which: &str, steps: usize, amplitude: f64) -> (f64, f64) {
         initial_pcl_temperature: 273.15 + start_c,
         ..Params::default()
     };
-    if which == "all" {
+    if which.ends_with("-prony") {
+        p.viscoelastic_law = thermovia_model::ViscoelasticLaw::Prony;
+    }
+    if which.starts_with("all") {
         p.gravity_link_mass = 0.91;
         p.coulomb_friction = 0.05;
         p.backlash_width = 0.01;
