@@ -395,9 +395,6 @@ impl Component {
     }
 
     pub fn exit_initialization_mode(&mut self) -> Status {
-        if let Some(why) = self.s.model.params().conflict() {
-            return self.error(&format!("fmi2ExitInitializationMode: {why}"));
-        }
         self.transition(Phase::StepComplete, true, "exited initialization mode")
     }
 
@@ -498,19 +495,17 @@ impl Component {
 
     /// Why writing `x` to parameter `v` would leave parameters that cannot run together
     /// ([`thermovia_model::Params::conflict`]), refused at the write so that every accepted set of
-    /// parameters initialises.
+    /// parameters initialises. The write is tried through the variable's own setter on a copy of
+    /// the model's parameters, so no parameter's meaning is repeated here.
     #[cold]
     fn parameter_conflict(&self, v: &Variable, x: f64) -> Option<String> {
-        use thermovia_model::ViscoelasticLaw;
-        let p = self.s.model.params();
-        match v.name {
-            "maxwell_stiffness" => thermovia_model::Params { maxwell_stiffness: x, ..p.clone() }.conflict(),
-            "viscoelastic_law" => {
-                let law = if x == 0.0 { ViscoelasticLaw::Hysteretic } else { ViscoelasticLaw::Prony };
-                thermovia_model::Params { viscoelastic_law: law, ..p.clone() }.conflict()
-            }
-            _ => None,
+        let mut m = thermovia_model::Model::with_params_only(self.s.model.params().clone());
+        match v.access {
+            Access::Real { set: Some(set), .. } => set(&mut m, x),
+            Access::Integer { set: Some(set), .. } => set(&mut m, x as i32),
+            _ => return None,
         }
+        m.params().conflict()
     }
 
     #[cold]
@@ -727,6 +722,9 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
         return Err(format!("terminated in phase {:?} without reaching a stop time", s.phase));
     }
     let m = &s.model;
+    if let Some(why) = m.params().conflict() {
+        return Err(why);
+    }
     for (i, x) in m.mechanics.iter().enumerate() {
         finite(*x, &format!("mechanical state {i}"))?;
     }

@@ -222,7 +222,15 @@ impl Default for Model {
 
 impl Model {
     pub fn new(params: Params) -> Self {
-        let mut m = Model {
+        let mut m = Model::with_params_only(params);
+        m.initialize();
+        m
+    }
+
+    /// A model holding `params`, its states not yet set from them ([`Model::initialize`] does
+    /// that): for trying parameter writes through the variable table's setters.
+    pub fn with_params_only(params: Params) -> Self {
+        Model {
             thermal: ThermalState::initial(&params),
             params,
             inputs: Inputs::default(),
@@ -240,9 +248,7 @@ impl Model {
             contact_etd: Vec::new(),
             inversion: thermal::InversionCache::default(),
             torque_bounds: None,
-        };
-        m.initialize();
-        m
+        }
     }
 
     /// Fits the Prony law once per parameter set, when it is the law in use and not yet fitted
