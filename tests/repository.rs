@@ -109,3 +109,34 @@ fn the_tools_reach_the_model_only_through_the_c_api() {
     let deps = dependencies("thermovia-importer");
     assert!(!deps.iter().any(|d| d == "thermovia-fmu" || d == "thermovia-model"), "{deps:?}");
 }
+
+/// A submission is refused whole past 256 MiB of diffs: one profiler dump committed by mistake
+/// (perf.data, callgrind.out.*) sinks a session's work. Whatever a script can make again stays out;
+/// the largest file kept is the EMPS validation log (1.4 MiB).
+#[test]
+fn no_tracked_file_is_large_or_a_profile_dump() {
+    const LIMIT_BYTES: u64 = 2 << 20;
+    let out = std::process::Command::new("git")
+        .args(["ls-files", "-z"])
+        .current_dir(ROOT)
+        .output()
+        .expect("git runs (CI works in a clone)");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let names: Vec<String> =
+        out.stdout.split(|b| *b == 0).filter(|n| !n.is_empty()).map(|n| String::from_utf8_lossy(n).into()).collect();
+    assert!(names.len() > 50, "git ls-files listed only {} files: is this the repository?", names.len());
+    let mut bad = Vec::new();
+    for name in &names {
+        let base = name.rsplit('/').next().unwrap_or(name);
+        let dump = ["perf.data", "callgrind.out.", "cachegrind.out.", "massif.out.", "vgcore."]
+            .iter()
+            .any(|p| base.starts_with(p))
+            || base.ends_with(".profraw");
+        // a file staged for removal is listed but absent: nothing to weigh
+        let size = std::fs::metadata(Path::new(ROOT).join(name)).map(|m| m.len()).unwrap_or(0);
+        if dump || size > LIMIT_BYTES {
+            bad.push(format!("{name}: {size} bytes{}", if dump { ", a profiler's output" } else { "" }));
+        }
+    }
+    assert!(bad.is_empty(), "tracked files that do not belong in the repository:\n{}", bad.join("\n"));
+}
