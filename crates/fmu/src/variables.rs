@@ -359,7 +359,7 @@ pub static VARIABLES: &[Variable] = &[
     real_param!(223, stribeck_friction, Fixed, "N.m", 0.0, 1e4, "Static friction above Coulomb, fading with speed", "EFFECT: off"),
     real_param!(224, stribeck_velocity, Fixed, "rad/s", 1e-6, 1e4, "Speed scale of the Stribeck excess", "EST: 0.05 rad/s"),
     real_param!(225, friction_smoothing_velocity, Fixed, "rad/s", 1e-9, 1e3, "tanh smoothing of sign(θl') in the friction law", "NUMERICS: 1e-3 rad/s"),
-    real_param!(226, backlash_width, Fixed, "rad", 0.0, 10.0, "Total play of the transmission; dead zone ±width/2 that never pulls (effect backlash)", "EFFECT: off"),
+    real_param!(226, backlash_width, Fixed, "rad", 0.0, 10.0, "Total play of the transmission; dead zone ±width/2 that never pulls, centred on the unloaded element's rest (r q with a relaxing branch, else 0) (effect backlash)", "EFFECT: off"),
     real_param!(227, gravity_link_mass, Fixed, "kg", 0.0, 1e4, "Mass on a link in a vertical plane (effect gravity)", "EFFECT: off (the device carries 0.91 kg, PAPER)"),
     real_param!(228, gravity_com_distance, Fixed, "m", 0.0, 100.0, "Distance of that mass's centre from the axis", "PAPER: link length 140 mm"),
     real_param!(229, gravity_offset, Fixed, "rad", -100.0, 100.0, "Link angle of the hanging rest position", "EFFECT: 0"),

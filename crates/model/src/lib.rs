@@ -438,7 +438,7 @@ impl Model {
     /// integrates through it.
     fn advance_contact_linear(&mut self, t: f64, key: f64, hs: f64, u: &Drive) -> bool {
         let x = self.mechanics;
-        let (mode, c) = if mechanics::in_play(&self.params, &x) {
+        let (mode, c) = if self.in_fixed_play() {
             (Contact::Free, Coefficients::ZERO)
         } else {
             self.prepare_linear_step(t, key);
@@ -457,8 +457,12 @@ impl Model {
         };
         y[mechanics::MOTOR_ANGLE] += offset;
         let p = &self.params;
+        if mode == Contact::Free && p.has_relaxing_branch() {
+            y[mechanics::MAXWELL_DEFLECTION] =
+                mechanics::recover_unloaded(p, &c, x[mechanics::MAXWELL_DEFLECTION], key);
+        }
         let same = match mode {
-            Contact::Free => mechanics::in_play(p, &y),
+            Contact::Free => mechanics::in_play(p, &c, &y),
             _ => mechanics::contact(p, &c, &y) == mode,
         };
         if !same {
@@ -481,10 +485,15 @@ impl Model {
         true
     }
 
+    /// Inside a play that no relaxing branch moves: free, with no moduli needed to say so.
+    fn in_fixed_play(&self) -> bool {
+        !self.params.has_relaxing_branch() && mechanics::in_play(&self.params, &Coefficients::ZERO, &self.mechanics)
+    }
+
     /// The backlash's contact state at the start of a sub-step and the moduli it was classified
     /// with (the exponential Runge–Kutta coefficients' at `t`; none needed inside the play).
     fn contact_at_start(&mut self, t: f64, key: f64) -> (Contact, Coefficients) {
-        if mechanics::in_play(&self.params, &self.mechanics) {
+        if self.in_fixed_play() {
             return (Contact::Free, Coefficients::ZERO);
         }
         // A step that starts at level 0 (most do) interpolates the level's whole table anyway:
@@ -566,7 +575,11 @@ impl Model {
                     let p = &self.params;
                     match mode {
                         Contact::Free => {
-                            if !mechanics::in_play(p, &x_new)
+                            if p.has_relaxing_branch() {
+                                x_new[mechanics::MAXWELL_DEFLECTION] =
+                                    mechanics::recover_unloaded(p, &c, x[mechanics::MAXWELL_DEFLECTION], len);
+                            }
+                            if !mechanics::in_play(p, &c, &x_new)
                                 || mechanics::may_leave(p, &c, mode, (&x, &x), (&x_new, &x_new), len)
                             {
                                 return None;

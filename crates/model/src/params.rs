@@ -248,6 +248,12 @@ impl Params {
         }
     }
 
+    /// Whether the transmission has a relaxing branch (the Maxwell effect, or the Prony law's):
+    /// with backlash its deflection moves the play ([`crate::mechanics::play_centre`]).
+    pub fn has_relaxing_branch(&self) -> bool {
+        self.maxwell_stiffness != 0.0 || self.viscoelastic_law == ViscoelasticLaw::Prony
+    }
+
     /// Why these parameters cannot run together, if they cannot.
     pub fn conflict(&self) -> Option<String> {
         (self.viscoelastic_law == ViscoelasticLaw::Prony && self.maxwell_stiffness != 0.0).then(|| {
