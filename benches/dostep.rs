@@ -9,7 +9,8 @@
 //!
 //! Environment (for callgrind or a quick look): DOSTEP_STEPS (steps per run, default 200 000),
 //! DOSTEP_RUNS (runs per regime, default 3), DOSTEP_REGIME (only regimes whose label contains it),
-//! DOSTEP_NO_FMPY (skip fmpy).
+//! DOSTEP_NO_FMPY (skip fmpy), DOSTEP_FMU (another .fmu than target/fmu/ThermoVIA.fmu: an earlier
+//! commit's build, for a before/after measured in one session).
 
 use std::hint::black_box;
 use std::process::Command;
@@ -109,6 +110,14 @@ const REGIMES: &[Regime] = &[
         params: &[BACKLASH],
     },
     Regime {
+        label: "backlash 0.01 rad, Prony law",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 0.0,
+        time_grid: false,
+        params: &[BACKLASH, PRONY],
+    },
+    Regime {
         label: "heating at 8 W, Prony law",
         start_c: 22.0,
         ambient_c: 22.0,
@@ -195,8 +204,12 @@ fn matvec(steps: usize) -> f64 {
 }
 
 fn main() {
-    let fmu =
-        Fmu::open(thermovia_tools::default_fmu_path()).expect("build the FMU first: cargo run --release -p fmu-build");
+    // DOSTEP_FMU: another build (an earlier commit's) for a before/after in one session
+    let path =
+        std::env::var_os("DOSTEP_FMU").map(std::path::PathBuf::from).unwrap_or_else(thermovia_tools::default_fmu_path);
+    let fmu = Fmu::open(&path)
+        .unwrap_or_else(|e| panic!("{}: {e} (build the FMU first: cargo run --release -p fmu-build)", path.display()));
+    println!("{}", path.display());
     let steps = env_usize("DOSTEP_STEPS", 200_000);
     let runs = env_usize("DOSTEP_RUNS", 3);
     let only = std::env::var("DOSTEP_REGIME").unwrap_or_default();
