@@ -191,9 +191,10 @@ impl PronyLaw {
         // a grid of 24 per decade over 1e-4…1e4 s, then golden-section search between the best
         // point's neighbours
         let grid: Vec<f64> = (0..=192).map(|i| -4.0 + i as f64 / 24.0).collect();
-        let best = (0..grid.len())
-            .min_by(|&a, &b| cost(10f64.powf(grid[a])).total_cmp(&cost(10f64.powf(grid[b]))))
-            .expect("non-empty grid");
+        // each point's cost once (a comparator would evaluate both sides at every comparison);
+        // the first of equal minima, as `min_by` gives
+        let costs: Vec<f64> = grid.iter().map(|&x| cost(10f64.powf(x))).collect();
+        let best = (1..grid.len()).fold(0, |b, i| if costs[i].total_cmp(&costs[b]).is_lt() { i } else { b });
         let (mut lo, mut hi) = (grid[best.saturating_sub(1)], grid[(best + 1).min(grid.len() - 1)]);
         let g = 0.5 * (5f64.sqrt() - 1.0);
         for _ in 0..60 {
@@ -205,7 +206,7 @@ impl PronyLaw {
             }
         }
         let lambda = 10f64.powf(0.5 * (lo + hi));
-        let lambda = if cost(lambda) <= cost(10f64.powf(grid[best])) { lambda } else { 10f64.powf(grid[best]) };
+        let lambda = if cost(lambda) <= costs[best] { lambda } else { 10f64.powf(grid[best]) };
         PronyLaw { relaxation_time: lambda, rows: std::array::from_fn(|i| fit_row(storage[i], loss[i], lambda).0) }
     }
 
