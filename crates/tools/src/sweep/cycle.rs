@@ -84,16 +84,21 @@ pub fn cycle_study(
     let every = ((record_every / h).round() as usize).max(1);
     let (mut x_last, mut peak_rate) = (inst.get("pcl_crystallinity")?, 0.0);
     let (mut peak_after_off, mut low_since_cooling) = (f64::NEG_INFINITY, f64::INFINITY);
+    // resolved once: one fmi2GetReal per step, not a lookup by name per value
+    let read = ["pcl_temperature", "effective_stiffness", "pcl_crystallinity", "housing_temperature"]
+        .map(|name| inst.handle(name).map(|v| v.value_reference));
+    let read = read.into_iter().collect::<Result<Vec<u32>, _>>()?;
+    let mut values = [0.0; 4];
     for k in 0..=n {
         let t = k as f64 * h;
-        let pcl = inst.get("pcl_temperature")? - ZERO_CELSIUS;
-        let k_eff = inst.get("effective_stiffness")?;
-        let x = inst.get("pcl_crystallinity")?;
+        inst.get_reals(&read, &mut values)?;
+        let [pcl_k, k_eff, x, housing_k] = values;
+        let pcl = pcl_k - ZERO_CELSIUS;
         r.min_k_eff = r.min_k_eff.min(k_eff);
         if k % every == 0 {
             trace.time_s.push(t);
             trace.pcl_c.push(pcl);
-            trace.housing_c.push(inst.get("housing_temperature")? - ZERO_CELSIUS);
+            trace.housing_c.push(housing_k - ZERO_CELSIUS);
             trace.k_eff.push(k_eff);
             trace.crystallinity.push(x);
         }
