@@ -220,6 +220,35 @@ impl Default for Model {
     }
 }
 
+/// Which momentum balance gives the transmission's mean torque over a step
+/// ([`Model::step_mean_torque`]), and so what it needs from the step's start
+/// ([`Model::step_start_torque`]).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum MeanTorqueBasis {
+    /// A torque-driven motor: its own balance (nothing from the start).
+    Motor,
+    /// A prescribed motor on a rigid transmission: no transmission torque to report.
+    Nothing,
+    /// A prescribed motor and an integrated link: the link's balance, with its nonlinear law's
+    /// torque (friction, gravity) at both ends when it has one.
+    Link { nonlinear: bool },
+    /// Both sides prescribed: the mean of the transmission's torques at both ends.
+    Ends,
+}
+
+impl MeanTorqueBasis {
+    fn of(p: &Params) -> Self {
+        match (p.motor_drive, p.transmission, p.link_drive) {
+            (MotorDrive::Torque, _, _) => MeanTorqueBasis::Motor,
+            (MotorDrive::PrescribedAngle, Transmission::Rigid, _) => MeanTorqueBasis::Nothing,
+            (MotorDrive::PrescribedAngle, Transmission::Compliant, LinkDrive::Prescribed) => MeanTorqueBasis::Ends,
+            (MotorDrive::PrescribedAngle, Transmission::Compliant, LinkDrive::Integrated) => {
+                MeanTorqueBasis::Link { nonlinear: !p.link_torque_is_linear() }
+            }
+        }
+    }
+}
+
 impl Model {
     pub fn new(params: Params) -> Self {
         let mut m = Model::with_params_only(params);
@@ -765,17 +794,11 @@ impl Model {
     /// balance is exact: both sides prescribed, the transmission's torque; a prescribed motor and a
     /// link under a nonlinear law, that law's torque on the link (friction, gravity: cheap, no moduli).
     fn step_start_torque(&mut self) -> f64 {
-        let p = &self.params;
-        if p.motor_drive != MotorDrive::PrescribedAngle || p.transmission != Transmission::Compliant {
-            return 0.0;
+        match MeanTorqueBasis::of(&self.params) {
+            MeanTorqueBasis::Ends => self.transmitted_torque(),
+            MeanTorqueBasis::Link { nonlinear: true } => self.link_law_torque(),
+            _ => 0.0,
         }
-        if p.link_drive == LinkDrive::Prescribed {
-            return self.transmitted_torque();
-        }
-        if p.link_torque_is_linear() {
-            return 0.0;
-        }
-        self.link_law_torque()
     }
 
     /// Friction and gravity on the link, the nonlinear part of its law.
@@ -794,27 +817,24 @@ impl Model {
     /// mean of the transmission's torques at both ends: exact for springs and Kelvin–Voigt PCL at a
     /// steady temperature, whose torque is then linear over the step.
     fn step_mean_torque(&mut self, h: f64, motor_start: [f64; 2], link_start: [f64; 2], start: f64) -> f64 {
-        let both_prescribed = self.params.motor_drive == MotorDrive::PrescribedAngle
-            && self.params.transmission == Transmission::Compliant
-            && self.params.link_drive == LinkDrive::Prescribed;
-        if both_prescribed {
-            return 0.5 * (start + self.transmitted_torque());
-        }
         let p = &self.params;
         let x = &self.mechanics;
-        if p.motor_drive == MotorDrive::Torque {
-            return self.inputs.motor_torque
-                - p.motor_damping * (x[mechanics::MOTOR_ANGLE] - motor_start[0]) / h
-                - p.motor_inertia * (x[mechanics::MOTOR_SPEED] - motor_start[1]) / h;
+        match MeanTorqueBasis::of(p) {
+            MeanTorqueBasis::Ends => 0.5 * (start + self.transmitted_torque()),
+            MeanTorqueBasis::Motor => {
+                self.inputs.motor_torque
+                    - p.motor_damping * (x[mechanics::MOTOR_ANGLE] - motor_start[0]) / h
+                    - p.motor_inertia * (x[mechanics::MOTOR_SPEED] - motor_start[1]) / h
+            }
+            MeanTorqueBasis::Nothing => 0.0,
+            MeanTorqueBasis::Link { nonlinear } => {
+                let nonlinear = if nonlinear { 0.5 * (start + self.link_law_torque()) } else { 0.0 };
+                p.link_inertia * (x[mechanics::LINK_SPEED] - link_start[1]) / h
+                    + p.link_damping * (x[mechanics::LINK_ANGLE] - link_start[0]) / h
+                    - self.inputs.load_torque
+                    - nonlinear
+            }
         }
-        if p.transmission == Transmission::Rigid {
-            return 0.0;
-        }
-        let nonlinear = if p.link_torque_is_linear() { 0.0 } else { 0.5 * (start + self.link_law_torque()) };
-        p.link_inertia * (x[mechanics::LINK_SPEED] - link_start[1]) / h
-            + p.link_damping * (x[mechanics::LINK_ANGLE] - link_start[0]) / h
-            - self.inputs.load_torque
-            - nonlinear
     }
 
     /// Every number of the model's state as one flat vector, what an FMU state saves: the mechanical
