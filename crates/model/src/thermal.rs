@@ -59,7 +59,12 @@ pub fn melt_fraction(p: &Params, t: f64) -> f64 {
 
 /// Equilibrium PCL enthalpy relative to 0 °C (the heating branch, T_f = T), J.
 pub fn pcl_enthalpy(p: &Params, t: f64) -> f64 {
-    pcl_sensible_enthalpy(p, t) + p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, t)
+    pcl_sensible_enthalpy(p, t) + melt_latent_heat(p, t)
+}
+
+/// Latent heat held by the molten part of a PCL at structural temperature T_f, m L χ(T_f), J.
+pub fn melt_latent_heat(p: &Params, structural: f64) -> f64 {
+    p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, structural)
 }
 
 /// Sensible part h_s of the PCL enthalpy relative to 0 °C (no latent heat), J.
@@ -99,7 +104,7 @@ pub fn pcl_temperature_from_enthalpy(p: &Params, enthalpy: f64, guess: f64) -> f
 /// The PCL temperature of enthalpy H at structural temperature T_f: h_s⁻¹(H − m L χ(T_f)) while
 /// that lies below T_f, else (the melt caught up: the heating branch) h⁻¹(H).
 pub fn pcl_temperature_at(p: &Params, enthalpy: f64, structural: f64, guess: f64) -> f64 {
-    let t = invert(p, true, enthalpy - p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, structural), guess);
+    let t = invert(p, true, enthalpy - melt_latent_heat(p, structural), guess);
     if t < structural {
         t
     } else {
@@ -346,7 +351,7 @@ impl ThermalState {
 
     /// Latent heat held by the molten part of the PCL, m L χ(T_f), J.
     pub fn latent_heat(&self, p: &Params) -> f64 {
-        p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, self.pcl_structural_temperature)
+        melt_latent_heat(p, self.pcl_structural_temperature)
     }
 
     /// The temperature the material table is read at ([`crystallisation::modulus_temperature`]).
@@ -515,11 +520,8 @@ impl ThermalState {
         if t_p != start || structural != self.pcl_structural_temperature {
             self.pcl_temperature = t_p;
             self.pcl_structural_temperature = structural;
-            self.pcl_enthalpy = if structural > t_p {
-                pcl_sensible_enthalpy(p, t_p) + p.pcl_mass * p.pcl_latent_heat * melt_fraction(p, structural)
-            } else {
-                pcl_enthalpy(p, t_p)
-            };
+            // the heating branch's enthalpy where the melt has caught up (T_f ≤ T_p)
+            self.pcl_enthalpy = pcl_sensible_enthalpy(p, t_p) + melt_latent_heat(p, structural.max(t_p));
         }
     }
 }
