@@ -834,7 +834,7 @@ pub fn linear_rate(p: &Params, c: &Coefficients, x: &State, u: &Drive) -> State 
     let delta = x[MOTOR_ANGLE] - x[LINK_ANGLE];
     let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
     let q = x[MAXWELL_DEFLECTION];
-    let tau = c.stiffness * delta + c.damping * rate + c.maxwell_stiffness * (delta - q);
+    let tau = element_torque(c, delta, rate, q);
     let motor_accel = match p.motor_drive {
         MotorDrive::Torque => (u[0] - p.motor_damping * x[MOTOR_SPEED] - tau) / p.motor_inertia,
         MotorDrive::PrescribedAngle => 0.0,
@@ -1124,7 +1124,7 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     let lam = p.branch_relaxation_time();
     if p.backlash_width <= 0.0 {
         let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
-        let tau = c.stiffness * delta + c.damping * rate + c.maxwell_stiffness * (delta - q);
+        let tau = element_torque(c, delta, rate, q);
         return (tau, (delta - q) / lam);
     }
     let Some(positive) = beyond_play(p, c, x) else {
@@ -1133,6 +1133,13 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
     let (engaged, tau) = engaged_torque(p, c, x, positive);
     let tau = if positive { tau.max(0.0) } else { tau.min(0.0) };
     (tau, (engaged - q) / lam)
+}
+
+/// The element's torque K e + C e' + K_M (e − q) at deflection e (Δ, or Δ ∓ b/2 beyond a play)
+/// and its rate e'.
+#[inline(always)]
+fn element_torque(c: &Coefficients, deflection: f64, rate: f64, q: f64) -> f64 {
+    c.stiffness * deflection + c.damping * rate + c.maxwell_stiffness * (deflection - q)
 }
 
 /// The share r = K_M/(K + K_M) of the relaxing branch's deflection q at which the element rests
@@ -1225,7 +1232,7 @@ fn engaged_torque(p: &Params, c: &Coefficients, x: &State, positive: bool) -> (f
     let half = 0.5 * p.backlash_width;
     let engaged = if positive { delta - half } else { delta + half };
     let rate = x[MOTOR_SPEED] - x[LINK_SPEED];
-    let tau = c.stiffness * engaged + c.damping * rate + c.maxwell_stiffness * (engaged - x[MAXWELL_DEFLECTION]);
+    let tau = element_torque(c, engaged, rate, x[MAXWELL_DEFLECTION]);
     (engaged, tau)
 }
 
