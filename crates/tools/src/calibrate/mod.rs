@@ -55,9 +55,9 @@ pub struct CalibrateArgs {
     pub validate: Vec<std::path::PathBuf>,
     /// A published reference to compare with (JSON: {"parameters": {"inertia": …, "viscous_friction": …,
     /// "coulomb_friction": …, "offset": …}, "position_relerr_percent": {"estimation": …, "validation": …}});
-    /// never used by the fit. Its parameters are simulated by this loop on the same runs
-    /// ("published_same_simulation"): the figures to compare with, since printed ones may come from
-    /// another simulation of the same model.
+    /// never used by the fit. Its parameters are simulated by this loop on the same runs, with the
+    /// published law's hard friction sign ("published_same_simulation"): the figures to compare
+    /// with, since printed ones may come from another simulation of the same model.
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE"))]
     pub published: Option<std::path::PathBuf>,
     /// Folder for report.json, the Markdown report and plots (written atomically).
