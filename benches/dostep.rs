@@ -39,6 +39,8 @@ const BACKLASH: (&str, f64) = ("backlash_width", 0.01);
 const EQUILIBRIUM: (&str, f64) = ("crystallisation", 0.0);
 /// The causal viscoelastic law (docs/physics.md §5c): its branch rides in the same exact step.
 const PRONY: (&str, f64) = ("viscoelastic_law", 1.0);
+/// Modelica's ElastoBacklash (docs/physics.md §10): its capped spells go to Dormand–Prince.
+const ELASTO_BACKLASH: (&str, f64) = ("backlash_law", 1.0);
 
 const REGIMES: &[Regime] = &[
     Regime {
@@ -116,6 +118,22 @@ const REGIMES: &[Regime] = &[
         heater_w: 0.0,
         time_grid: false,
         params: &[BACKLASH, PRONY],
+    },
+    Regime {
+        label: "backlash 0.01 rad, ElastoBacklash",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 0.0,
+        time_grid: false,
+        params: &[BACKLASH, ELASTO_BACKLASH],
+    },
+    Regime {
+        label: "all three while heating, ElastoBacklash",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 8.0,
+        time_grid: true,
+        params: &[GRAVITY, FRICTION, BACKLASH, ELASTO_BACKLASH],
     },
     Regime {
         label: "heating at 8 W, Prony law",

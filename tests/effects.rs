@@ -91,6 +91,37 @@ fn backlash_adds_half_the_play_to_the_lag() {
     assert_eq!(i.get("transmitted_torque").unwrap(), 0.0);
 }
 
+/// `backlash_law` = 1 (Modelica's ElastoBacklash) caps the damper's torque by the spring's: a motor
+/// ramping at 0.2 rad/s into the play of a free link meets it with the clipped law's jump, about
+/// C·v = E''(22 °C) κ r_p² / ω · v = 1.46 N·m at 0.5 Hz (then decaying as the light link catches up),
+/// and with ElastoBacklash's 2 K Δ̃, rising from zero.
+#[test]
+fn elasto_backlash_meets_the_play_without_the_dampers_jump() {
+    let f = common::fmu();
+    let c = E2_22 * KAPPA_R2 / (2.0 * std::f64::consts::PI * 0.5);
+    let v = 0.2;
+    let contact_torques = |law: f64| -> Vec<f64> {
+        let mut i = prescribed(&f, &[("backlash_width", 0.01), ("backlash_law", law)]);
+        let mut torques = Vec::new();
+        for k in 0..100 {
+            i.set("motor_angle_command", v * k as f64 * H).unwrap();
+            i.set("motor_speed_command", v).unwrap();
+            i.step(H).unwrap();
+            let tau = i.get("transmitted_torque").unwrap();
+            if tau != 0.0 || !torques.is_empty() {
+                torques.push(tau);
+            }
+        }
+        torques
+    };
+    let (clipped, elasto) = (contact_torques(0.0), contact_torques(1.0));
+    eprintln!("first steps in contact: clipped {:?}\nElastoBacklash {:?}", &clipped[..8], &elasto[..8]);
+    assert!(clipped.len() > 10 && elasto.len() > 10, "contact reached: {clipped:?} {elasto:?}");
+    assert!(clipped[0] > 0.5 * c * v, "the clipped law jumps: {} vs C·v {}", clipped[0], c * v);
+    assert!(elasto[0] > 0.0 && elasto[0] < 0.02 * c * v, "ElastoBacklash starts at {} (C·v {})", elasto[0], c * v);
+    assert!(elasto[..8].windows(2).all(|w| w[1] > w[0]), "and rises: {:?}", &elasto[..8]);
+}
+
 /// Motor held at 0, link hanging at offset 0.3 rad with m g d = 0.91 kg · g · 0.14 m: the rest
 /// angle solves K(0 − θ) = m g d sin(θ − 0.3) (Newton's method by hand below).
 #[test]

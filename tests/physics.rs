@@ -4,7 +4,7 @@
 use thermovia_model::mechanics::{self, Coefficients, Drive, State};
 use thermovia_model::params::ZERO_CELSIUS;
 use thermovia_model::thermal::ThermalInputs;
-use thermovia_model::{Model, MotorDrive, Params, ViscoelasticLaw};
+use thermovia_model::{BacklashLaw, Model, MotorDrive, Params, ViscoelasticLaw};
 
 fn celsius(t: f64) -> f64 {
     ZERO_CELSIUS + t
@@ -301,6 +301,11 @@ fn every_regime_matches_fine_reference_over_20_s() {
     };
     let backlash_prony = prony(Params { backlash_width: 0.01, ..Params::default() });
     let all_prony = prony(all.clone());
+    // Modelica's ElastoBacklash: the capped spells (τ = 2τ_c) go to Dormand–Prince
+    let elasto = |p: Params| Params { backlash_law: BacklashLaw::ElastoBacklash, ..p };
+    let elasto_torque = elasto(Params { backlash_width: 0.01, ..Params::default() });
+    let elasto_all = elasto(all.clone());
+    let elasto_prony = elasto(prony(Params { backlash_width: 0.01, ..Params::default() }));
     // Steps off 1 ms by a few 1e-10 relative: beyond fmpy's jitter, past the propagator's step key.
     // A variable-step master: every step a new length (new tables each time, bounded caches).
     let varying: Vec<f64> = (0..20_000).map(|k| 1e-3 * (1.0 + 0.1 * (k as f64 * 0.37).sin())).collect();
@@ -361,6 +366,21 @@ fn every_regime_matches_fine_reference_over_20_s() {
         (
             "all three, Prony law, heating, fmpy's h",
             sc(all_prony, 22.0, 22.0, 8.0, time_grid_steps(20.0), Box::new(motion())),
+            5.0,
+        ),
+        (
+            "ElastoBacklash, torque-driven",
+            sc(elasto_torque, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(drive())),
+            0.0,
+        ),
+        (
+            "ElastoBacklash with the Prony law",
+            sc(elasto_prony, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(drive())),
+            0.0,
+        ),
+        (
+            "all three, ElastoBacklash, heating, fmpy's h",
+            sc(elasto_all, 22.0, 22.0, 8.0, time_grid_steps(20.0), Box::new(motion())),
             5.0,
         ),
     ];

@@ -779,7 +779,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 // ---- serialized FMU state: versioned, pointer-free, checked ----
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
-pub const STATE_FORMAT_VERSION: u32 = 5;
+pub const STATE_FORMAT_VERSION: u32 = 6;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;

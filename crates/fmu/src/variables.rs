@@ -3,7 +3,9 @@
 //! so they cannot disagree. Start values are read from `Model::default()` through each row's getter.
 
 use thermovia_model::material::MaterialTable;
-use thermovia_model::{Crystallisation, LinkDrive, Model, MotorDrive, ThermalDrive, Transmission, ViscoelasticLaw};
+use thermovia_model::{
+    BacklashLaw, Crystallisation, LinkDrive, Model, MotorDrive, ThermalDrive, Transmission, ViscoelasticLaw,
+};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Causality {
@@ -308,6 +310,18 @@ pub static VISCOELASTIC_LAW: Enumeration = Enumeration {
     ],
 };
 
+pub static BACKLASH_LAW: Enumeration = Enumeration {
+    name: "BacklashLaw",
+    items: &[
+        (0, "clipped", "the clipped spring-damper: tau_c + tau_d beyond the play, never pulling (default)"),
+        (
+            1,
+            "elasto_backlash",
+            "Modelica's Rotational.Components.ElastoBacklash: the damper's torque capped by the spring's, never pulling",
+        ),
+    ],
+};
+
 pub static VARIABLES: &[Variable] = &[
     // ---- inputs
     real_input!(0, heater_power, "W", 0.0, 1e4, "Electrical power into the heaters (>= 0)"),
@@ -402,6 +416,7 @@ pub static VARIABLES: &[Variable] = &[
     mode_param!(303, transmission, 0.0, 1.0, TRANSMISSION, "0: springs and PCL couple motor and link; 1: rigid, motor and link one body of inertia motor_inertia + link_inertia, damping motor_damping + link_damping", "MODE", |v| if v == 0 { Transmission::Compliant } else { Transmission::Rigid }),
     mode_param!(302, thermal_drive, 0.0, 1.0, THERMAL_DRIVE, "0: heater_power drives the thermal network; 1: the housing follows housing_temperature_command", "MODE", |v| if v == 0 { ThermalDrive::Heater } else { ThermalDrive::PrescribedHousing }),
     mode_param!(304, crystallisation, 0.0, 1.0, CRYSTALLISATION, "0: crystallinity follows the melting curve both ways; 1: melting on the curve, crystallisation by Nakamura's kinetics on cooling (supercooling, rate-dependent Tc)", "MODE: 1 (docs/physics.md §5a); the heating branch is the same in both", |v| if v == 0 { Crystallisation::Equilibrium } else { Crystallisation::Nakamura }),
+    mode_param!(307, backlash_law, 0.0, 1.0, BACKLASH_LAW, "0: clipped spring-damper beyond the play, tau_c + tau_d, never pulling; 1: Modelica's ElastoBacklash, tau_c + min(tau_c, tau_d) (max on the negative side), never pulling: no torque jump at the start of contact", "MODE: 0 (docs/physics.md §10)", |v| if v == 0 { BacklashLaw::Clipped } else { BacklashLaw::ElastoBacklash }),
     mode_param!(306, viscoelastic_law, 0.0, 1.0, VISCOELASTIC_LAW, "0: hysteretic Kelvin-Voigt, C = K''/omega at excitation_frequency (exact in steady harmonic motion at that frequency; the paper's sweeps); 1: Prony, a spring, a dashpot and one Maxwell branch per table row, causal at every frequency (use for transients; needs maxwell_stiffness = 0)", "MODE: 0 (docs/physics.md §5c); the Prony law misses the table by 6-31 % at 0.5/1 Hz, as every passive law must", |v| if v == 0 { ViscoelasticLaw::Hysteretic } else { ViscoelasticLaw::Prony }),
 ];
 

@@ -15,7 +15,9 @@ use std::sync::Arc;
 use mechanics::{
     Coefficients, Contact, Coupling, Drive, EtdStep, FineCell, LinearStep, PropagatorTable, State, Tabulated,
 };
-pub use params::{Crystallisation, LinkDrive, MotorDrive, Params, ThermalDrive, Transmission, ViscoelasticLaw};
+pub use params::{
+    BacklashLaw, Crystallisation, LinkDrive, MotorDrive, Params, ThermalDrive, Transmission, ViscoelasticLaw,
+};
 use thermal::{ThermalInputs, ThermalState};
 
 #[derive(Clone, Debug, PartialEq)]
@@ -474,6 +476,10 @@ impl Model {
             let c = self.linear_step.as_ref().expect("prepared").1.step.coefficients();
             (mechanics::contact(&self.params, &c, &x), c)
         };
+        if matches!(mode, Contact::Capped { .. }) {
+            // ElastoBacklash's capped spell: Dormand–Prince (its springs double, tabulated nowhere)
+            return false;
+        }
         let offset = mode.offset(&self.params);
         let mut shifted = x;
         shifted[mechanics::MOTOR_ANGLE] -= offset;
@@ -562,6 +568,9 @@ impl Model {
         attempts_left: &mut u64,
         contact: Option<(Contact, Coefficients)>,
     ) -> Option<(Coefficients, Option<State>)> {
+        if matches!(contact, Some((Contact::Capped { .. }, _))) {
+            return None; // ElastoBacklash's capped spell: Dormand–Prince, as above
+        }
         let full: u64 = 1 << MAX_ETD_LEVEL;
         let mut level = etd_level(key, self.adaptive_step);
         let mut x = self.mechanics;

@@ -12,14 +12,15 @@
 //! rebuilt while the PCL heats or cools. Gravity and friction are smooth nonlinear link torques:
 //! an exponential Runge–Kutta step ([`EtdStep`]) keeps the linear part exact and treats them
 //! explicitly, with error control on dyadic sub-steps. Backlash switches the transmission between
-//! three linear states ([`Contact`]: free, engaged, clipped); a step takes the exact (or
-//! exponential Runge–Kutta) step of the state it starts in, and one that may hold a contact event
-//! ([`may_leave`]) is integrated by an adaptive Dormand–Prince 5(4) step with error control.
+//! three linear states ([`Contact`]: free, engaged, clipped; ElastoBacklash adds capped); a step
+//! takes the exact (or exponential Runge–Kutta) step of the state it starts in, and one that may
+//! hold a contact event ([`may_leave`]) or starts capped is integrated by an adaptive
+//! Dormand–Prince 5(4) step with error control.
 
 use nalgebra::{SMatrix, SVector};
 
 use super::material::TABLE_TEMPERATURES_C;
-use super::params::{LinkDrive, MotorDrive, Params, Transmission, ViscoelasticLaw};
+use super::params::{BacklashLaw, LinkDrive, MotorDrive, Params, Transmission, ViscoelasticLaw};
 
 pub const N_STATE: usize = 5;
 pub type State = SVector<f64, N_STATE>;
@@ -117,6 +118,9 @@ pub enum Coupling {
     Free,
     /// No torque; the Maxwell branch follows the deflection beyond the play (q' = (Δ̃ − q)/λ).
     Clipped,
+    /// ElastoBacklash with the damper's torque capped by the spring's: τ = 2τ_c, twice the springs
+    /// (K and K_M) and no damping.
+    Capped,
 }
 
 /// A and B of the linear system (valid when `Params::mechanics_is_linear`).
@@ -133,6 +137,7 @@ pub fn linear_system_with(
 ) -> (SMatrix<f64, N_STATE, N_STATE>, SMatrix<f64, N_STATE, 2>) {
     let (k, d, km, lam) = match coupling {
         Coupling::Engaged => (c.stiffness, c.damping, c.maxwell_stiffness, p.branch_relaxation_time()),
+        Coupling::Capped => (2.0 * c.stiffness, 0.0, 2.0 * c.maxwell_stiffness, p.branch_relaxation_time()),
         Coupling::Free | Coupling::Clipped => (0.0, 0.0, 0.0, p.branch_relaxation_time()),
     };
     let mut a = SMatrix::<f64, N_STATE, N_STATE>::zeros();
@@ -1114,8 +1119,9 @@ impl PropagatorTable<EtdStep> {
 }
 
 /// Transmitted torque τ_t and the relaxing branch's rate q', with backlash when enabled.
-/// Backlash: no torque inside the play, and the spring–damper never pulls at its edges. Unlike
-/// Modelica's ElastoBacklash, the damping torque is not capped by the spring torque (docs/physics.md §10).
+/// Backlash: no torque inside the play, and the spring–damper never pulls at its edges; under
+/// [`BacklashLaw::ElastoBacklash`] the damping torque is also capped by the spring torque, as
+/// Modelica's ElastoBacklash has it (docs/physics.md §10).
 /// With a relaxing branch the play is centred on the unloaded element's rest deflection
 /// ([`play_centre`]), so contact begins at zero spring torque.
 pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
@@ -1131,8 +1137,44 @@ pub fn transmission(p: &Params, c: &Coefficients, x: &State) -> (f64, f64) {
         return (0.0, (play_centre(c, x) - q) / lam);
     };
     let (engaged, tau) = engaged_torque(p, c, x, positive);
-    let tau = if positive { tau.max(0.0) } else { tau.min(0.0) };
+    let tau = match p.backlash_law {
+        BacklashLaw::Clipped => {
+            if positive {
+                tau.max(0.0)
+            } else {
+                tau.min(0.0)
+            }
+        }
+        BacklashLaw::ElastoBacklash => {
+            let (spring, damper) = spring_and_damper(c, engaged, x);
+            elasto_backlash_torque(spring, damper, positive)
+        }
+    };
     (tau, (engaged - q) / lam)
+}
+
+/// Beyond the play, the element's spring torque τ_c = K Δ̃ + K_M (Δ̃ − q) and damper torque
+/// τ_d = C Δ̃' at deflection Δ̃ = `engaged`.
+fn spring_and_damper(c: &Coefficients, engaged: f64, x: &State) -> (f64, f64) {
+    let spring = c.stiffness * engaged + c.maxwell_stiffness * (engaged - x[MAXWELL_DEFLECTION]);
+    (spring, c.damping * (x[MOTOR_SPEED] - x[LINK_SPEED]))
+}
+
+/// Modelica's `Rotational.Components.ElastoBacklash` beyond the play: on the positive side
+/// τ_c + min(τ_c, τ_d) while τ_c + τ_d > 0, else 0; on the negative τ_c + max(τ_c, τ_d) while
+/// τ_c + τ_d < 0, else 0. (The MSL's special case of a play below 1e-10 rad is not reproduced.)
+pub fn elasto_backlash_torque(spring: f64, damper: f64, positive: bool) -> f64 {
+    if positive {
+        if spring + damper <= 0.0 {
+            0.0
+        } else {
+            spring + spring.min(damper)
+        }
+    } else if spring + damper >= 0.0 {
+        0.0
+    } else {
+        spring + spring.max(damper)
+    }
 }
 
 /// The element's torque K e + C e' + K_M (e − q) at deflection e (Δ, or Δ ∓ b/2 beyond a play)
@@ -1185,8 +1227,16 @@ pub fn recover_unloaded(p: &Params, c: &Coefficients, q0: f64, len: f64) -> f64 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Contact {
     Free,
-    Engaged { positive: bool },
-    Clipped { positive: bool },
+    Engaged {
+        positive: bool,
+    },
+    Clipped {
+        positive: bool,
+    },
+    /// ElastoBacklash only: pushing, with the damper's torque above the spring's (τ = 2τ_c).
+    Capped {
+        positive: bool,
+    },
 }
 
 impl Contact {
@@ -1194,7 +1244,7 @@ impl Contact {
     pub fn offset(self, p: &Params) -> f64 {
         match self {
             Contact::Free => 0.0,
-            Contact::Engaged { positive } | Contact::Clipped { positive } => {
+            Contact::Engaged { positive } | Contact::Clipped { positive } | Contact::Capped { positive } => {
                 if positive {
                     0.5 * p.backlash_width
                 } else {
@@ -1209,6 +1259,7 @@ impl Contact {
             Contact::Free => Coupling::Free,
             Contact::Engaged { .. } => Coupling::Engaged,
             Contact::Clipped { .. } => Coupling::Clipped,
+            Contact::Capped { .. } => Coupling::Capped,
         }
     }
 }
@@ -1241,13 +1292,25 @@ pub fn contact(p: &Params, c: &Coefficients, x: &State) -> Contact {
     let Some(positive) = beyond_play(p, c, x) else {
         return Contact::Free;
     };
-    let (_, tau) = engaged_torque(p, c, x, positive);
-    // transmission(): τ.max(0) on the positive side, τ.min(0) on the negative.
-    let pushes = if positive { tau >= 0.0 } else { tau <= 0.0 };
-    if pushes {
-        Contact::Engaged { positive }
-    } else {
-        Contact::Clipped { positive }
+    let (engaged, tau) = engaged_torque(p, c, x, positive);
+    // as transmission() decides: the clipped law's τ.max(0) on the positive side (τ.min(0) on the
+    // negative); ElastoBacklash's τ_c + τ_d > 0 (< 0) and which of τ_c, τ_d is the smaller
+    let (pushes, capped) = match p.backlash_law {
+        BacklashLaw::Clipped => (if positive { tau >= 0.0 } else { tau <= 0.0 }, false),
+        BacklashLaw::ElastoBacklash => {
+            let (spring, damper) = spring_and_damper(c, engaged, x);
+            let sum = spring + damper;
+            if positive {
+                (sum > 0.0, damper > spring)
+            } else {
+                (sum < 0.0, damper < spring)
+            }
+        }
+    };
+    match (pushes, capped) {
+        (false, _) => Contact::Clipped { positive },
+        (true, true) => Contact::Capped { positive },
+        (true, false) => Contact::Engaged { positive },
     }
 }
 
@@ -1287,20 +1350,32 @@ pub fn may_leave(
         Contact::Free => {
             hermite_dips(half - d0, -h * v0, half - d1, -h * v1) || hermite_dips(half + d0, h * v0, half + d1, h * v1)
         }
-        Contact::Engaged { positive } | Contact::Clipped { positive } => {
+        Contact::Engaged { positive } | Contact::Clipped { positive } | Contact::Capped { positive } => {
             let s = if positive { 1.0 } else { -1.0 };
             let off = s * half;
             if hermite_dips(s * (d0 - off), s * h * v0, s * (d1 - off), s * h * v1) {
                 return true;
             }
-            let (_, t0) = engaged_torque(p, c, x0, positive);
-            let (_, t1) = engaged_torque(p, c, x1, positive);
+            let (e0, t0) = engaged_torque(p, c, x0, positive);
+            let (e1, t1) = engaged_torque(p, c, x1, positive);
             let km = c.maxwell_stiffness;
             let slope =
                 |x: &State, r: &State| (c.stiffness + km) * rate(x) + c.damping * accel(r) - km * r[MAXWELL_DEFLECTION];
-            // inside: s·τ ≥ 0 engaged, s·τ < 0 clipped
-            let g = if matches!(mode, Contact::Engaged { .. }) { s } else { -s };
-            hermite_dips(g * t0, g * h * slope(x0, r0), g * t1, g * h * slope(x1, r1))
+            // inside: s·τ ≥ 0 engaged and capped, s·τ < 0 clipped
+            let g = if matches!(mode, Contact::Clipped { .. }) { -s } else { s };
+            if hermite_dips(g * t0, g * h * slope(x0, r0), g * t1, g * h * slope(x1, r1)) {
+                return true;
+            }
+            if p.backlash_law != BacklashLaw::ElastoBacklash || matches!(mode, Contact::Clipped { .. }) {
+                return false;
+            }
+            // ElastoBacklash: τ_c − τ_d keeps its sign between engaged (s·(τ_c − τ_d) ≥ 0) and capped
+            let (sp0, da0) = spring_and_damper(c, e0, x0);
+            let (sp1, da1) = spring_and_damper(c, e1, x1);
+            let cap_rate =
+                |x: &State, r: &State| (c.stiffness + km) * rate(x) - c.damping * accel(r) - km * r[MAXWELL_DEFLECTION];
+            let g = if matches!(mode, Contact::Capped { .. }) { -s } else { s };
+            hermite_dips(g * (sp0 - da0), g * h * cap_rate(x0, r0), g * (sp1 - da1), g * h * cap_rate(x1, r1))
         }
     }
 }
@@ -1472,14 +1547,25 @@ fn event_fraction(p: &Params, c: &Coefficients, mode: Contact, x0: &State, x1: &
     let to = contact(p, c, x1);
     let half = 0.5 * p.backlash_width;
     let depth = |x: &State| (x[MOTOR_ANGLE] - x[LINK_ANGLE] - play_centre(c, x)).abs() - half; // ≤ 0 in the play
+                                                                                               // τ_c − τ_d on the side `a`: its sign parts engaged from capped (ElastoBacklash)
+    let cap = |a: bool, x: &State| {
+        let (spring, damper) = spring_and_damper(c, engaged_torque(p, c, x, a).0, x);
+        spring - damper
+    };
     let (g0, g1) = match (mode, to) {
-        (Contact::Free, Contact::Engaged { .. } | Contact::Clipped { .. })
-        | (Contact::Engaged { .. } | Contact::Clipped { .. }, Contact::Free) => (depth(x0), depth(x1)),
-        (Contact::Engaged { positive: a }, Contact::Clipped { positive: b })
-        | (Contact::Clipped { positive: a }, Contact::Engaged { positive: b })
+        (Contact::Free, Contact::Free) => return None,
+        (Contact::Free, _) | (_, Contact::Free) => (depth(x0), depth(x1)),
+        (Contact::Engaged { positive: a } | Contact::Capped { positive: a }, Contact::Clipped { positive: b })
+        | (Contact::Clipped { positive: a }, Contact::Engaged { positive: b } | Contact::Capped { positive: b })
             if a == b =>
         {
             (engaged_torque(p, c, x0, a).1, engaged_torque(p, c, x1, a).1)
+        }
+        (Contact::Engaged { positive: a }, Contact::Capped { positive: b })
+        | (Contact::Capped { positive: a }, Contact::Engaged { positive: b })
+            if a == b =>
+        {
+            (cap(a, x0), cap(a, x1))
         }
         _ => return None,
     };
@@ -1787,6 +1873,71 @@ mod tests {
         x[MAXWELL_DEFLECTION] = recover_unloaded(&p, &c, q, h);
         assert!((x[MAXWELL_DEFLECTION] / (q * ((r - 1.0) * h / lam).exp()) - 1.0).abs() < 1e-15);
         assert_eq!([x[MOTOR_ANGLE], x[LINK_ANGLE]], [r * q, 0.0], "nothing else moves");
+    }
+
+    /// `backlash_law` = 1 is Modelica's ElastoBacklash, written here from the MSL's equations: with
+    /// φ = Δ, b2 the half play, τ_c = K(φ ∓ b2), τ_d = C φ', the torque is τ_c + min(τ_c, τ_d) for
+    /// φ > b2 unless τ_c + τ_d ≤ 0 (then 0), τ_c + max(τ_c, τ_d) for φ < −b2 unless τ_c + τ_d ≥ 0,
+    /// and 0 inside. The contact state agrees: torque only when engaged or capped, capped exactly
+    /// where the cap (τ_d beyond τ_c) acts.
+    #[test]
+    fn the_elasto_backlash_law_is_modelicas() {
+        let p = Params { backlash_width: 0.01, backlash_law: BacklashLaw::ElastoBacklash, ..Params::default() };
+        let c = Coefficients::at(&p, p.initial_pcl_temperature);
+        let (k, d, b2) = (c.stiffness, c.damping, 0.005);
+        let msl = |phi: f64, w: f64| {
+            if phi > b2 {
+                let (tc, td) = (k * (phi - b2), d * w);
+                if tc + td <= 0.0 {
+                    0.0
+                } else {
+                    tc + tc.min(td)
+                }
+            } else if phi < -b2 {
+                let (tc, td) = (k * (phi + b2), d * w);
+                if tc + td >= 0.0 {
+                    0.0
+                } else {
+                    tc + tc.max(td)
+                }
+            } else {
+                0.0
+            }
+        };
+        let (mut capped, mut engaged, mut clipped) = (0, 0, 0);
+        for i in -40..=40 {
+            for j in -40..=40 {
+                let (phi, w) = (i as f64 * 5e-4, j as f64 * 2e-3);
+                let x = State::from([phi, w, 0.0, 0.0, 0.0]);
+                let tau = transmission(&p, &c, &x).0;
+                assert_eq!(tau, msl(phi, w), "φ {phi}, φ' {w}");
+                match contact(&p, &c, &x) {
+                    Contact::Capped { positive } => {
+                        capped += 1;
+                        assert_eq!(
+                            tau,
+                            2.0 * k * (phi - if positive { b2 } else { -b2 }),
+                            "capped: 2τ_c at φ {phi}, φ' {w}"
+                        );
+                    }
+                    Contact::Engaged { .. } => engaged += 1,
+                    Contact::Clipped { .. } => {
+                        clipped += 1;
+                        assert_eq!(tau, 0.0, "clipped at φ {phi}, φ' {w}");
+                    }
+                    Contact::Free => assert_eq!(tau, 0.0),
+                }
+            }
+        }
+        assert!(
+            capped > 100 && engaged > 100 && clipped > 100,
+            "{capped} capped, {engaged} engaged, {clipped} clipped"
+        );
+        // the clipped law's torque jumps by C φ' at contact; ElastoBacklash's starts at 0
+        let entering = State::from([b2 + 1e-9, 1.0, 0.0, 0.0, 0.0]);
+        let clipped_law = Params { backlash_law: BacklashLaw::Clipped, ..p.clone() };
+        assert!((transmission(&clipped_law, &c, &entering).0 - d).abs() < 1e-6 * d);
+        assert!(transmission(&p, &c, &entering).0.abs() < 1e-7);
     }
 
     #[test]

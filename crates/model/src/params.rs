@@ -72,6 +72,17 @@ pub enum ViscoelasticLaw {
     Prony = 1,
 }
 
+/// The backlash's contact law beyond the play (docs/physics.md §10).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BacklashLaw {
+    /// The clipped spring–damper: τ_c + τ_d, never pulling (the MSL documentation's curve 2).
+    Clipped = 0,
+    /// Modelica's `Rotational.Components.ElastoBacklash`: the damper's torque capped by the
+    /// spring's, τ_c + min(τ_c, τ_d) (max on the negative side), never pulling: continuous torque
+    /// at the start of contact.
+    ElastoBacklash = 1,
+}
+
 #[derive(Clone, Debug, PartialEq)]
 pub struct Params {
     // mechanics
@@ -105,6 +116,7 @@ pub struct Params {
     pub stribeck_velocity: f64,
     pub friction_smoothing_velocity: f64,
     pub backlash_width: f64,
+    pub backlash_law: BacklashLaw,
     pub gravity_link_mass: f64,
     pub gravity_com_distance: f64,
     pub gravity_offset: f64,
@@ -180,6 +192,7 @@ impl Default for Params {
             stribeck_velocity: 0.05,
             friction_smoothing_velocity: 1e-3,
             backlash_width: 0.0,
+            backlash_law: BacklashLaw::Clipped,
             gravity_link_mass: 0.0,
             gravity_com_distance: 0.14,
             gravity_offset: 0.0,
