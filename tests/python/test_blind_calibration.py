@@ -6,6 +6,7 @@ effects as the Modelica Standard Library defines them, RK4, noise and an encoder
 - clean runs, moduli 0.1–20× the defaults and a multisine: nothing added, final error ≤ 1.1× the
   noise floor √(σ² + q²/12), the transmission's K and C per temperature within 5 %;
 - each library effect: found, nothing else kept, every parameter within 10 %, final ≤ 1.2× floor;
+- backlash made with Modelica's ElastoBacklash: that law chosen, alone and with Coulomb and gravity;
 - an effect outside the library (a hardening spring): flagged unexplained, nothing spurious kept;
 - a lightly damped link (ζ = 0.004): natural frequency and damping ratio as the truth has them.
 """
@@ -158,8 +159,14 @@ def check_found(report, expected):
     assert set(found) == set(expected), report["added_effects"]
     for effect, params in expected.items():
         for key, value in params.items():
+            if key == "law":
+                continue
             got = found[effect][key]
             assert abs(got - value) <= 0.1 * abs(value), f"{effect}.{key} = {got}, truth {value}"
+    if "backlash" in expected:
+        # the contact law, chosen after the search by BIC: the truth's (clipped unless it says)
+        law = expected["backlash"].get("law", "clipped")
+        assert report["backlash_law"]["chosen"] == law, report["backlash_law"]
 
 
 @pytest.mark.parametrize("name", COMBINATIONS)
@@ -169,6 +176,31 @@ def test_combinations_of_effects_are_found_together(tmp_path, name):
     check_found(report, expected)
     assert ratio <= 1.2, f"final {ratio:.2f}× the noise floor"
     assert report["unexplained"] is False
+
+
+ELASTO = {
+    "ElastoBacklash": (["--effect", "elasto_backlash=0.02"],
+                       {"backlash": {"width_rad": 0.02, "law": "elasto_backlash"}}),
+    "ElastoBacklash + Coulomb + gravity": (
+        ["--effect", "elasto_backlash=0.02", "--effect", "coulomb_friction=0.03", "--effect", "gravity_mgl=1.249"],
+        {"backlash": {"width_rad": 0.02, "law": "elasto_backlash"}, "coulomb_friction": {"torque_nm": 0.03},
+         "gravity": {"mgl_nm": 1.249}},
+    ),
+}
+
+
+@pytest.mark.parametrize("name", ELASTO)
+def test_elasto_backlash_data_get_modelicas_law_and_the_width(tmp_path, name):
+    """Data made with Modelica's ElastoBacklash (the damper capped by the spring): the search finds
+    backlash with the clipped law, the law choice moves to ElastoBacklash (width within 10 %, the
+    final error at the noise floor); with the clipped law alone the fit stays near 2× the floor."""
+    truth_args, expected = ELASTO[name]
+    truth, report, ratio = calibrate(tmp_path, truth_args)
+    check_found(report, expected)
+    assert ratio <= 1.2, f"final {ratio:.2f}× the noise floor"
+    assert report["unexplained"] is False
+    clipped = next(r for r in report["backlash_law"]["compared"] if r["law"] == "clipped")
+    assert clipped["rmse_rad"] > 1.5 * report["final"]["rmse_rad"], report["backlash_law"]
 
 
 def test_a_stiffness_that_depends_on_the_link_angle_is_flagged_and_nothing_spurious_is_kept(tmp_path):

@@ -7,6 +7,9 @@ defines them:
 - backlash: the clipped spring–damper (Modelica's ElastoBacklash without its cap |τ_d| ≤ |τ_c|). With the relative angle φ = θm − θl and half-play b = width/2, the
   spring acts on the part of φ beyond ±b; the damper acts only while in contact and never pulls:
   τ = K(φ − b) + C φ' for φ > b, clipped at ≥ 0 (and symmetric for φ < −b), τ = 0 inside the play.
+  `elasto_backlash=WIDTH` instead: Modelica's Rotational.Components.ElastoBacklash itself, τ_c = K(φ − b),
+  τ_d = C φ', τ = τ_c + min(τ_c, τ_d) for φ > b unless τ_c + τ_d ≤ 0 (then 0), τ_c + max(τ_c, τ_d) for φ < −b
+  unless τ_c + τ_d ≥ 0.
 - Coulomb friction: BearingFriction with a smooth sign, τ_f = Fc tanh(θl'/v_s) (v_s small);
 - Stribeck friction: τ_f = (Fc + Fs exp(−(θl'/v_st)²)) tanh(θl'/v_s);
 - asymmetric friction (no Modelica element: defined here): τ_f = Fc± tanh(θl'/v_s) + Bv± θl', with Fc+, Bv+
@@ -49,7 +52,19 @@ def link_torque(phi, dphi, v, p):
     k *= 1.0 + p.get("angle_stiffness_beta", 0.0) * p.get("theta_l", 0.0) ** 2
     b = 0.5 * p.get("backlash", 0.0)
     alpha = p.get("hardening_alpha", 0.0)
-    if b > 0.0:
+    elasto_b = 0.5 * p.get("elasto_backlash", 0.0)
+    if elasto_b > 0.0:
+        if phi > elasto_b:
+            x = phi - elasto_b
+            tc, td = k * x * (1.0 + alpha * x * x), c * dphi
+            tau = 0.0 if tc + td <= 0.0 else tc + min(tc, td)
+        elif phi < -elasto_b:
+            x = phi + elasto_b
+            tc, td = k * x * (1.0 + alpha * x * x), c * dphi
+            tau = 0.0 if tc + td >= 0.0 else tc + max(tc, td)
+        else:
+            tau = 0.0
+    elif b > 0.0:
         if phi > b:
             x = phi - b
             tau = max(k * x * (1.0 + alpha * x * x) + c * dphi, 0.0)
@@ -114,7 +129,7 @@ def write_run(path, meta, columns):
 
 
 # One-value effect options: the key of the parameter dict they set.
-FLAT_EFFECTS = ("backlash", "coulomb_friction", "stribeck_friction", "stribeck_velocity", "gravity_mgl",
+FLAT_EFFECTS = ("backlash", "elasto_backlash", "coulomb_friction", "stribeck_friction", "stribeck_velocity", "gravity_mgl",
                 "gravity_offset", "link_damping", "constant_load", "friction_smoothing")
 # Several-value effect options: the keys they set, in order.
 COMPOUND_EFFECTS = {
@@ -162,6 +177,8 @@ def effects_json(flat):
         out["constant_load"] = {"torque_nm": flat["constant_load"]}
     if flat.get("backlash", 0.0) > 0.0:
         out["backlash"] = {"width_rad": flat["backlash"]}
+    if flat.get("elasto_backlash", 0.0) > 0.0:
+        out["backlash"] = {"width_rad": flat["elasto_backlash"], "law": "elasto_backlash"}
     if flat.get("gravity_mgl", 0.0) > 0.0:
         out["gravity"] = {"mgl_nm": flat["gravity_mgl"], "offset_rad": flat.get("gravity_offset", 0.0)}
     if flat.get("link_damping", 0.0) > 0.0:
@@ -247,7 +264,7 @@ def main(argv=None):
                     help="timestamp jitter: each logged time is off by up to ± this fraction of a sample period "
                          "(uniform; the samples themselves stay on the uniform grid); below 0.5")
     ap.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE[,VALUE...]",
-                    help="backlash=WIDTH, coulomb_friction=FC, stribeck_friction=FS, stribeck_velocity=VST, "
+                    help="backlash=WIDTH, elasto_backlash=WIDTH (Modelica's ElastoBacklash), coulomb_friction=FC, stribeck_friction=FS, stribeck_velocity=VST, "
                          "stribeck=FS,VST, asymmetric_friction=FCP,FCN,BVP,BVN, gravity_mgl=MGL, gravity_offset=RAD, "
                          "link_damping=B, constant_load=TAU, hardening=ALPHA (spring K φ(1 + α φ²), outside the "
                          "calibration's library), friction_smoothing=VS (repeatable)")

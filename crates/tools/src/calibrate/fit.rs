@@ -295,6 +295,9 @@ pub struct ModelSpec {
     pub effects: Vec<Effect>,
     pub law: DampingLaw,
     pub springs: SpringBank,
+    /// With backlash among the effects: Modelica's ElastoBacklash instead of the clipped law
+    /// (chosen after the search, [`super::search::choose_backlash_law`]).
+    pub elasto_backlash: bool,
 }
 
 impl ModelSpec {
@@ -839,6 +842,7 @@ impl<'a> Problem<'a> {
         for (o, eff) in spec.offsets(self.n_groups) {
             eff.apply(&p[o..o + eff.params().len()], &mut e);
         }
+        e.elasto_backlash = spec.elasto_backlash;
         let t = &self.tables[g];
         let k = p[2 * g].exp();
         let (storage_scale, spring_stiffness) = match spec.springs {

@@ -246,6 +246,11 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
             "spring_bank": o.final_fit.spec.springs.name(),
             "compared": o.laws.iter().map(|r| json!({"stage": r.stage, "law": r.structure.0.name(), "spring_bank": r.structure.1.name(), "rmse_rad": r.rmse, "bic": r.bic})).collect::<Vec<_>>(),
         },
+        "backlash_law": o.backlash_laws.as_ref().map(|b| json!({
+            "chosen": if b.elasto { "elasto_backlash" } else { "clipped" },
+            "compared": b.compared.iter().map(|(law, rmse, bic)| json!({"law": law, "rmse_rad": rmse, "bic": bic})).collect::<Vec<_>>(),
+            "rule": format!("with backlash in the final model, the clipped spring-damper (the search's) and Modelica's ElastoBacklash (the damper capped by the spring) are both fitted from the search's parameters on the fitting runs; ElastoBacklash is kept when it lowers the BIC by more than {}", super::stepwise::BIC_MARGIN),
+        })),
         "identified_baseline": identified(prob, &o.baseline, temps),
         "rounds": record["rounds"],
         "search_budget": record["search_budget"],
@@ -462,6 +467,22 @@ fn identified_markdown(j: &Value) -> String {
             law["reason"].as_str().unwrap_or(""),
             j["identified"][0]["damping_reference_frequency_hz"].as_f64().unwrap_or(f64::NAN)
         );
+    }
+    if let Some(law) = j["backlash_law"].as_object() {
+        let rows: Vec<String> = law["compared"]
+            .as_array()
+            .into_iter()
+            .flatten()
+            .map(|r| {
+                format!(
+                    "{} RMSE {:.4e} rad, BIC {:.1}",
+                    r["law"].as_str().unwrap_or("?"),
+                    f(r, "rmse_rad"),
+                    f(r, "bic")
+                )
+            })
+            .collect();
+        s += &format!("\nBacklash law: **{}** ({}).\n", law["chosen"].as_str().unwrap_or("?"), rows.join("; "));
     }
     s
 }

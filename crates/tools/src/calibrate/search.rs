@@ -90,6 +90,43 @@ pub struct Outcome {
     /// Damping laws compared (baseline and after each added effect).
     pub laws: Vec<LawRow>,
     pub law_reason: String,
+    /// Backlash's contact laws compared, when the final model has backlash.
+    pub backlash_laws: Option<BacklashLawChoice>,
+}
+
+/// Backlash's contact law chosen by evidence: both laws fitted from the search's parameters.
+#[derive(Clone, Debug)]
+pub struct BacklashLawChoice {
+    /// (law, rmse, bic): the clipped law, then ElastoBacklash (None when its fit failed).
+    pub compared: Vec<(&'static str, f64, f64)>,
+    pub elasto: bool,
+}
+
+/// With backlash in the model, the clipped law (the search's) and Modelica's ElastoBacklash
+/// (docs/physics.md §10) fitted from the same parameters; ElastoBacklash is kept when it lowers the
+/// BIC by more than [`BIC_MARGIN`] (the same number of parameters, so by the SSE alone). The fitting
+/// runs choose; held-out runs never do.
+pub fn choose_backlash_law(
+    prob: &Problem,
+    current: Fit,
+    sig: Signatures,
+) -> (Fit, Signatures, Option<BacklashLawChoice>) {
+    if !current.spec.effects.contains(&Effect::Backlash) {
+        return (current, sig, None);
+    }
+    let spec = ModelSpec { elasto_backlash: true, ..current.spec.clone() };
+    let elasto = levenberg_marquardt(prob, spec, current.p.clone(), MAX_ITERATIONS).ok();
+    let mut compared = vec![("clipped", current.rmse(), current.bic())];
+    if let Some(e) = &elasto {
+        compared.push(("elasto_backlash", e.rmse(), e.bic()));
+    }
+    match elasto {
+        Some(e) if e.bic() < current.bic() - BIC_MARGIN => {
+            let sig = signatures(prob, &e);
+            (e, sig, Some(BacklashLawChoice { compared, elasto: true }))
+        }
+        _ => (current, sig, Some(BacklashLawChoice { compared, elasto: false })),
+    }
 }
 
 /// Starting points of the baseline, cheapest first: the closed-form transmission (frequency
@@ -130,7 +167,7 @@ fn fit_from_best(prob: &Problem, spec: ModelSpec, starts: Vec<Vec<f64>>, max_ite
 /// simulated once, and Levenberg–Marquardt runs from the best one.
 pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String> {
     let starts = baseline_starts(prob, law).into_iter().map(|s| s.1).collect();
-    fit_from_best(prob, ModelSpec { effects: vec![], law, springs }, starts, MAX_ITERATIONS)
+    fit_from_best(prob, ModelSpec { effects: vec![], law, springs, elasto_backlash: false }, starts, MAX_ITERATIONS)
 }
 
 /// The combinations of linear effects ([`EQUATION_ERROR_EFFECTS`]) the equation error supports,
@@ -277,7 +314,7 @@ fn try_combination(
     for ((law, springs), subset, ee) in &proposals {
         let mut effects = kept_effects.clone();
         effects.extend_from_slice(subset);
-        let spec = ModelSpec { effects, law: *law, springs: *springs };
+        let spec = ModelSpec { effects, law: *law, springs: *springs, elasto_backlash: false };
         let closed = prob.closed_form_start(*law);
         let starts: Vec<Vec<f64>> = [Some(&ee.p[..n_t]), feasible.then_some(&current.p[..n_t]), Some(&closed[..n_t])]
             .into_iter()
@@ -443,7 +480,7 @@ fn best_law(
     let sprob = screen.unwrap_or(prob);
     let Some(best_screened) = Fit::evaluate(sprob, best.spec.clone(), best.p.clone()) else { return best };
     for &(law, springs) in laws.iter().filter(|&&l| l != first) {
-        let spec = ModelSpec { effects: best.spec.effects.clone(), law, springs };
+        let spec = ModelSpec { effects: best.spec.effects.clone(), law, springs, elasto_backlash: false };
         // from the other structure's optimum, and from this law's closed-form transmission with
         // the effects' values (a transmission fitted under the wrong law is a poor start)
         let n_t = 2 * prob.n_groups;
@@ -758,6 +795,7 @@ impl Rig for DeviceRig<'_, '_> {
             effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect(),
             law: current.spec.law,
             springs: current.spec.springs,
+            elasto_backlash: false,
         };
         let mut p = current.p[..2 * self.prob.n_groups].to_vec();
         for (o, x) in current.spec.offsets(self.prob.n_groups) {
@@ -806,6 +844,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         }
     }
     debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
+    let (current, sig, backlash_laws) = choose_backlash_law(prob, current, sig);
     let unexplained = !sig.white();
     Ok(Outcome {
         record,
@@ -817,5 +856,6 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         unexplained,
         laws: rows,
         law_reason: laws.reason.clone(),
+        backlash_laws,
     })
 }

@@ -44,6 +44,8 @@ pub struct EffectValues {
     pub viscous_asymmetry: f64,
     /// Constant torque on the link (the FMU's `load_torque` input, held), N·m.
     pub constant_load: f64,
+    /// Backlash by Modelica's ElastoBacklash (`backlash_law` = 1) instead of the clipped law.
+    pub elasto_backlash: bool,
 }
 
 impl EffectValues {
@@ -151,6 +153,9 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
     ];
     if e.maxwell_time > 0.0 {
         params.push(("maxwell_relaxation_time", e.maxwell_time));
+    }
+    if e.elasto_backlash {
+        params.push(("backlash_law", 1.0));
     }
     if e.stribeck_friction > 0.0 {
         params.push(("stribeck_friction", e.stribeck_friction));
