@@ -97,7 +97,7 @@ pub struct Outcome {
 /// Backlash's contact law chosen by evidence: both laws fitted from the search's parameters.
 #[derive(Clone, Debug)]
 pub struct BacklashLawChoice {
-    /// (law, rmse, bic): the clipped law, then ElastoBacklash (None when its fit failed).
+    /// (law, rmse, bic): the clipped law, then ElastoBacklash (absent when its fit failed).
     pub compared: Vec<(&'static str, f64, f64)>,
     pub elasto: bool,
 }
