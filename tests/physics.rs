@@ -605,6 +605,62 @@ fn a_step_too_small_to_resolve_is_refused_with_that_reason() {
     assert!([m.link_angle(), m.link_speed(), m.thermal.pcl_temperature].iter().all(|x| x.is_finite()));
 }
 
+/// Every step's work is bounded by the budget the model counts (work, not wall time, which a
+/// shared machine makes noise): steps that would need more sub-steps are refused before any work,
+/// and the stiffest legal rigs, with and without the adaptive solver, stay within the sub-step and
+/// attempt budgets whatever they return. Timing lives in `cargo bench --bench dostep`.
+#[test]
+fn every_step_is_bounded_by_the_work_budget() {
+    use thermovia_model::{StepFailure, StepWork, MAX_SOLVER_ATTEMPTS_PER_STEP, MAX_SUBSTEPS_PER_STEP};
+    for h in [1e6, 1e10, 1e300, f64::MAX] {
+        let mut m = Model::new(Params::default());
+        m.initialize();
+        let mut work = StepWork::default();
+        match m.step_counting(h, &mut work) {
+            Err(StepFailure::TooManySubsteps { .. }) => {}
+            other => panic!("h = {h:e}: expected TooManySubsteps, got {other:?}"),
+        }
+        assert_eq!(work, StepWork::default(), "h = {h:e}: refused before any work");
+    }
+    let d = Params::default;
+    let rigs = [
+        ("spring_count = 1e3", Params { spring_count: 1e3, ..d() }),
+        ("spring_stiffness = 1e7", Params { spring_stiffness: 1e7, ..d() }),
+        ("max_internal_step = 1e-7", Params { max_internal_step: 1e-7, ..d() }),
+        ("stiff, with friction", Params { spring_stiffness: 1e7, coulomb_friction: 1.0, ..d() }),
+        ("stiff, with backlash", Params { spring_stiffness: 1e7, backlash_width: 0.01, ..d() }),
+        ("light link, friction", Params { link_inertia: 1e-9, coulomb_friction: 1e3, ..d() }),
+    ];
+    for (name, p) in rigs {
+        let mut m = Model::new(p);
+        m.initialize();
+        m.inputs.motor_torque = 1.0;
+        let mut work = StepWork::default();
+        let outcome = m.step_counting(1.0, &mut work);
+        println!("{name}: {outcome:?}, {work:?}");
+        assert!(work.substeps as f64 <= MAX_SUBSTEPS_PER_STEP, "{name}: {work:?}");
+        assert!(work.solver_attempts <= MAX_SOLVER_ATTEMPTS_PER_STEP, "{name}: {work:?}");
+        if let Err(f) = outcome {
+            assert!(
+                matches!(
+                    f,
+                    StepFailure::TooManySubsteps { .. }
+                        | StepFailure::SolverBudget { .. }
+                        | StepFailure::SolverStalled { .. }
+                ),
+                "{name}: {f:?}"
+            );
+        }
+    }
+    // The counter counts: a nonlinear step of 1 s takes sub-steps and solver attempts.
+    let mut m = Model::new(Params { coulomb_friction: 0.1, ..d() });
+    m.initialize();
+    m.inputs.motor_torque = 1.0;
+    let mut work = StepWork::default();
+    m.step_counting(1.0, &mut work).unwrap();
+    assert!(work.substeps >= 1 && work.solver_attempts >= work.substeps, "{work:?}");
+}
+
 /// Link-driven mode (issue 21): the link follows the engine's angle and speed over each step, and
 /// `transmitted_torque_mean` is the impulse the step integrated. Energy through the joint — into
 /// the transmission from the motor, minus out to the link at the engine's speeds — must equal what

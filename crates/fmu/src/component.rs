@@ -163,6 +163,14 @@ fn category_bit(name: &str) -> Option<u8> {
 pub type LogSink = Box<dyn Fn(Status, &str, &str)>;
 
 /// Everything an FMU state holds: restoring it makes a run continue bit-identically.
+///
+/// What a state may hold is defined once, here and in [`validate`], and the runtime keeps it:
+/// - `start_time ≤ time`, and `time ≤ stop_time + time_tolerance(stop_time)` when there is a stop time;
+/// - `time` never decreases (a step ends at `max(t + h, time)`, a stop at `max(stop, time)`);
+/// - in phase Instantiated, `time == start_time`;
+/// - fmi2LastSuccessfulTime is `time`, on every path (an OK step, a discarded step, a refused step,
+///   a step too short to resolve): a step that fails leaves the state, time included, as it was, so
+///   no second clock is stored that could disagree with the first.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Snapshot {
     pub model: Model,
@@ -170,8 +178,14 @@ pub struct Snapshot {
     pub time: f64,
     pub start_time: f64,
     pub stop_time: Option<f64>,
-    pub last_successful_time: f64,
     pub terminated: bool,
+}
+
+/// How far a communication point may be from the FMU's time `now` and still be accepted as `now`
+/// (and how far a time may pass the stop time): a relative 1e-9, absolute below 1 s. The step check
+/// and the state check both use it.
+pub fn time_tolerance(now: f64) -> f64 {
+    1e-9 * now.abs().max(1.0)
 }
 
 impl Snapshot {
@@ -183,7 +197,6 @@ impl Snapshot {
             time: 0.0,
             start_time: 0.0,
             stop_time: None,
-            last_successful_time: 0.0,
             terminated: false,
         }
     }
@@ -375,7 +388,6 @@ impl Component {
         }
         self.s.start_time = start;
         self.s.time = start;
-        self.s.last_successful_time = start;
         self.s.stop_time = stop;
         Status::Ok
     }
@@ -575,17 +587,20 @@ impl Component {
             return self.error(&format!("fmi2DoStep: communicationStepSize {h} must be positive and finite"));
         }
         let now = self.s.time;
-        if !t.is_finite() || (t - now).abs() > 1e-9 * now.abs().max(1.0) {
+        if !t.is_finite() || (t - now).abs() > time_tolerance(now) {
             return self
                 .error(&format!("fmi2DoStep: currentCommunicationPoint {t} does not match the FMU's time {now}"));
         }
-        // The model advances by exactly the h the master passed ((t + h) − t may differ from h
-        // in the last bit), unless stopTime cuts the step short.
-        let (mut end, mut advance) = (t + h, h);
+        // The step ends where the master's clock says, t + h, so the FMU's time never drifts from
+        // the master's; but never before `now` (t may lie below `now` within the tolerance, by more
+        // than a tiny h), so time never runs backwards and never falls below the start time. The
+        // model advances by exactly the h the master passed ((t + h) − t may differ from h in the
+        // last bit), unless stopTime cuts the step short.
+        let (mut end, mut advance) = ((t + h).max(now), h);
         let mut status = Status::Ok;
         if let Some(stop) = self.s.stop_time {
-            if end > stop + 1e-9 * stop.abs().max(1.0) {
-                (end, advance) = (stop, stop - t);
+            if end > stop + time_tolerance(stop) {
+                (end, advance) = (stop.max(now), stop - now);
                 status = Status::Discard;
             }
         }
@@ -605,10 +620,8 @@ impl Component {
             if let Err(why) = outcome {
                 let m = &mut self.s.model;
                 m.set_state(&before);
+                // The state and its time stay as they were: the last successful time is `now`.
                 self.s.phase = Phase::StepFailed;
-                // FMI 2.0: the end of the last successful step, i.e. the FMU's own time (the
-                // caller's t may differ from it within the tolerance above)
-                self.s.last_successful_time = now;
                 self.last_step_status = Status::Discard;
                 self.emit(
                     Status::Discard,
@@ -620,7 +633,6 @@ impl Component {
             }
         }
         self.s.time = end;
-        self.s.last_successful_time = end;
         if status == Status::Discard {
             self.s.phase = Phase::StepFailed;
             self.s.terminated = true;
@@ -639,8 +651,9 @@ impl Component {
         self.last_step_status
     }
 
+    /// fmi2LastSuccessfulTime: the FMU's time, on every path (see [`Snapshot`]).
     pub fn last_successful_time(&self) -> f64 {
-        self.s.last_successful_time
+        self.s.time
     }
 
     pub fn terminated(&self) -> bool {
@@ -697,12 +710,8 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
     }
     finite(s.start_time, "start time")?;
     finite(s.time, "time")?;
-    finite(s.last_successful_time, "last successful time")?;
     if s.time < s.start_time {
         return Err(format!("time {} is before start time {}", s.time, s.start_time));
-    }
-    if s.last_successful_time != s.time {
-        return Err(format!("last successful time {} differs from time {}", s.last_successful_time, s.time));
     }
     if s.phase == Phase::Instantiated && s.time != s.start_time {
         return Err(format!("phase Instantiated at time {}, not at start time {}", s.time, s.start_time));
@@ -712,7 +721,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
         if stop < s.start_time {
             return Err(format!("stop time {stop} is before start time {}", s.start_time));
         }
-        if s.time > stop + 1e-9 * stop.abs().max(1.0) {
+        if s.time > stop + time_tolerance(stop) {
             return Err(format!("time {} is after stop time {stop}", s.time));
         }
     }
@@ -779,7 +788,7 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
 // ---- serialized FMU state: versioned, pointer-free, checked ----
 
 const MAGIC: &[u8; 8] = b"TVIAFMUS";
-pub const STATE_FORMAT_VERSION: u32 = 6;
+pub const STATE_FORMAT_VERSION: u32 = 7;
 
 fn fnv1a64(bytes: &[u8]) -> u64 {
     let mut h: u64 = 0xcbf29ce484222325;
@@ -792,8 +801,7 @@ fn fnv1a64(bytes: &[u8]) -> u64 {
 
 /// Layout: magic, format version (u32), GUID (u32 length + bytes), payload length (u64),
 /// payload, FNV-1a 64 of everything before it. Little-endian throughout.
-/// Payload: phase (u8), terminated (u8), has-stop (u8), time, start, stop, last successful time
-/// (f64), then every parameter and input as (value reference u32, f64) in table order, then the
+/// Payload: phase (u8), terminated (u8), has-stop (u8), time, start, stop (f64), then every parameter and input as (value reference u32, f64) in table order, then the
 /// model's flat state vector (`Model::state`, `STATE_LEN` f64). The FMI layer knows nothing of what
 /// the vector holds.
 pub fn serialize(s: &Snapshot) -> Vec<u8> {
@@ -801,7 +809,7 @@ pub fn serialize(s: &Snapshot) -> Vec<u8> {
     payload.push(s.phase as u8);
     payload.push(s.terminated as u8);
     payload.push(s.stop_time.is_some() as u8);
-    for x in [s.time, s.start_time, s.stop_time.unwrap_or(0.0), s.last_successful_time] {
+    for x in [s.time, s.start_time, s.stop_time.unwrap_or(0.0)] {
         payload.extend_from_slice(&x.to_le_bytes());
     }
     let mut m = s.model.clone();
@@ -902,7 +910,6 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     let time = r.f64("time")?;
     let start_time = r.f64("start time")?;
     let stop = r.f64("stop time")?;
-    let last_successful_time = r.f64("last successful time")?;
     let mut model = Model::default();
     for v in VARIABLES.iter().filter(|v| v.has_start()) {
         let vr = r.u32("value reference")?;
@@ -928,15 +935,7 @@ pub fn deserialize(bytes: &[u8]) -> Result<Snapshot, String> {
     if r.at != sum_at {
         return Err(format!("{} unread bytes in the state payload", sum_at - r.at));
     }
-    let snapshot = Snapshot {
-        model,
-        phase,
-        time,
-        start_time,
-        stop_time: has_stop.then_some(stop),
-        last_successful_time,
-        terminated,
-    };
+    let snapshot = Snapshot { model, phase, time, start_time, stop_time: has_stop.then_some(stop), terminated };
     validate(&snapshot).map_err(|e| format!("the state is well-formed but impossible: {e}"))?;
     Ok(snapshot)
 }
@@ -970,7 +969,6 @@ mod tests {
             time: 0.25,
             start_time: 0.0,
             stop_time: Some(3.0),
-            last_successful_time: 0.25,
             terminated: false,
         }
     }
@@ -1008,14 +1006,14 @@ mod tests {
         let s = stepped(0.0);
         let bytes = serialize(&s);
         assert_eq!(deserialize(&forge(&bytes, |_| {})).unwrap(), s, "an untouched forge is the state itself");
-        let f64_at = |k: usize| 3 + 8 * k; // time, start, stop, last successful time
+        let f64_at = |k: usize| 3 + 8 * k; // time, start, stop
         let put = |p: &mut [u8], at: usize, x: f64| p[at..at + 8].copy_from_slice(&x.to_le_bytes());
         let cases: Vec<(&str, Vec<u8>)> = vec![
             ("phase Fatal", forge(&bytes, |p| p[0] = Phase::Fatal as u8)),
             ("flag", forge(&bytes, |p| p[1] = 7)),
             ("time NaN", forge(&bytes, |p| put(p, f64_at(0), f64::NAN))),
             ("time after stop", forge(&bytes, |p| put(p, f64_at(2), 0.1))),
-            ("last successful time", forge(&bytes, |p| put(p, f64_at(3), 0.2))),
+            ("time before start", forge(&bytes, |p| put(p, f64_at(1), 0.3))),
             ("terminated", forge(&bytes, |p| p[1] = 1)),
             ("state NaN", {
                 // the model's state vector closes the payload

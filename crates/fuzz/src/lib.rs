@@ -7,9 +7,13 @@
 //! - whenever fmi2GetReal returns OK, every value is finite; after an OK or discarded fmi2DoStep
 //!   every output is finite;
 //! - fmi2SetReal / fmi2SetInteger are all-or-nothing: a refused set changes no value;
-//! - time advances exactly: after an OK step LastSuccessfulTime = t + h, after a discard it lies in
-//!   [t, t + h];
+//! - time advances exactly: after an OK step LastSuccessfulTime = max(t + h, the FMU's time), after a
+//!   discard it lies in [the FMU's time, t + h];
 //! - an FMU state round-trips: serialize, deserialize, restore gives bit-identical outputs and bytes;
+//! - every state the FMU writes restores: each fmi2GetFMUstate is serialized, deserialized into a
+//!   fresh instance and restored there, and both instances continue bit-identically through a step
+//!   (issue 31: starts at odd times, communication points within the time tolerance, denormal and
+//!   tiny steps, discards at offset times and legal input edits are drawn on purpose);
 //! - damaged or forged buffers (flipped bytes, truncation, a recomputed checksum over changed values)
 //!   are refused, or, if accepted, leave an instance that keeps every other invariant;
 //! - unsupported functions and NULL pointers return fmi2Error, never crash;
@@ -93,6 +97,7 @@ pub struct Var {
     pub vr: u32,
     pub real: bool,
     pub settable: bool,
+    pub input: bool,
     pub min: Option<f64>,
     pub max: Option<f64>,
 }
@@ -120,6 +125,7 @@ impl Target {
                 vr: v.value_reference,
                 real: v.ty == VariableType::Real,
                 settable: matches!(v.causality.as_str(), "parameter" | "input"),
+                input: v.causality == "input",
                 min: num(&v.min),
                 max: num(&v.max),
             })
@@ -322,9 +328,10 @@ impl<'a> Driver<'a> {
         }
         self.errored = false;
         self.before_init = true;
-        let stop = if rng.chance(0.3) { Some(0.05 + rng.unit()) } else { None };
+        let start = Self::start_time(rng);
+        let stop = if rng.chance(0.3) { Some(start + 0.05 + rng.unit()) } else { None };
         self.begin("fmi2SetupExperiment");
-        let s = self.inst().setup_experiment(None, 0.0, stop);
+        let s = self.inst().setup_experiment(None, start, stop);
         self.end();
         self.st(s, "fmi2SetupExperiment")?;
         // A few extreme legal parameter values before initialisation (a refused one is undone by
@@ -362,8 +369,23 @@ impl<'a> Driver<'a> {
         if s != FMI2_OK {
             return Err(format!("initialisation after a reset returned {s}"));
         }
-        self.time = 0.0;
+        self.time = start;
         Ok(())
+    }
+
+    /// A start time: mostly 0, often an arbitrary time of a long run (where the time tolerance is
+    /// wider than the shortest steps), sometimes a large one.
+    fn start_time(rng: &mut Rng) -> f64 {
+        match rng.below(4) {
+            0 | 1 => 0.0,
+            2 => 100.0 * rng.unit(),
+            _ => 1e6 * rng.unit(),
+        }
+    }
+
+    /// The FMU's time tolerance at `now` (documented: a relative 1e-9, absolute below 1 s).
+    fn tolerance(now: f64) -> f64 {
+        1e-9 * now.abs().max(1.0)
     }
 
     /// Sets one value; a refused set must leave every value as it was.
@@ -424,13 +446,22 @@ impl<'a> Driver<'a> {
     }
 
     fn do_step(&mut self, rng: &mut Rng) -> Check {
+        let tol = Self::tolerance(self.time);
         let h = match rng.below(10) {
             0 => *rng.pick(&[0.0, -1e-3, f64::NAN, f64::INFINITY, f64::MAX, f64::MIN_POSITIVE]),
+            // denormal and tiny steps, some shorter than the time tolerance
+            1 => *rng.pick(&[5e-324, 5.7e-322, 1e-154, 1e-15, 0.5 * tol, 2.0 * tol]),
             _ => *rng.pick(&REAL_STEPS),
         };
-        // 1e-12: within the FMU's time tolerance, accepted (issue 19: a discard there must keep the
-        // FMU's own time as the last successful one)
-        let t = if rng.chance(0.1) { self.time + *rng.pick(&[1e-3, -1.0, f64::NAN, 1e300, 1e-12]) } else { self.time };
+        // 1e-12 and the draws within ±tol: accepted (issue 19: a discard there must keep the FMU's
+        // own time as the last successful one; issue 31: a point below the FMU's time by more than
+        // a tiny h must not end the step before it)
+        let t = match rng.below(10) {
+            0 => self.time + *rng.pick(&[1e-3, -1.0, f64::NAN, 1e300, 1e-12]),
+            1 => self.time + tol * (2.0 * rng.unit() - 1.0),
+            2 => self.time + *rng.pick(&[-tol, tol]),
+            _ => self.time,
+        };
         self.begin("fmi2DoStep");
         let s = self.inst().do_step_with(t, h, rng.chance(0.5));
         self.end();
@@ -450,7 +481,7 @@ impl<'a> Driver<'a> {
             if s2 != FMI2_OK {
                 return Err(format!("fmi2GetRealStatus refused after a step that returned {s}"));
             }
-            let end = t + h;
+            let end = (t + h).max(self.time);
             if s == FMI2_OK && lst != end {
                 return Err(format!("step ({t}, {h}) OK but LastSuccessfulTime {lst} ≠ {end}"));
             }
@@ -577,10 +608,117 @@ impl<'a> Driver<'a> {
         }
     }
 
+    /// A legal value for an input (inside its range), set, then the state written and checked.
+    fn legal_input_edit_then_state(&mut self, rng: &mut Rng) -> Check {
+        let inputs: Vec<Var> = self.t.vars.iter().filter(|v| v.input && v.real).cloned().collect();
+        if inputs.is_empty() || self.before_init || self.errored {
+            return Ok(());
+        }
+        let v = rng.pick(&inputs).clone();
+        let (lo, hi) = (v.min.unwrap_or(-1e3), v.max.unwrap_or(1e3));
+        let x = match rng.below(4) {
+            0 => lo,
+            1 => hi,
+            _ => lo + rng.unit() * (hi - lo),
+        };
+        self.set_one(&v, x)?;
+        self.begin("fmi2GetFMUstate");
+        let r = self.inst().get_fmu_state(None);
+        self.end();
+        match r {
+            Ok(st) => {
+                self.states.push((st, self.time));
+                self.check_written_state(self.states.len() - 1, rng)
+            }
+            Err(s) => self.st(s, "fmi2GetFMUstate"),
+        }
+    }
+
+    /// Every state the FMU writes must restore: state `k`, serialized, is deserialized into a
+    /// fresh instance and restored there; the two instances then hold the same values and continue
+    /// bit-identically through one step (statuses, values, LastSuccessfulTime).
+    fn check_written_state(&mut self, k: usize, rng: &mut Rng) -> Check {
+        self.begin("fmi2SerializeFMUstate (written state)");
+        let (inst, st) = self.with_state(k);
+        let r = inst.serialize_fmu_state(st);
+        self.end();
+        let bytes = r.map_err(|s| format!("a state the FMU just wrote could not be serialized ({s})"))?;
+        self.begin("fmi2Instantiate (fresh instance)");
+        let r = RawInstance::instantiate(&self.t.lib, "fresh", &self.t.guid, Some(&self.t.resource_uri), false);
+        self.end();
+        let mut fresh = r.map_err(|e| format!("fmi2Instantiate (fresh instance) failed: {e}"))?;
+        self.begin("fmi2DeSerializeFMUstate (fresh instance)");
+        let r = fresh.deserialize_fmu_state(&bytes);
+        self.end();
+        let copy = r.map_err(|s| {
+            let why: Vec<String> = fresh.take_log().into_iter().map(|l| l.message).collect();
+            format!("a fresh instance refused a state the FMU wrote ({s}): {}", why.join("; "))
+        })?;
+        self.begin("fmi2SetFMUstate (fresh instance)");
+        let s = fresh.set_fmu_state(&copy);
+        self.end();
+        if s != FMI2_OK {
+            return Err(format!("a fresh instance could not restore a state the FMU wrote ({s})"));
+        }
+        if self.before_init {
+            return Ok(()); // no values to read before initialisation, and no step to take
+        }
+        // The state is the instance's current one: restore it there too, so both start alike.
+        self.begin("fmi2SetFMUstate (written state)");
+        let (inst, st) = self.with_state(k);
+        let s = inst.set_fmu_state(st);
+        self.end();
+        self.st(s, "fmi2SetFMUstate")?;
+        self.time = self.states[k].1;
+        let vrs = self.reals();
+        let read = |i: &mut RawInstance| {
+            let mut out = vec![0.0; vrs.len()];
+            let s = i.get_real(&vrs, &mut out);
+            (s, out.iter().map(|x| x.to_bits()).collect::<Vec<u64>>())
+        };
+        self.begin("fmi2GetReal (both)");
+        let (a, b) = (read(self.inst()), read(&mut fresh));
+        self.end();
+        if a != b {
+            return Err("a state restored in a fresh instance reads other values".into());
+        }
+        let tol = Self::tolerance(self.time);
+        let h = *rng.pick(&[1e-3, 0.01, 0.2, 5.7e-322, 0.5 * tol, 1e6]);
+        let t = self.time + *rng.pick(&[0.0, 0.0, -tol, tol]);
+        self.begin("fmi2DoStep (both)");
+        let (s1, s2) = (self.inst().do_step(t, h), fresh.do_step(t, h));
+        self.end();
+        self.st(s1, "fmi2DoStep")?;
+        if s1 != s2 {
+            return Err(format!("after the same step ({t}, {h}) the instance returned {s1}, the fresh one {s2}"));
+        }
+        self.begin("fmi2GetReal (both)");
+        let (a, b) = (read(self.inst()), read(&mut fresh));
+        self.end();
+        if a != b {
+            return Err(format!("a state restored in a fresh instance continues differently through ({t}, {h})"));
+        }
+        self.begin("fmi2GetRealStatus (both)");
+        let (l1, l2) =
+            (self.inst().get_real_status(FMI2_LAST_SUCCESSFUL_TIME), fresh.get_real_status(FMI2_LAST_SUCCESSFUL_TIME));
+        self.end();
+        if l1.0 != l2.0 || l1.1.to_bits() != l2.1.to_bits() {
+            return Err(format!("LastSuccessfulTime differs after the same step: {l1:?} and {l2:?}"));
+        }
+        if s1 == FMI2_OK || s1 == FMI2_DISCARD {
+            self.time = l1.1;
+        }
+        self.begin("fmi2FreeInstance (fresh instance)");
+        drop(fresh);
+        self.end();
+        Ok(())
+    }
+
     fn op(&mut self, rng: &mut Rng) -> Check {
         let n_states = self.states.len();
-        match rng.below(24) {
+        match rng.below(26) {
             0 | 1 => self.revive(rng),
+            24 | 25 => self.legal_input_edit_then_state(rng),
             2..=6 => self.do_step(rng),
             7 => {
                 let settable: Vec<Var> = self.t.vars.to_vec();
@@ -659,7 +797,10 @@ impl<'a> Driver<'a> {
                 };
                 self.end();
                 match r {
-                    Ok(Some(st)) => self.states.push((st, self.time)),
+                    Ok(Some(st)) => {
+                        self.states.push((st, self.time));
+                        self.check_written_state(self.states.len() - 1, rng)?;
+                    }
                     Ok(None) => {}
                     Err(s) => self.st(s, "fmi2GetFMUstate")?,
                 }

@@ -78,6 +78,15 @@ pub const MAX_SUBSTEPS_PER_STEP: f64 = 100_000.0;
 /// ...and at most this many attempted exponential Runge–Kutta and Dormand–Prince steps over all sub-steps.
 pub const MAX_SOLVER_ATTEMPTS_PER_STEP: u64 = 1_000_000;
 
+/// The work one [`Model::step`] did: internal sub-steps taken and adaptive-solver steps attempted
+/// (exponential Runge–Kutta and Dormand–Prince). The budget above bounds both, so a step's time is
+/// bounded by work the model counts, which a test can assert where a wall clock would be noise.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StepWork {
+    pub substeps: u64,
+    pub solver_attempts: u64,
+}
+
 impl std::fmt::Display for StepFailure {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
@@ -706,6 +715,11 @@ impl Model {
 
     /// Advances the model by `h` seconds with inputs held. On failure nothing changes.
     pub fn step(&mut self, h: f64) -> Result<(), StepFailure> {
+        self.step_counting(h, &mut StepWork::default())
+    }
+
+    /// [`Model::step`], adding the work it did to `work` (also when it fails).
+    pub fn step_counting(&mut self, h: f64, work: &mut StepWork) -> Result<(), StepFailure> {
         if h < MIN_RESOLVABLE_STEP {
             return Err(StepFailure::StepTooSmall { h });
         }
@@ -756,6 +770,7 @@ impl Model {
         };
         let linear = self.params.mechanics_is_linear();
         for i in 0..substeps {
+            work.substeps += 1;
             // Thermal first, then mechanics with the moduli at the sub-step's midpoint PCL
             // temperature: the thermal time scale (s) is far above the sub-step (ms).
             let t_mid = self.thermal.advance_cached(&self.params, &thermal_inputs, hs, &mut self.inversion);
@@ -778,7 +793,10 @@ impl Model {
                 self.mechanics = x;
                 continue;
             }
-            if !self.nonlinear_substep(t_mid, hs, &drive, &mut attempts_left) {
+            let left_before = attempts_left;
+            let advanced = self.nonlinear_substep(t_mid, hs, &drive, &mut attempts_left);
+            work.solver_attempts += left_before - attempts_left;
+            if !advanced {
                 self.set_state(&before);
                 let at_time_in_step = i as f64 * hs;
                 return Err(if attempts_left == 0 {
