@@ -163,3 +163,124 @@ fn a_declared_link_mass_becomes_an_inertia_or_is_refused() {
     assert_eq!(e.line, Some(3), "{e}");
     assert!(e.to_string().contains("link_length_m"), "{e}");
 }
+
+/// A run of `n` samples at `rate` Hz of a 0.5 Hz sine through a stiff link, with small
+/// deterministic noise, as CSV text (line 5 holds sample 0).
+fn sine_run(n: usize, rate: f64, time_of: impl Fn(usize) -> f64) -> String {
+    let mut text =
+        String::from("# temperature_c=40\n# frequency_hz=0.5\n# source=test\ntime_s,motor_angle_rad,link_angle_rad\n");
+    for k in 0..n {
+        let t = time_of(k);
+        let tk = k as f64 / rate;
+        let noise = 1e-5 * ((k * 7919 % 13) as f64 - 6.0) / 6.0;
+        let m = 0.3 * (std::f64::consts::TAU * 0.5 * tk).sin();
+        let l = 0.29 * (std::f64::consts::TAU * 0.5 * tk - 0.05).sin() + noise;
+        text += &format!("{t:.9},{m:.9},{l:.9}\n");
+    }
+    text
+}
+
+fn even(rate: f64) -> impl Fn(usize) -> f64 {
+    move |k| k as f64 / rate
+}
+
+/// Replaces the link cell of sample `k` (file line k + 5).
+fn with_link(text: &str, k: usize, value: &str) -> String {
+    let mut lines: Vec<String> = text.lines().map(String::from).collect();
+    let cells: Vec<&str> = lines[k + 4].split(',').collect();
+    lines[k + 4] = format!("{},{},{value}", cells[0], cells[1]);
+    lines.join("\n") + "\n"
+}
+
+/// Issue 28's corrupt samples: 1e300 (outside any physical range), a 1e6 rad spike and an encoder
+/// wrap are refused before any fit, naming file, line and column; a spike and a wrap are repaired
+/// with the option and listed.
+#[test]
+fn corrupt_samples_are_refused_by_line_and_column_or_repaired_on_request() {
+    use thermovia_tools::calibrate::data::{parse_run_with, ReadOptions};
+    let good = sine_run(2000, 1000.0, even(1000.0));
+    parse_run(Path::new("good.csv"), &good).expect("a clean run has no findings");
+    let e = err(&with_link(&good, 700, "1e300"));
+    assert_eq!((e.line, e.column.clone()), (Some(705), Some((3, "link_angle_rad".into()))), "{e}");
+    assert!(e.to_string().contains("1.0000e300") && e.to_string().len() < 300, "short, not 301 digits: {e}");
+    let e = err(&with_link(&good, 900, "1000000"));
+    assert_eq!(e.line, Some(905), "{e}");
+    assert!(e.message.contains("spike") && e.message.contains("--repair-samples"), "{e}");
+    // an encoder wrap: one turn added from sample 1200 on
+    let mut wrapped = good.clone();
+    for k in 1200..2000 {
+        let cells: Vec<String> = wrapped.lines().nth(k + 4).unwrap().split(',').map(String::from).collect();
+        let v: f64 = cells[2].parse().unwrap();
+        wrapped = with_link(&wrapped, k, &format!("{:.9}", v + std::f64::consts::TAU));
+    }
+    let e = err(&wrapped);
+    assert_eq!(e.line, Some(1205), "{e}");
+    assert!(e.message.contains("encoder wrap") && e.message.contains("1 turn"), "{e}");
+    // repaired on request: both, by line, and the repaired run matches the clean one
+    let both = with_link(&wrapped, 900, "1000000");
+    let clean = parse_run(Path::new("good.csv"), &good).unwrap();
+    let r = parse_run_with(Path::new("both.csv"), &both, ReadOptions { repair_samples: true }).unwrap();
+    let found: Vec<(usize, &str)> = r.repairs.iter().map(|p| (p.line, p.kind.name())).collect();
+    assert_eq!(found, vec![(905, "spike"), (1205, "encoder_wrap")]);
+    let worst = r.link.iter().zip(&clean.link).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    assert!(worst < 1e-4, "repaired within the noise: {worst}");
+}
+
+/// A gap splits a run into segments, each from its own first sample; the gaps are listed by line.
+#[test]
+fn a_gap_splits_the_run_and_is_listed() {
+    let d = tmp("calib-data-gap");
+    // 0.25 s missing after sample 999 (samples 1000..1249 dropped)
+    let text = sine_run(3000, 1000.0, even(1000.0));
+    let kept: Vec<&str> = text.lines().enumerate().filter(|(i, _)| !(1004..1254).contains(i)).map(|(_, l)| l).collect();
+    std::fs::write(d.join("gap.csv"), kept.join("\n") + "\n").unwrap();
+    let runs = read_inputs(&[d.join("gap.csv")]).unwrap();
+    assert_eq!(runs.len(), 2);
+    assert_eq!((runs[0].time.len(), runs[1].time.len()), (1000, 1750));
+    assert_eq!(runs[1].time[0], 1.25);
+    assert_eq!(runs[1].gaps.len(), 1);
+    assert_eq!(runs[1].gaps[0].line, 1005, "the first sample after the gap");
+    assert!(runs[1].name().contains("segment 2 of 2"), "{}", runs[1].name());
+}
+
+/// Timestamps that jitter around a uniform clock while the samples were taken on it: the clock is
+/// used (the positions are smoother there). Samples really taken unevenly: the stamps stay.
+#[test]
+fn the_time_base_is_the_clock_or_the_stamps_as_the_positions_show() {
+    let d = tmp("calib-data-jitter");
+    let jitter = |k: usize| 0.15e-3 * (((k * 2654435761) % 1000) as f64 / 500.0 - 1.0);
+    // stamps off the clock, values on it
+    std::fs::write(d.join("stamps.csv"), sine_run(4000, 1000.0, |k| k as f64 / 1000.0 + jitter(k))).unwrap();
+    let r = &read_inputs(&[d.join("stamps.csv")]).unwrap()[0];
+    assert!(r.time_base.as_deref().unwrap_or("").contains("clock's times are used"), "{:?}", r.time_base);
+    assert!((r.time[1234] - 1.234).abs() < 1e-6, "the clock to jitter/√n: {}", r.time[1234]);
+    // values at the stamps: the stamps are right
+    let mut text = String::from("# temperature_c=40\n# frequency_hz=0.5\ntime_s,motor_angle_rad,link_angle_rad\n");
+    for k in 0..4000 {
+        let t = k as f64 / 1000.0 + jitter(k);
+        let m = 0.3 * (std::f64::consts::TAU * 0.5 * t).sin();
+        text += &format!("{t:.9},{m:.9},{:.9}\n", 0.29 * (std::f64::consts::TAU * 0.5 * t - 0.05).sin());
+    }
+    std::fs::write(d.join("uneven.csv"), text).unwrap();
+    let r = &read_inputs(&[d.join("uneven.csv")]).unwrap()[0];
+    assert!(r.time_base.as_deref().unwrap_or("").contains("logged times are used"), "{:?}", r.time_base);
+}
+
+/// A corrupt cell stops `calibrate` while reading: the error names the cell, not the FMU (none is
+/// needed to refuse it), and nothing is written.
+#[test]
+fn the_cli_refuses_a_corrupt_sample_before_any_fit() {
+    let d = tmp("calib-data-corrupt");
+    let f = d.join("spike.csv");
+    std::fs::write(&f, with_link(&sine_run(2000, 1000.0, even(1000.0)), 500, "1e300")).unwrap();
+    let out = d.join("out");
+    let r = std::process::Command::new(env!("CARGO_BIN_EXE_thermovia"))
+        .args(["calibrate", f.to_str().unwrap(), "--out", out.to_str().unwrap(), "--fmu", "/nonexistent.fmu"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&r.stderr);
+    assert!(!r.status.success());
+    assert!(stderr.contains("spike.csv:505:3"), "{stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "one line, no backtrace: {stderr}");
+    assert!(!out.exists());
+}

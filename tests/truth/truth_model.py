@@ -263,6 +263,9 @@ def main(argv=None):
     ap.add_argument("--jitter", type=float, default=0.0,
                     help="timestamp jitter: each logged time is off by up to ± this fraction of a sample period "
                          "(uniform; the samples themselves stay on the uniform grid); below 0.5")
+    ap.add_argument("--dropout", type=float, default=0.0, metavar="SECONDS",
+                    help="a logger's dropout: each run loses the samples of one stretch this long, placed at random "
+                         "in its middle half (the time base keeps its gap)")
     ap.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE[,VALUE...]",
                     help="backlash=WIDTH, elasto_backlash=WIDTH (Modelica's ElastoBacklash), coulomb_friction=FC, stribeck_friction=FS, stribeck_velocity=VST, "
                          "stribeck=FS,VST, asymmetric_friction=FCP,FCN,BVP,BVN, gravity_mgl=MGL, gravity_offset=RAD, "
@@ -287,7 +290,7 @@ def main(argv=None):
     stride = int(round(1.0 / (a.rate * a.dt)))
     truth = {"inertia": a.inertia, "effects": effects_json(effects), "effect_options": a.effect, "noise": a.noise,
              "quantum": a.quantum, "jitter": a.jitter, "rate_hz": a.rate, "excitation": a.excitation,
-             "initial_link_speed": a.initial_speed, "seed": a.seed, "runs": []}
+             "initial_link_speed": a.initial_speed, "dropout_s": a.dropout, "seed": a.seed, "runs": []}
     moving = a.initial_speed is not None
     for temp, k, c in zip(temps, ks, cs):
         for i, f in enumerate(freqs):
@@ -303,12 +306,19 @@ def main(argv=None):
                 return np.round(y / a.quantum) * a.quantum if a.quantum > 0 else y
 
             tm = ts + (rng.uniform(-a.jitter, a.jitter, ts.shape) / a.rate if a.jitter > 0 else 0.0)
+            keep = np.ones(ts.shape, dtype=bool)
+            if a.dropout > 0:
+                start = rng.uniform(0.25, 0.75 - a.dropout / a.duration) * a.duration
+                keep = (ts < start) | (ts >= start + a.dropout)
             name = f"run_{temp:g}C_{f:g}Hz.csv" if a.excitation == "sine" else f"run_{temp:g}C_{a.excitation}{i + 1}.csv"
             meta = {"temperature_c": temp, "source": "tests/truth/truth_model.py"}
             if a.declare_inertia:
                 meta["link_inertia_kgm2"] = a.inertia
-            write_run(a.out / name, meta, {"time_s": tm, "motor_angle_rad": measure(ms), "link_angle_rad": measure(ls)})
+            write_run(a.out / name, meta, {"time_s": tm[keep], "motor_angle_rad": measure(ms)[keep],
+                                           "link_angle_rad": measure(ls)[keep]})
             run = {"file": name, "temperature_c": temp, "stiffness": k, "damping": c, "excitation": described}
+            if a.dropout > 0:
+                run["dropout_s"] = [float(start), float(start + a.dropout)]
             if a.excitation == "sine":
                 run["frequency_hz"] = f
             truth["runs"].append(run)

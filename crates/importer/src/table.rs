@@ -54,6 +54,10 @@ pub struct Table {
     pub names: Vec<String>,
     pub header_line: usize,
     pub last_line: usize,
+    /// The file's line (1-based) of each data row, so a later check can name the line of a sample.
+    pub row_lines: Vec<usize>,
+    /// The header position (0-based) of each selected column, `None` where the file lacks it.
+    pub positions: Vec<Option<usize>>,
     /// One entry per selected column (per header column for `Columns::All`); `None` for an
     /// optional column the file does not have.
     pub columns: Vec<Option<Vec<f64>>>,
@@ -100,6 +104,7 @@ pub fn parse(path: &Path, text: &str, select: Columns) -> Result<Table, DataErro
     };
     let mut columns: Vec<Option<Vec<f64>>> = selected.iter().map(|i| i.map(|_| Vec::new())).collect();
     let mut last_line = header_line;
+    let mut row_lines = Vec::new();
     for (n, l) in lines {
         if l.trim().is_empty() {
             continue;
@@ -108,6 +113,7 @@ pub fn parse(path: &Path, text: &str, select: Columns) -> Result<Table, DataErro
             return Err(DataError::line(path, n, "a '#' line after the header (metadata goes before it)".into()));
         }
         last_line = n;
+        row_lines.push(n);
         let cells: Vec<&str> = l.split(',').collect();
         for (slot, c) in selected.iter().enumerate() {
             let Some(c) = *c else { continue };
@@ -145,5 +151,5 @@ pub fn parse(path: &Path, text: &str, select: Columns) -> Result<Table, DataErro
             column.push(v);
         }
     }
-    Ok(Table { meta, names, header_line, last_line, columns })
+    Ok(Table { meta, names, header_line, last_line, row_lines, positions: selected, columns })
 }

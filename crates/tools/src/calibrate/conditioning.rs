@@ -3,7 +3,7 @@
 //! `drive::DriveInput`.
 
 use super::data::Run;
-use super::signal::{rms_frequency, savitzky_golay, second_difference_noise};
+use super::signal::{rms_frequency, second_difference_noise, smooth};
 
 /// The fitted temperature group each held-out run uses: the one nearest its own temperature
 /// (held-out runs take the moduli fitted there; nothing is fitted on them).
@@ -76,7 +76,7 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
 pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> super::sim::SimInput {
     super::sim::SimInput {
         time: r.time.clone(),
-        motor: savitzky_golay(&r.motor, smoothing_half_width(r, smoothing_seconds)),
+        motor: smooth(&r.time, &r.motor, smoothing_half_width(r, smoothing_seconds)),
         housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
         frequency_hz: r.frequency_hz,
         link_inertia: r.link_inertia,

@@ -88,11 +88,35 @@ pub struct Run {
     /// External torque (force) on the link, when the file has it.
     pub load: Option<Vec<f64>>,
     pub controller: Option<Controller>,
+    /// The file's line of each sample (for messages and the report).
+    pub lines: Vec<usize>,
+    /// Samples repaired on `--repair-samples` (spikes, encoder wraps), by line and column.
+    pub repairs: Vec<super::quality::Repair>,
+    /// Gaps in the file's time base; the run is split there into segments (`segment`).
+    pub gaps: Vec<super::quality::Gap>,
+    /// (this segment, of how many) when the file was split at its gaps; None for a whole file.
+    pub segment: Option<(usize, usize)>,
+    /// What was done with an uneven time base, when it was uneven (for the report).
+    pub time_base: Option<String>,
+}
+
+/// How runs are read.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ReadOptions {
+    /// Repair isolated spikes and encoder wraps (listed in the report) instead of refusing them.
+    pub repair_samples: bool,
 }
 
 impl Run {
+    /// The file's name, with the segment when the file was split at its gaps.
     pub fn name(&self) -> String {
-        self.file.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default()
+        let file = self.file.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        match self.segment {
+            Some((k, n)) => {
+                format!("{file} (segment {k} of {n}, from line {})", self.lines.first().copied().unwrap_or(0))
+            }
+            None => file,
+        }
     }
 
     /// Run temperature for reporting and grouping: mean of the thermocouple, °C.
@@ -142,8 +166,12 @@ fn file_error(file: &Path, message: String) -> DataError {
 }
 
 pub fn read_run(path: &Path) -> Result<Run, DataError> {
+    read_run_with(path, ReadOptions::default())
+}
+
+pub fn read_run_with(path: &Path, options: ReadOptions) -> Result<Run, DataError> {
     let text = std::fs::read_to_string(path).map_err(|e| file_error(path, format!("cannot read: {e}")))?;
-    parse_run(path, &text)
+    parse_run_with(path, &text, options)
 }
 
 /// Line (1-based) of the `# key=` metadata line, for errors.
@@ -172,8 +200,13 @@ fn meta_error(path: &Path, text: &str, key: &str, message: String) -> DataError 
     }
 }
 
-/// Parses one run from its text (`path` only names it in errors).
+/// Parses one run from its text (`path` only names it in errors), refusing corrupt samples.
 pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
+    parse_run_with(path, text, ReadOptions::default())
+}
+
+/// Parses one run from its text (`path` only names it in errors).
+pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<Run, DataError> {
     // the metadata decides which columns the file must have: read it first
     let head = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&[]))
         .map(|t| t.meta)
@@ -234,9 +267,51 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
             e
         })?;
     let (meta, last_line) = (table.meta, table.last_line);
-    let has_temperature_column = table.columns[3].is_some();
-    let link_measured = table.columns[2].is_some();
-    let mut cols: Vec<Option<Vec<f64>>> = table.columns;
+    let lines = table.row_lines;
+    let mut repairs = Vec::new();
+    let mut table_columns = table.columns;
+    {
+        use super::quality::{check_range, find_corrupt, refusal, repair, Quantity, Repair};
+        let position = if axis == Axis::Rotary { Quantity::Angle } else { Quantity::Position };
+        let kinds = [
+            None,
+            Some(position),
+            Some(position),
+            Some(Quantity::TemperatureC),
+            Some(position),
+            Some(Quantity::Torque),
+            Some(Quantity::Torque),
+        ];
+        let time = table_columns[0].clone().unwrap_or_default();
+        for (slot, kind) in kinds.iter().enumerate() {
+            let (Some(q), Some(at)) = (kind, table.positions[slot]) else { continue };
+            let name = columns[slot].0;
+            let x = table_columns[slot].as_mut().expect("a present column");
+            check_range(path, &lines, (at + 1, name), *q, x)?;
+            // measured positions and temperatures; commands (reference) and torques may step
+            if !matches!(slot, 1..=3) || time.len() < 9 {
+                continue;
+            }
+            let found = find_corrupt(&time, x, *q);
+            if found.is_empty() {
+                continue;
+            }
+            if !options.repair_samples {
+                return Err(refusal(path, &lines, (at + 1, name), x, &found));
+            }
+            repairs.extend(found.iter().map(|f| Repair {
+                line: lines[f.index],
+                column: name.to_string(),
+                kind: f.kind,
+                value: f.value,
+                replaced_by: f.repaired,
+            }));
+            repair(x, &found);
+        }
+    }
+    let has_temperature_column = table_columns[3].is_some();
+    let link_measured = table_columns[2].is_some();
+    let mut cols: Vec<Option<Vec<f64>>> = table_columns;
     let n = cols[0].as_ref().map_or(0, Vec::len);
     if n < 3 {
         return Err(DataError::line(path, last_line, format!("only {n} data rows; a run needs at least 3")));
@@ -258,6 +333,7 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
         ));
     };
     let time = cols[0].take().unwrap_or_default();
+    let time_for_gaps = time.clone();
     let motor = cols[1].take().unwrap_or_default();
     let link = cols[2].take().unwrap_or_else(|| motor.clone());
     let mut run = Run {
@@ -279,6 +355,11 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
         load: cols[6].take(),
         controller: None,
         meta,
+        gaps: gaps_of(&lines, &time_for_gaps),
+        lines,
+        repairs,
+        segment: None,
+        time_base: None,
     };
     let inertia_key = match axis {
         Axis::Rotary => "link_inertia_kgm2",
@@ -346,16 +427,16 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
             saturation: get("controller_saturation", "largest torque or force")?,
             period: get("controller_period_s", "controller period, s")?,
         };
-        // the controller acts once per sample: the log must be at its period
-        let span = run.time[n - 1] - run.time[0];
-        let mean_dt = span / (n - 1) as f64;
+        // the controller acts once per sample: the log must be at its period (the median interval,
+        // which jitter and gaps do not move)
+        let mean_dt = super::quality::median_period(&run.time);
         if (mean_dt - controller.period).abs() > 1e-3 * controller.period {
             return Err(meta_error(
                 path,
                 text,
                 "controller_period_s",
                 format!(
-                    "controller_period_s={} but the samples are {mean_dt:.6} s apart on average: drive=reference \
+                    "controller_period_s={} but the samples are {mean_dt:.6} s apart (median): drive=reference \
                      replays one controller update per sample",
                     controller.period
                 ),
@@ -473,7 +554,90 @@ pub fn dominant_frequency(t: &[f64], x: &[f64]) -> Option<f64> {
     Some(0.5 * (a + b))
 }
 
-/// Reads every input; the first error stops everything.
+/// Reads every input, refusing corrupt samples; the first error stops everything.
 pub fn read_inputs(inputs: &[PathBuf]) -> Result<Vec<Run>, DataError> {
-    expand_inputs(inputs)?.iter().map(|f| read_run(f)).collect()
+    read_inputs_with(inputs, ReadOptions::default())
+}
+
+/// Reads every input; the first error stops everything. A file with gaps in its time base becomes
+/// one run per segment between them (docs/interfaces.md, "Data quality").
+pub fn read_inputs_with(inputs: &[PathBuf], options: ReadOptions) -> Result<Vec<Run>, DataError> {
+    let mut runs = Vec::new();
+    for f in expand_inputs(inputs)? {
+        runs.extend(split_at_gaps(read_run_with(&f, options)?).into_iter().map(choose_time_base));
+    }
+    Ok(runs)
+}
+
+/// An uneven time base is either a logger's timestamps jittering around a uniform clock (the
+/// samples were taken on the clock, the stamps are off) or samples really taken unevenly (the stamps
+/// are right). The positions tell which: on the wrong time base a moving signal gains speed × timing
+/// error. The uniform grid nearest the stamps replaces them when the positions are clearly smoother
+/// on it (`quality::GRID_PREFERENCE`); otherwise the stamps stay, and smoothing and derivatives work
+/// on the uneven grid.
+pub fn choose_time_base(mut run: Run) -> Run {
+    let Some(grid) = super::quality::nearest_grid(&run.time) else { return run };
+    let columns: Vec<&[f64]> = if run.link_measured { vec![&run.motor, &run.link] } else { vec![&run.motor] };
+    let (on_stamps, on_grid) =
+        (super::quality::roughness(&run.time, &columns), super::quality::roughness(&grid, &columns));
+    let spread = run.time.iter().zip(&grid).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+    let period = (grid[grid.len() - 1] - grid[0]) / (grid.len() - 1) as f64;
+    if on_grid < super::quality::GRID_PREFERENCE * on_stamps {
+        run.time_base = Some(format!(
+            "the timestamps jitter by up to {:.1} % of the {} s period around a uniform clock, and the positions \
+             are smoother on the clock (roughness {} vs {}): the clock's times are used",
+            100.0 * spread / period,
+            super::quality::short(period),
+            super::quality::short(on_grid),
+            super::quality::short(on_stamps)
+        ));
+        run.time = grid;
+    } else {
+        run.time_base = Some(format!(
+            "uneven sampling (up to {:.1} % of the {} s mean period off a uniform clock; the positions are not \
+             smoother on the clock: roughness {} vs {}): the logged times are used, with smoothing and \
+             derivatives on the uneven grid",
+            100.0 * spread / period,
+            super::quality::short(period),
+            super::quality::short(on_grid),
+            super::quality::short(on_stamps)
+        ));
+    }
+    run
+}
+
+/// The gaps of a time base (intervals longer than `quality::GAP_PERIODS` median periods).
+fn gaps_of(lines: &[usize], t: &[f64]) -> Vec<super::quality::Gap> {
+    let s = super::quality::stretches(t);
+    s.iter().skip(1).map(|&(a, _)| super::quality::Gap { line: lines[a], from_s: t[a - 1], to_s: t[a] }).collect()
+}
+
+/// One run per stretch between gaps, each started from its own first samples (the measured state
+/// after the gap), never bridged by interpolation across it. Stretches shorter than
+/// `quality::MIN_SEGMENT_SAMPLES` are dropped (the run's `gaps` still list every gap).
+pub fn split_at_gaps(run: Run) -> Vec<Run> {
+    if run.gaps.is_empty() {
+        return vec![run];
+    }
+    let kept: Vec<(usize, usize)> = super::quality::stretches(&run.time)
+        .into_iter()
+        .filter(|(a, b)| b - a >= super::quality::MIN_SEGMENT_SAMPLES)
+        .collect();
+    let n = kept.len();
+    let cut = |x: &Vec<f64>, a: usize, b: usize| x[a..b].to_vec();
+    kept.iter()
+        .enumerate()
+        .map(|(i, &(a, b))| Run {
+            time: cut(&run.time, a, b),
+            motor: cut(&run.motor, a, b),
+            link: cut(&run.link, a, b),
+            temperature_c: cut(&run.temperature_c, a, b),
+            reference: run.reference.as_ref().map(|x| cut(x, a, b)),
+            motor_torque: run.motor_torque.as_ref().map(|x| cut(x, a, b)),
+            load: run.load.as_ref().map(|x| cut(x, a, b)),
+            lines: run.lines[a..b].to_vec(),
+            segment: Some((i + 1, n)),
+            ..run.clone()
+        })
+        .collect()
 }

@@ -2,7 +2,7 @@
 //! (each run depends only on its temperature group's two moduli and the effect parameters, so a
 //! Jacobian costs Σ_runs (2 + n_effect) simulations), and parameter covariance σ²(JᵀJ)⁻¹.
 
-use super::signal::savitzky_golay;
+use super::signal::smooth;
 use nalgebra::{DMatrix, DVector};
 
 use super::sim::{EffectValues, RunModel, SimInput, Simulator, TransmissionTable};
@@ -801,7 +801,7 @@ impl<'a> Problem<'a> {
                 .zip(&self.measured)
                 .map(|(inp, y)| {
                     let half = (y.len() / 100).max(5);
-                    (savitzky_golay(y, half), savitzky_golay(&inp.motor, half))
+                    (smooth(&inp.time, y, half), smooth(&inp.time, &inp.motor, half))
                 })
                 .collect()
         })
@@ -992,6 +992,9 @@ fn diagonally_scaled(a: &DMatrix<f64>) -> (DMatrix<f64>, Vec<f64>) {
 /// Solves (A + μ diag A) δ = g with column scaling; falls back to a pseudo-inverse.
 fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
     let n = a.nrows();
+    if a.iter().chain(g.iter()).any(|x| !x.is_finite()) {
+        return DVector::zeros(n); // no finite information: no step (nalgebra's SVD panics on a NaN)
+    }
     let (mut s, d) = diagonally_scaled(a);
     for i in 0..n {
         s[(i, i)] += mu;
@@ -1007,6 +1010,10 @@ fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
 /// Pseudo-inverse of a symmetric positive semi-definite matrix with diagonal scaling.
 pub fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
     let n = a.nrows();
+    if a.iter().any(|x| !x.is_finite()) {
+        // nalgebra's SVD panics on a NaN: a matrix without finite information gives none (zero)
+        return DMatrix::zeros(n, n);
+    }
     let (s, d) = diagonally_scaled(a);
     let inv = s.pseudo_inverse(1e-12).unwrap_or_else(|_| DMatrix::zeros(n, n));
     DMatrix::from_fn(n, n, |i, j| inv[(i, j)] / (d[i] * d[j]))

@@ -14,6 +14,7 @@ pub mod diagnose;
 pub mod drive;
 pub mod fit;
 pub mod paper;
+pub mod quality;
 pub mod reference;
 pub mod report;
 pub mod search;
@@ -86,6 +87,13 @@ pub struct CalibrateArgs {
     /// between refits, keeps the best model found and says so in the report (`search_budget`).
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS", default_value_t = 300.0))]
     pub search_budget: f64,
+    /// Repair corrupt samples instead of refusing the file: an isolated spike in a measured angle,
+    /// position or temperature takes the line through its neighbours, an encoder wrap (a jump of
+    /// whole turns in one sample) is unwrapped. Each repair is named by file, line and column on the
+    /// console and in report.json (`data_quality`). Values outside any physical range are refused
+    /// either way.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub repair_samples: bool,
 }
 
 #[cfg(feature = "cli")]
@@ -104,6 +112,75 @@ impl CalibrateArgs {
     }
 }
 
+impl CalibrateArgs {
+    pub fn read_options(&self) -> data::ReadOptions {
+        data::ReadOptions { repair_samples: self.repair_samples }
+    }
+}
+
+/// `data_quality` of report.json: every repaired sample and every gap, by file and line, and the rules.
+pub fn data_quality_json(runs: &[&data::Run]) -> serde_json::Value {
+    // a file split into segments lists its repairs and gaps once
+    let mut seen = std::collections::BTreeSet::new();
+    let (mut repairs, mut gaps) = (Vec::new(), Vec::new());
+    for r in runs {
+        if !seen.insert(r.file.clone()) {
+            continue;
+        }
+        let file = r.file.file_name().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        repairs.extend(r.repairs.iter().map(|p| {
+            serde_json::json!({"file": file, "line": p.line, "column": p.column, "kind": p.kind.name(),
+                               "value": p.value, "replaced_by": p.replaced_by})
+        }));
+        gaps.extend(r.gaps.iter().map(|g| {
+            serde_json::json!({"file": file, "line": g.line, "from_s": g.from_s, "to_s": g.to_s,
+                               "seconds": g.to_s - g.from_s})
+        }));
+    }
+    serde_json::json!({
+        "repairs": repairs,
+        "gaps": gaps,
+        "segments": runs.iter().filter(|r| r.segment.is_some()).map(|r| r.name()).collect::<Vec<_>>(),
+        "time_base": runs.iter().filter_map(|r| r.time_base.as_ref().map(|t| serde_json::json!({"run": r.name(), "what": t}))).collect::<Vec<_>>(),
+        "rules": format!(
+            "values outside the FMU's ranges (positions ±{:e}, torques ±{:e}, temperatures 1 K … 1e4 K) are refused; \
+             an isolated spike (a sample {}× the column's noise off the line through its neighbours, which agree) or an \
+             encoder wrap (a jump of whole turns in one sample) is refused, or repaired with --repair-samples; an \
+             interval longer than {} median sample periods is a gap, where the run is split into segments, each \
+             started from the measured state after it (segments under {} samples are dropped)",
+            quality::POSITION_LIMIT, quality::TORQUE_LIMIT, 10, quality::GAP_PERIODS, quality::MIN_SEGMENT_SAMPLES
+        ),
+    })
+}
+
+/// The console's lines for what the data-quality checks did (repairs and gaps, by file and line).
+pub fn data_quality_lines(report: &serde_json::Value) -> Vec<String> {
+    let q = &report["data_quality"];
+    let mut out = Vec::new();
+    for p in q["repairs"].as_array().into_iter().flatten() {
+        out.push(format!(
+            "{}:{} (column {}): repaired {} {} → {}",
+            p["file"].as_str().unwrap_or("?"),
+            p["line"],
+            p["column"],
+            p["kind"].as_str().unwrap_or("?"),
+            quality::short(p["value"].as_f64().unwrap_or(f64::NAN)),
+            quality::short(p["replaced_by"].as_f64().unwrap_or(f64::NAN)),
+        ));
+    }
+    for g in q["gaps"].as_array().into_iter().flatten() {
+        out.push(format!(
+            "{}:{}: a gap of {} s in the time base ({} → {} s): the run is split there",
+            g["file"].as_str().unwrap_or("?"),
+            g["line"],
+            quality::short(g["seconds"].as_f64().unwrap_or(f64::NAN)),
+            quality::short(g["from_s"].as_f64().unwrap_or(f64::NAN)),
+            quality::short(g["to_s"].as_f64().unwrap_or(f64::NAN)),
+        ));
+    }
+    out
+}
+
 /// Everything `thermovia calibrate` computes, before it is written.
 pub struct Calibration {
     pub runs: Vec<data::Run>,
@@ -119,7 +196,7 @@ pub struct Calibration {
 /// Reads the runs, fits, diagnoses, searches the effect library and builds the report files.
 pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error::Error>> {
     let t0 = std::time::Instant::now();
-    let runs = data::read_inputs(&args.inputs)?;
+    let runs = data::read_inputs_with(&args.inputs, args.read_options())?;
     let is_drive = |r: &data::Run| r.drive != data::DriveKind::MotorAngle || r.rigid;
     if runs.iter().any(is_drive) {
         return calibrate_drive(args, runs, t0);
@@ -132,7 +209,11 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         )
         .into());
     }
-    let held = if args.validate.is_empty() { Vec::new() } else { data::read_inputs(&args.validate)? };
+    let held = if args.validate.is_empty() {
+        Vec::new()
+    } else {
+        data::read_inputs_with(&args.validate, args.read_options())?
+    };
     if let Some(r) = held.iter().find(|r| is_drive(r) || r.axis == data::Axis::Linear) {
         return Err(format!(
             "{}: a held-out drive run (drive={}, axis={}) cannot validate runs driven by the measured motor angle",
@@ -144,6 +225,45 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     }
     let fmu = crate::open_fmu(args.fmu.as_deref())?;
     let sim = sim::Simulator::new(fmu, args.threads)?;
+    sim.set_deadline(hard_deadline(t0, args.search_budget));
+    calibrate_device(args, runs, held, &sim, t0).map_err(|e| over_budget(&sim, args, e))
+}
+
+/// The backstop past which every simulation fails: the search stops itself between refits when
+/// `--search-budget` runs out, and this bounds what a fit in progress (the baseline's included) may
+/// add to it: a quarter of the budget, at least 10 s.
+fn hard_deadline(t0: std::time::Instant, budget: f64) -> std::time::Instant {
+    let seconds = if budget.is_finite() && budget >= 0.0 { budget + (0.25 * budget).max(10.0) } else { 1e9 };
+    t0 + std::time::Duration::from_secs_f64(seconds.min(1e9))
+}
+
+/// An error raised after the hard deadline is the budget's doing: say so, not what failed first.
+fn over_budget(
+    sim: &sim::Simulator,
+    args: &CalibrateArgs,
+    e: Box<dyn std::error::Error>,
+) -> Box<dyn std::error::Error> {
+    if sim.past_deadline() {
+        format!(
+            "the calibration ran past its time budget (--search-budget {} s, plus a quarter for the fit in progress) \
+             before it had a model to report ({e}); nothing was written: raise --search-budget, or give fewer or \
+             shorter runs",
+            args.search_budget
+        )
+        .into()
+    } else {
+        e
+    }
+}
+
+fn calibrate_device(
+    args: &CalibrateArgs,
+    runs: Vec<data::Run>,
+    held: Vec<data::Run>,
+    sim: &sim::Simulator,
+    t0: std::time::Instant,
+) -> Result<Calibration, Box<dyn std::error::Error>> {
+    let sim = sim;
     let (group, temperatures) = group_runs(&runs);
     let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
@@ -281,6 +401,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
         });
     }
     report["warnings"] = serde_json::json!(report::device_warnings(&runs, &report));
+    report["data_quality"] = data_quality_json(&runs.iter().chain(&held).collect::<Vec<_>>());
     let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),
         ("report.md".to_string(), report::report_markdown(&report, &outcome).into_bytes()),
@@ -302,7 +423,11 @@ fn calibrate_drive(
     runs: Vec<data::Run>,
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
-    let held = if args.validate.is_empty() { Vec::new() } else { data::read_inputs(&args.validate)? };
+    let held = if args.validate.is_empty() {
+        Vec::new()
+    } else {
+        data::read_inputs_with(&args.validate, args.read_options())?
+    };
     let all: Vec<&data::Run> = runs.iter().chain(&held).collect();
     let first = all[0];
     for r in &all {
@@ -333,8 +458,21 @@ fn calibrate_drive(
     };
     let fmu = crate::open_fmu(args.fmu.as_deref())?;
     let sim = sim::Simulator::new(fmu, args.threads)?;
+    sim.set_deadline(hard_deadline(t0, args.search_budget));
+    calibrate_drive_with(args, runs, held, published, &sim, t0).map_err(|e| over_budget(&sim, args, e))
+}
+
+fn calibrate_drive_with(
+    args: &CalibrateArgs,
+    runs: Vec<data::Run>,
+    held: Vec<data::Run>,
+    published: Option<serde_json::Value>,
+    sim: &sim::Simulator,
+    t0: std::time::Instant,
+) -> Result<Calibration, Box<dyn std::error::Error>> {
+    let sim = sim;
     let (group, temperatures) = group_runs(&runs);
-    let mut prob = drive::DriveProblem::new(&sim, &runs, group, temperatures.len());
+    let mut prob = drive::DriveProblem::new(sim, &runs, group, temperatures.len());
     let mut held_prob = if held.is_empty() {
         None
     } else {
@@ -344,6 +482,7 @@ fn calibrate_drive(
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut(), &budget)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
+    report["data_quality"] = data_quality_json(&runs.iter().chain(&held).collect::<Vec<_>>());
     if let Some(same) = published.as_ref().and_then(|p| drive::published_same_simulation(&prob, held_prob.as_ref(), p))
     {
         report["published_same_simulation"] = same;
@@ -380,6 +519,9 @@ pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
     }
     let c = calibrate(args)?;
     synthetic::write_atomically(&args.out, &c.files)?;
+    for line in data_quality_lines(&c.report) {
+        eprintln!("thermovia: {line}");
+    }
     if let Some(d) = &c.drive {
         let j = &c.report;
         let unit = j["units"]["position"].as_str().unwrap_or("");

@@ -36,6 +36,56 @@ pub fn savitzky_golay(x: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
+/// Whether `t` is an even grid: every interval within 1e-3 of the median (CSV rounding passes,
+/// a logger's jitter does not).
+pub fn is_even_grid(t: &[f64]) -> bool {
+    if t.len() < 3 {
+        return true;
+    }
+    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
+    let m = d.len() / 2;
+    let median = *d.select_nth_unstable_by(m, f64::total_cmp).1;
+    t.windows(2).all(|w| ((w[1] - w[0]) - median).abs() <= 1e-3 * median)
+}
+
+/// Zero-phase quintic smoothing over 2m+1 samples on any grid: Savitzky–Golay on an even grid,
+/// else the same local least-squares quintic fitted in the samples' own times (a logger's jitter
+/// would otherwise read as noise of the size speed × jitter).
+pub fn smooth(t: &[f64], x: &[f64], half: usize) -> Vec<f64> {
+    if is_even_grid(t) {
+        return savitzky_golay(x, half);
+    }
+    let n = x.len();
+    (0..n)
+        .map(|k| {
+            let m = half.min(k).min(n - 1 - k);
+            if m < 3 {
+                return x[k];
+            }
+            let span = (t[k + m] - t[k - m]).max(f64::MIN_POSITIVE);
+            // moments Σu^j (j ≤ 10) and Σx u^j (j ≤ 5) of u = (t − t_k)/span in [−1, 1]
+            let (mut mu, mut mx) = ([0.0f64; 11], [0.0f64; 6]);
+            for i in k - m..=k + m {
+                let u = (t[i] - t[k]) / span;
+                let mut p = 1.0;
+                for j in 0..11 {
+                    mu[j] += p;
+                    if j < 6 {
+                        mx[j] += x[i] * p;
+                    }
+                    p *= u;
+                }
+            }
+            let a = DMatrix::from_fn(6, 6, |i, j| mu[i + j]);
+            let b = DVector::from_column_slice(&mx);
+            match a.lu().solve(&b) {
+                Some(beta) if beta[0].is_finite() => beta[0],
+                _ => x[k],
+            }
+        })
+        .collect()
+}
+
 /// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
 /// var(Δ²x) = 6σ²; a smooth signal sampled fast contributes almost nothing).
 pub fn second_difference_noise(x: &[f64]) -> f64 {
@@ -111,9 +161,10 @@ pub fn amplitude_spectrum(t: &[f64], e: &[f64], freqs: &[f64]) -> Vec<f64> {
         .collect()
 }
 
-/// Central differences of a Savitzky–Golay-smoothed position: (speed, acceleration).
+/// Central differences of a smoothed position (quintic over ±10 samples, on any grid): (speed,
+/// acceleration).
 pub fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
-    let s = savitzky_golay(x, 10);
+    let s = smooth(t, x, 10);
     let n = s.len();
     let mut v = vec![0.0; n];
     let mut a = vec![0.0; n];

@@ -213,12 +213,27 @@ pub struct Simulator {
     instances: Vec<Mutex<Instance>>,
     /// Number of FMU simulations done (for reporting the cost of a fit).
     pub simulations: AtomicUsize,
+    /// Past this instant every simulation fails at once: the backstop that bounds a whole
+    /// calibration's wall time (`--search-budget`), whatever fit is running.
+    deadline: Mutex<Option<std::time::Instant>>,
 }
+
+/// The message of a simulation refused past the deadline.
+pub const DEADLINE_PASSED: &str = "the calibration's time budget ran out (--search-budget)";
 
 impl Simulator {
     pub fn new(fmu: Fmu, threads: usize) -> Result<Self, HarnessError> {
         let instances = (0..threads.max(1)).map(|_| fmu.instantiate(None).map(Mutex::new)).collect::<Result<_, _>>()?;
-        Ok(Simulator { fmu, instances, simulations: AtomicUsize::new(0) })
+        Ok(Simulator { fmu, instances, simulations: AtomicUsize::new(0), deadline: Mutex::new(None) })
+    }
+
+    /// Every simulation started after `at` fails with [`DEADLINE_PASSED`].
+    pub fn set_deadline(&self, at: std::time::Instant) {
+        *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = Some(at);
+    }
+
+    pub fn past_deadline(&self) -> bool {
+        self.deadline.lock().unwrap_or_else(|p| p.into_inner()).is_some_and(|d| std::time::Instant::now() >= d)
     }
 
     pub fn threads(&self) -> usize {
@@ -278,6 +293,11 @@ impl Simulator {
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
     /// absurd trial parameter) is returned as an error for that job only.
     pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<JobResult> {
-        self.map(jobs, |inst, (run, model)| simulate(inst, &inputs[*run], model).map_err(|e| e.to_string()))
+        self.map(jobs, |inst, (run, model)| {
+            if self.past_deadline() {
+                return Err(DEADLINE_PASSED.to_string());
+            }
+            simulate(inst, &inputs[*run], model).map_err(|e| e.to_string())
+        })
     }
 }
