@@ -348,7 +348,14 @@ fn calibrate_device(
     let reverted = !dropped.is_empty();
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
-    for (j, r) in report["runs"].as_array_mut().into_iter().flatten().zip(&runs) {
+    let lengths = prob.lengths();
+    let mut offset = 0;
+    for (i, (j, r)) in report["runs"].as_array_mut().into_iter().flatten().zip(&runs).enumerate() {
+        // each run's own error, so a run (or a segment) that fits worse than the rest shows
+        let residual = &outcome.final_fit.residual[offset..offset + lengths[i]];
+        offset += lengths[i];
+        j["final_rmse_rad"] =
+            serde_json::json!((residual.iter().map(|e| e * e).sum::<f64>() / residual.len().max(1) as f64).sqrt());
         let n = r.time.len();
         let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
         j["input_smoothing_s"] = serde_json::json!(smoothing_half_width(r, args.input_smoothing) as f64 * dt);

@@ -531,24 +531,28 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
     if speeds.iter().all(|&v| v == 0.0) {
         return moving;
     }
+    // Each run's start is judged on its own, at the moving fit's parameters: a refit of every run
+    // at rest would let the runs that do start moving (a segment after a gap) drag the shared
+    // parameters and so decide for the others.
     prob.inputs.iter_mut().for_each(|i| i.initial_link_speed = 0.0);
-    let Ok(resting) = levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS) else {
+    let Some(at_rest) = prob.outputs(&moving.spec, &moving.p) else {
         prob.inputs.iter_mut().zip(&speeds).for_each(|(i, v)| i.initial_link_speed = *v);
         return moving;
     };
+    let resting_residual = prob.residual(&at_rest);
     let lengths = prob.lengths();
-    let per_run = |f: &Fit| -> Vec<f64> {
+    let per_run = |r: &[f64]| -> Vec<f64> {
         let mut offset = 0;
         lengths
             .iter()
             .map(|&n| {
-                let s = f.residual[offset..offset + n].iter().map(|e| e * e).sum();
+                let s = r[offset..offset + n].iter().map(|e| e * e).sum();
                 offset += n;
                 s
             })
             .collect()
     };
-    let (sm, sr) = (per_run(&moving), per_run(&resting));
+    let (sm, sr) = (per_run(&moving.residual), per_run(&resting_residual));
     let mut kept = 0;
     for (r, inp) in prob.inputs.iter_mut().enumerate() {
         let n = lengths[r] as f64;
@@ -557,14 +561,14 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
             kept += 1;
         }
     }
-    if kept == 0 {
-        return resting;
-    }
+    debug(format_args!(
+        "initial speeds: estimated {speeds:?}, kept {:?}",
+        prob.inputs.iter().map(|i| i.initial_link_speed).collect::<Vec<_>>()
+    ));
     if kept == speeds.iter().filter(|&&v| v != 0.0).count() {
         return moving;
     }
-    let start = if resting.sse < moving.sse { resting.p.clone() } else { moving.p.clone() };
-    levenberg_marquardt(prob, moving.spec.clone(), start, MAX_ITERATIONS).unwrap_or(moving)
+    levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS).unwrap_or(moving)
 }
 
 /// Simulations run so far (for `debug`).
@@ -815,6 +819,7 @@ impl Rig for DeviceRig<'_, '_> {
 pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Result<Outcome, String> {
     let mut rows = Vec::new();
     let t = std::time::Instant::now();
+    let estimated_speeds: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
     let first = baseline(prob, laws.allowed[0])?;
     debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
     let share = screening_share_fits(prob).then(|| prob.truncated(SCREEN_SHARE));
@@ -833,17 +838,37 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     };
     let start = Judged { fit: baseline.clone(), sig: baseline_signatures.clone() };
     let super::stepwise::Search { model, path, record } = super::stepwise::search(&rig, start, budget);
-    let rows = rig.rows.into_inner();
+    let mut rows = rig.rows.into_inner();
     debug(format_args!("searched: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let Judged { fit: mut current, mut sig } = model;
+    // The final model decides every run's start again, from the estimated speeds: the baseline,
+    // missing an effect (gravity, say), may have preferred a resting start for a run that does
+    // start moving (a segment after a gap always does).
+    let zeroed = prob.inputs.iter().zip(&estimated_speeds).any(|(i, &v)| v != 0.0 && i.initial_link_speed == 0.0);
+    if zeroed {
+        prob.inputs.iter_mut().zip(&estimated_speeds).for_each(|(i, &v)| i.initial_link_speed = v);
+        if let Ok(moving) = levenberg_marquardt(prob, current.spec.clone(), current.p.clone(), MAX_ITERATIONS) {
+            current = moving;
+        }
+    }
     if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
         current = resolve_initial_speeds(prob, current);
-        if current.sse != before {
+        if current.sse != before || zeroed {
             sig = signatures(prob, &current);
         }
     }
     debug(format_args!("initial speeds again: {:?}, {} simulations", t.elapsed(), sims(prob)));
+    // Then the structure is re-chosen with the final effects and starts: an effect found by a combination pass
+    // (gravity at the baseline, say) never passed through a round's re-choice, and a law chosen
+    // while an effect was missing may only have been standing in for it.
+    if laws.allowed.len() > 1 && !current.spec.effects.is_empty() {
+        let before = (current.spec.law, current.spec.springs);
+        current = best_law(prob, None, current, &laws.allowed, "final effects", &mut rows);
+        if (current.spec.law, current.spec.springs) != before {
+            sig = signatures(prob, &current);
+        }
+    }
     let (current, sig, backlash_laws) = choose_backlash_law(prob, current, sig);
     let unexplained = !sig.white();
     Ok(Outcome {
