@@ -308,6 +308,16 @@ impl ModelSpec {
         let folded = |e: &Effect| asymmetric && matches!(e, Effect::CoulombFriction | Effect::LinkDamping);
         self.effects.iter().copied().filter(|e| !folded(e)).collect()
     }
+    /// (asymmetry's index, its level's index) for the asymmetric friction's Coulomb and viscous
+    /// asymmetries: each level ± its asymmetry must stay ≥ 0.
+    pub fn friction_level_pairs(&self, n_groups: usize) -> Vec<(usize, Option<usize>)> {
+        let offsets = self.offsets(n_groups);
+        let at = |e: Effect| offsets.iter().find(|(_, x)| *x == e).map(|(o, _)| *o);
+        match at(Effect::AsymmetricFriction) {
+            Some(a) => vec![(a, at(Effect::CoulombFriction)), (a + 1, at(Effect::LinkDamping))],
+            None => Vec::new(),
+        }
+    }
     pub fn n_params(&self, n_groups: usize) -> usize {
         2 * n_groups + self.effects.iter().map(|e| e.params().len()).sum::<usize>()
     }
@@ -1169,6 +1179,7 @@ pub const MAX_BROYDEN_UPDATES: usize = 3;
 pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_iter: usize) -> Result<Fit, String> {
     let (lower, upper) = prob.bounds(&spec);
     let typical = spec.typical(prob.n_groups);
+    let levels = spec.friction_level_pairs(prob.n_groups);
     let clamp = |p: &mut [f64]| {
         for ((x, lo), hi) in p.iter_mut().zip(&lower).zip(&upper) {
             if let Some(b) = lo {
@@ -1177,6 +1188,12 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
             if let Some(b) = hi {
                 *x = x.min(*b);
             }
+        }
+        // friction never pushes: F± = level ± asymmetry ≥ 0 (a one-sided push is a load, which
+        // the library has as constant_load)
+        for &(asymmetry, level) in &levels {
+            let bound = level.map_or(0.0, |i| p[i].max(0.0));
+            p[asymmetry] = p[asymmetry].clamp(-bound, bound);
         }
     };
     let m = minimize(

@@ -844,7 +844,9 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     // The final model decides every run's start again, from the estimated speeds: the baseline,
     // missing an effect (gravity, say), may have preferred a resting start for a run that does
     // start moving (a segment after a gap always does).
-    let zeroed = prob.inputs.iter().zip(&estimated_speeds).any(|(i, &v)| v != 0.0 && i.initial_link_speed == 0.0);
+    // (Without effects the final model is the baseline's, whose choice stands.)
+    let zeroed = !current.spec.effects.is_empty()
+        && prob.inputs.iter().zip(&estimated_speeds).any(|(i, &v)| v != 0.0 && i.initial_link_speed == 0.0);
     if zeroed {
         prob.inputs.iter_mut().zip(&estimated_speeds).for_each(|(i, &v)| i.initial_link_speed = v);
         if let Ok(moving) = levenberg_marquardt(prob, current.spec.clone(), current.p.clone(), MAX_ITERATIONS) {

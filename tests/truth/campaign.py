@@ -1,0 +1,269 @@
+"""The calibration loop's proving ground: device rigs drawn at random, seeded, from the independent
+truth model (tests/truth/truth_model.py, written apart from the FMU), each calibrated blind by
+`thermovia calibrate` and scored against its truth.
+
+A rig draws (every draw from the rig's own seed):
+- the link inertia 0.2–5× the paper's bench (0.018 kg·m²), the link's natural frequency 2–50× the
+  highest excitation frequency, which sets the stiffness (kept within 0.3–10× the bench's 34 N·m/rad),
+  a damping ratio 0.05–0.3; 1–4 temperatures, the stiffness falling with temperature as the PCL's;
+- the excitation: one sine per run at 0.2–5 Hz (one or two frequencies), a multisine, or steps;
+- the logger: 200 Hz–5 kHz (at least 10 samples per period of the natural frequency), runs of 5–60 s,
+  noise 1e-5–1e-3 rad, encoders of 1k–100k counts per turn, timestamp jitter up to ±20 % of the period
+  on half the rigs, a dropout of up to 0.5 s per run on a third;
+- 0–3 effects of the library with sizes drawn against the rig's noise floor and stiffness (every effect
+  moves the link by 20× the floor to a tenth of the amplitude), pairs and triples included; or, on a share of the rigs, an effect
+  outside the library (a stiffness that depends on the link's angle).
+
+A rig in the library passes when the added effects are the truth's set, every parameter within 10 %,
+the transmission's K and C within 10 % at every temperature, the final RMSE ≤ 1.2× the noise floor
+√(σ² + q²/12) and the residual is not flagged unexplained. A rig outside the library passes when it is
+flagged unexplained or explained to ≤ 1.2× the floor.
+
+Drive rigs (torque- or reference-driven servos, linear axes) are not drawn yet: the truth model is a
+device rig.
+
+  .venv/bin/python tests/truth/campaign.py --rigs 300 --out out/campaign          # the benchmark
+  .venv/bin/python tests/truth/campaign.py --ci --out out/campaign-ci             # the CI subset
+"""
+import argparse
+import json
+import math
+import statistics
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import truth_model  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[2]
+THERMOVIA = ROOT / "target" / "release" / "thermovia"
+BENCH_K = 34.0  # N·m/rad, the truth model's default stiffness at 22 °C
+BENCH_J = 0.018  # kg·m²
+TEMPERATURES = (22.0, 40.0, 50.0, 60.0)
+K_SHAPE = (1.0, 20 / 34, 12 / 34, 5 / 34)  # the stiffness's fall with temperature, as the PCL's
+RATES = (200, 250, 400, 500, 1000, 2000, 2500, 5000)  # divisors of the truth model's 1e-4 s step
+# sample budget of the CI subset: the first rigs whose runs add up to at most this many samples
+CI_RIGS, CI_SAMPLES = 30, 60_000
+
+
+def log_uniform(rng, lo, hi):
+    return math.exp(rng.uniform(math.log(lo), math.log(hi)))
+
+
+def draw(seed):
+    """One rig: the truth model's arguments, the expected effects and what the scorer needs."""
+    rng = np.random.default_rng(seed)
+    excitation = rng.choice(["sine", "sine", "sine", "multisine", "steps"])
+    f = log_uniform(rng, 0.2, 5.0) if excitation == "sine" else 1.0
+    freqs = [f] if rng.uniform() < 0.5 or excitation != "sine" else [f, min(2 * f, 5.0)]
+    f_top = max(freqs) if excitation == "sine" else (3.0 if excitation == "multisine" else 1.0 / (2 * math.pi * 0.05))
+    j = BENCH_J * log_uniform(rng, 0.2, 5.0)
+    for _ in range(100):
+        ratio = log_uniform(rng, 2.0, 50.0)
+        k = j * (2 * math.pi * ratio * f_top) ** 2
+        if 0.3 * BENCH_K <= k <= 10 * BENCH_K:
+            break
+    else:
+        k = min(max(k, 0.3 * BENCH_K), 10 * BENCH_K)
+    f_n = math.sqrt(k / j) / (2 * math.pi)
+    n_temps = int(rng.integers(1, 5))
+    picks = sorted(rng.choice(4, size=n_temps, replace=False))
+    temps = [TEMPERATURES[i] for i in picks]
+    ks = [k * K_SHAPE[i] for i in picks]
+    zeta = rng.uniform(0.05, 0.3)
+    cs = [2 * zeta * math.sqrt(kk * j) for kk in ks]
+    rate = int(rng.choice([r for r in RATES if r >= 10 * max(f_n, f_top)] or [RATES[-1]]))
+    duration = round(log_uniform(rng, 5.0, 60.0), 1)
+    if excitation == "multisine":
+        duration = 5.0 * max(1, round(duration / 5.0))  # whole cycles of every component
+    noise = log_uniform(rng, 1e-5, 1e-3)
+    counts = log_uniform(rng, 1e3, 1e5)
+    quantum = 2 * math.pi / counts
+    floor = math.sqrt(noise ** 2 + quantum ** 2 / 12)
+    amplitude = rng.uniform(0.1, 0.5)
+    jitter = rng.uniform(0.0, 0.2) if rng.uniform() < 0.5 else 0.0
+    dropout = rng.uniform(0.05, 0.5) if rng.uniform() < 1 / 3 and duration >= 5.0 else 0.0
+    # effects, sized by how far they move the link against the softest stiffness: from 20× the floor
+    # (visible) to a tenth of the amplitude (an effect, not the whole motion)
+    k_soft, w = min(ks), 2 * math.pi * f_top
+    hi = 0.1 * amplitude
+    lo = min(20.0 * floor, 0.5 * hi)
+    deflection = lambda: log_uniform(rng, lo, hi)  # noqa: E731
+    size = lambda: deflection() * k_soft  # noqa: E731 (a torque)
+    outside = rng.uniform() < 0.15
+    args, expected = [], {}
+    if outside:
+        beta = rng.uniform(0.5, 2.0) / amplitude ** 2
+        args += ["--effect", f"angle_stiffness={beta}"]
+    else:
+        n_effects = int(rng.choice([0, 1, 1, 2, 2, 3]))
+        friction = rng.choice(["coulomb", "stribeck", "asymmetric", None])
+        others = list(rng.permutation(["backlash", "gravity", "link_damping", "constant_load"]))
+        chosen = []
+        if n_effects and friction is not None:
+            chosen.append(str(friction))
+        chosen += [str(o) for o in others][: n_effects - len(chosen)]
+        if "asymmetric" in chosen:  # asymmetric friction carries its own viscous levels and offset
+            chosen = [c for c in chosen if c not in ("link_damping", "constant_load")]
+        for e in chosen:
+            if e == "coulomb":
+                fc = size()
+                args += ["--effect", f"coulomb_friction={fc}"]
+                expected["coulomb_friction"] = {"torque_nm": fc}
+            elif e == "stribeck":
+                fc, fs, vst = size(), size(), rng.uniform(0.05, 0.3) * amplitude * w
+                args += ["--effect", f"coulomb_friction={fc}", "--effect", f"stribeck={fs},{vst}"]
+                expected["coulomb_friction"] = {"torque_nm": fc}
+                expected["stribeck_friction"] = {"torque_nm": fs, "velocity": vst}
+            elif e == "asymmetric":
+                fp, fn_ = size(), size()
+                bp, bn = size() / (amplitude * w), size() / (amplitude * w)
+                args += ["--effect", f"asymmetric_friction={fp},{fn_},{bp},{bn}"]
+                expected["asymmetric_friction"] = {"coulomb_positive": fp, "coulomb_negative": fn_,
+                                                   "viscous_positive": bp, "viscous_negative": bn}
+            elif e == "backlash":
+                width = deflection()
+                args += ["--effect", f"backlash={width}"]
+                expected["backlash"] = {"width_rad": width}
+            elif e == "gravity":
+                mgl = log_uniform(rng, 0.05, 1.0) * amplitude * k_soft
+                offset = rng.choice([0.0, rng.uniform(-0.3, 0.3)])
+                args += ["--effect", f"gravity_mgl={mgl}", "--effect", f"gravity_offset={offset}"]
+                expected["gravity"] = {"mgl_nm": mgl, "offset_rad": float(offset)}
+            elif e == "link_damping":
+                b = size() / (amplitude * w)
+                args += ["--effect", f"link_damping={b}"]
+                expected["link_damping"] = {"damping_nms": b}
+            elif e == "constant_load":
+                tau = size() * rng.choice([-1.0, 1.0])
+                args += ["--effect", f"constant_load={tau}"]
+                expected["constant_load"] = {"torque_nm": tau}
+    truth_args = [
+        "--declare-inertia", "--seed", str(seed), "--excitation", str(excitation),
+        "--temperatures", ",".join(f"{t:g}" for t in temps),
+        "--frequencies", ",".join(f"{x:.4g}" for x in freqs) if excitation == "sine" else ",".join("1" for _ in freqs),
+        "--stiffness", ",".join(repr(x) for x in ks), "--damping", ",".join(repr(x) for x in cs),
+        "--inertia", repr(j), "--amplitude", repr(amplitude), "--duration", repr(duration),
+        "--rate", str(rate), "--noise", repr(noise), "--quantum", repr(quantum),
+        "--jitter", repr(jitter), "--dropout", repr(dropout), *args,
+    ]
+    n_effects = len(expected)
+    klass = "outside library" if outside else f"{n_effects} effect{'s' if n_effects != 1 else ''}"
+    samples = int(len(temps) * len(freqs) * duration * rate)
+    return {
+        "seed": seed, "class": klass, "truth_args": truth_args, "expected": expected, "outside": outside,
+        "floor": floor, "samples": samples,
+        "rig": {"inertia": j, "stiffness_22c_equivalent": k, "natural_frequency_hz": f_n, "zeta": zeta,
+                "temperatures": temps, "excitation": str(excitation), "frequencies_hz": freqs, "rate_hz": rate,
+                "duration_s": duration, "noise": noise, "counts_per_turn": counts, "jitter": jitter,
+                "dropout_s": dropout},
+    }
+
+
+def score(rig, report):
+    """(passed, reasons) of one calibrated rig against its truth."""
+    why = []
+    found = {e["effect"]: e["parameters"] for e in report.get("added_effects", [])}
+    ratio = report["final"]["rmse_rad"] / rig["floor"]
+    if rig["outside"]:
+        ok = report.get("unexplained") is True or ratio <= 1.2
+        return ok, [] if ok else [f"neither flagged unexplained nor at the floor ({ratio:.2f}×)"]
+    if set(found) != set(rig["expected"]):
+        why.append(f"effects {sorted(found)} ≠ truth {sorted(rig['expected'])}")
+    for effect, params in rig["expected"].items():
+        for key, value in params.items():
+            got = found.get(effect, {}).get(key)
+            if got is None:
+                continue
+            tol = 0.1 * abs(value) if key != "offset_rad" else 0.02
+            if abs(got - value) > tol:
+                why.append(f"{effect}.{key} = {got:.4g}, truth {value:.4g}")
+    truth = dict(zip(rig["rig"]["temperatures"], zip(rig["k"], rig["c"])))
+    for g in report.get("identified", []):
+        k, c = truth.get(g["temperature_c"], (None, None))
+        if k is None:
+            continue
+        if abs(g["stiffness"] / k - 1) > 0.1 or abs(g["damping"] / c - 1) > 0.1:
+            why.append(f"{g['temperature_c']:g} °C: K {g['stiffness'] / k - 1:+.1%}, C {g['damping'] / c - 1:+.1%}")
+    if ratio > 1.2:
+        why.append(f"final {ratio:.2f}× the floor")
+    if report.get("unexplained"):
+        why.append("flagged unexplained")
+    return not why, why
+
+
+def run_rig(rig, out, budget):
+    folder = out / f"rig_{rig['seed']}"
+    data, result = folder / "runs", folder / "calibration"
+    truth_model.main(["--out", str(data), *rig["truth_args"]])
+    truth = json.loads((data / "truth.json").read_text())
+    by_temp = {}
+    for r in truth["runs"]:
+        by_temp[r["temperature_c"]] = (r["stiffness"], r["damping"])
+    rig["k"] = [by_temp[t][0] for t in rig["rig"]["temperatures"]]
+    rig["c"] = [by_temp[t][1] for t in rig["rig"]["temperatures"]]
+    started = time.monotonic()
+    run = subprocess.run([str(THERMOVIA), "calibrate", str(data), "--out", str(result), "--no-plots",
+                          "--search-budget", str(budget)], capture_output=True, text=True)
+    seconds = time.monotonic() - started
+    if run.returncode != 0:
+        return {"seed": rig["seed"], "class": rig["class"], "passed": False, "seconds": seconds,
+                "why": [f"calibrate failed: {run.stderr.strip()[-300:]}"], "rig": rig["rig"]}
+    report = json.loads((result / "report.json").read_text())
+    passed, why = score(rig, report)
+    return {"seed": rig["seed"], "class": rig["class"], "passed": passed, "why": why, "seconds": seconds,
+            "ratio": report["final"]["rmse_rad"] / rig["floor"], "added": [e["effect"] for e in report["added_effects"]],
+            "expected": sorted(rig["expected"]), "rig": rig["rig"]}
+
+
+def ci_seeds():
+    """The CI subset: the first CI_RIGS seeds whose rigs hold at most CI_SAMPLES samples (fixed)."""
+    seeds, s = [], 1
+    while len(seeds) < CI_RIGS:
+        if draw(s)["samples"] <= CI_SAMPLES:
+            seeds.append(s)
+        s += 1
+    return seeds
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", type=Path, default=Path("out/campaign"), help="folder for the rigs and campaign.json")
+    ap.add_argument("--rigs", type=int, default=300, help="number of rigs (seeds first-seed …)")
+    ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--ci", action="store_true", help=f"the CI subset: {CI_RIGS} fixed seeds of at most {CI_SAMPLES} samples")
+    ap.add_argument("--search-budget", type=float, default=120.0, help="thermovia calibrate --search-budget, s")
+    a = ap.parse_args(argv)
+    seeds = ci_seeds() if a.ci else list(range(a.first_seed, a.first_seed + a.rigs))
+    a.out.mkdir(parents=True, exist_ok=True)
+    results = []
+    for i, s in enumerate(seeds):
+        rig = draw(s)
+        r = run_rig(rig, a.out, a.search_budget)
+        results.append(r)
+        mark = "pass" if r["passed"] else "FAIL"
+        print(f"[{i + 1}/{len(seeds)}] seed {s} ({r['class']}): {mark} in {r['seconds']:.1f} s"
+              + ("" if r["passed"] else f": {'; '.join(r['why'])}"), flush=True)
+        (a.out / "campaign.json").write_text(json.dumps({"seeds": seeds, "results": results}, indent=1) + "\n")
+    classes = sorted({r["class"] for r in results})
+    print("\nclass              rigs  passed  rate")
+    for c in classes:
+        rs = [r for r in results if r["class"] == c]
+        n = sum(r["passed"] for r in rs)
+        print(f"{c:<18} {len(rs):>4}  {n:>6}  {100 * n / len(rs):5.1f} %")
+    inside = [r for r in results if r["class"] != "outside library"]
+    n = sum(r["passed"] for r in results)
+    print(f"{'all':<18} {len(results):>4}  {n:>6}  {100 * n / len(results):5.1f} %")
+    if inside:
+        print(f"inside the library: {100 * sum(r['passed'] for r in inside) / len(inside):.1f} %")
+    secs = [r["seconds"] for r in results]
+    print(f"calibration wall time: median {statistics.median(secs):.1f} s, max {max(secs):.1f} s")
+    return results
+
+
+if __name__ == "__main__":
+    main()
