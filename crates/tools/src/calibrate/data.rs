@@ -572,7 +572,7 @@ pub fn read_inputs_with(inputs: &[PathBuf], options: ReadOptions) -> Result<Vec<
 /// An uneven time base is either a logger's timestamps jittering around a uniform clock (the
 /// samples were taken on the clock, the stamps are off) or samples really taken unevenly (the stamps
 /// are right). The positions tell which: on the wrong time base a moving signal gains speed × timing
-/// error. The uniform grid nearest the stamps replaces them when the positions are clearly smoother
+/// error. The uniform grid nearest the stamps replaces them when the positions are smoother
 /// on it (`quality::GRID_PREFERENCE`); otherwise the stamps stay, and smoothing and derivatives work
 /// on the uneven grid.
 pub fn choose_time_base(mut run: Run) -> Run {

@@ -171,15 +171,23 @@ pub fn nearest_grid(t: &[f64]) -> Option<Vec<f64>> {
     (b > 0.0 && worst < 0.5 * b).then_some(grid)
 }
 
-/// How rough the columns look on the time base `t`: the sum over columns of the median deviation
-/// from the line through each sample's neighbours. On the wrong time base a moving signal gains
-/// speed × timing error.
+/// How rough the columns look on the time base `t`: the sum over columns of the mean deviation
+/// from the line through each sample's neighbours (the mean, not the median, which an encoder's
+/// steps pin to 0 or one count). On the wrong time base a moving signal gains speed × timing error.
 pub fn roughness(t: &[f64], columns: &[&[f64]]) -> f64 {
-    columns.iter().map(|x| median((1..x.len().saturating_sub(1)).map(|k| deviation(t, x, k).abs()).collect())).sum()
+    columns
+        .iter()
+        .map(|x| {
+            let n = x.len().saturating_sub(2).max(1) as f64;
+            (1..x.len().saturating_sub(1)).map(|k| deviation(t, x, k).abs()).sum::<f64>() / n
+        })
+        .sum()
 }
 
-/// A grid is taken over the logged times when the positions are clearly smoother on it.
-pub const GRID_PREFERENCE: f64 = 0.7;
+/// A grid is taken over the logged times when the positions are smoother on it: whichever time
+/// base is wrong adds speed × timing error to the roughness, and where the noise hides that, either
+/// is as good.
+pub const GRID_PREFERENCE: f64 = 1.0;
 
 /// x[k] minus the straight line through its neighbours at t[k]: the local deviation, on any grid.
 fn deviation(t: &[f64], x: &[f64], k: usize) -> f64 {
