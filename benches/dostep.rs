@@ -8,7 +8,8 @@
 //!   cargo bench --bench dostep
 //!
 //! Environment (for callgrind or a quick look): DOSTEP_STEPS (steps per run, default 200 000),
-//! DOSTEP_RUNS (runs per regime, default 3), DOSTEP_REGIME (only regimes whose label contains it),
+//! DOSTEP_RUNS (runs per regime, default 3), DOSTEP_REGIME (only regimes whose label contains it;
+//! `budget`: only the work budget's worst cases, one step each),
 //! DOSTEP_NO_FMPY (skip fmpy), DOSTEP_FMU (another .fmu than target/fmu/ThermoVIA.fmu: an earlier
 //! commit's build, for a before/after measured in one session).
 
@@ -232,6 +233,10 @@ fn main() {
     let runs = env_usize("DOSTEP_RUNS", 3);
     let only = std::env::var("DOSTEP_REGIME").unwrap_or_default();
     println!("fmi2DoStep via the C API, h = 1 ms, set motor_torque + doStep + get link_angle; median of {runs} x {steps} steps");
+    if only == "budget" {
+        worst_cases(&fmu, runs.max(3));
+        return;
+    }
     matvec(steps); // warm up
     let mut base = Vec::new();
     let mut rows = Vec::new();
@@ -263,6 +268,9 @@ fn main() {
         "  {:<28} median {mv:>7.1} ns  (min {min:.1}, max {max:.1}), timed between the runs above",
         "bare 6x6 mat-vec step"
     );
+    if only.is_empty() {
+        worst_cases(&fmu, runs.max(3));
+    }
     let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
     let python = root.join(".venv/bin/python");
     if std::env::var_os("DOSTEP_NO_FMPY").is_some() || !only.is_empty() {
@@ -285,5 +293,41 @@ fn main() {
             fmpy_ns / rust_ns
         ),
         None => println!("fmpy benchmark failed: {}{}", text, String::from_utf8_lossy(&out.stderr)),
+    }
+}
+
+/// The work budget's worst cases, timed (the tests count their work; the time belongs here): one
+/// fmi2DoStep of each, median of `runs`, with what it returned.
+fn worst_cases(fmu: &Fmu, runs: usize) {
+    type Case = (&'static str, f64, &'static [(&'static str, f64)], f64);
+    let cases: &[Case] = &[
+        ("h = 1e300, refused before any work", 1e300, &[], 0.0),
+        ("100 s of heating in 1e5 sub-steps", 100.0, &[], 8.0),
+        ("stiff friction: the attempt budget", 1.0, &[("spring_stiffness", 1e7), ("coulomb_friction", 1.0)], 0.0),
+        ("light link, 1e3 N·m friction", 1.0, &[("link_inertia", 1e-9), ("coulomb_friction", 1e3)], 0.0),
+    ];
+    println!("worst cases of the work budget (one fmi2DoStep each, median of {runs}):");
+    for (label, h, params, heater) in cases {
+        let mut times = Vec::new();
+        let mut outcome = String::new();
+        for _ in 0..runs {
+            let mut i = fmu.instantiate(None).expect("instantiate");
+            i.initialize(0.0, None, params).expect("initialize");
+            i.set("heater_power", *heater).expect("heater");
+            i.set("motor_torque", 1.0).expect("torque");
+            let started = Instant::now();
+            let r = i.step(*h);
+            times.push(started.elapsed().as_secs_f64());
+            outcome = match r {
+                Ok(()) => "OK".into(),
+                // the reason the FMU logged, after "discarded:"
+                Err(e) => {
+                    let text = format!("{e}");
+                    let why = text.split("discarded: ").nth(1).unwrap_or(&text);
+                    why.split(';').next().unwrap_or(why).chars().take(70).collect()
+                }
+            };
+        }
+        println!("  {label:<40} median {:>9.3} ms  ({outcome})", 1e3 * median(times));
     }
 }
