@@ -159,7 +159,7 @@ def draw(seed):
         "floor": floor, "samples": samples,
         "rig": {"inertia": j, "stiffness_22c_equivalent": k, "natural_frequency_hz": f_n, "zeta": zeta,
                 "temperatures": temps, "excitation": str(excitation), "frequencies_hz": freqs, "rate_hz": rate,
-                "duration_s": duration, "noise": noise, "counts_per_turn": counts, "jitter": jitter,
+                "duration_s": duration, "amplitude_rad": amplitude, "noise": noise, "counts_per_turn": counts, "jitter": jitter,
                 "dropout_s": dropout},
     }
 
