@@ -119,6 +119,15 @@ impl Run {
         }
     }
 
+    /// A file-name-safe stem for this run's plots: the file's stem, `_segment_K` for a segment.
+    pub fn plot_stem(&self) -> String {
+        let stem = self.file.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+        match self.segment {
+            Some((k, _)) => format!("{stem}_segment_{k}"),
+            None => stem,
+        }
+    }
+
     /// Run temperature for reporting and grouping: mean of the thermocouple, °C.
     pub fn mean_temperature_c(&self) -> f64 {
         self.temperature_c.iter().sum::<f64>() / self.temperature_c.len() as f64

@@ -96,6 +96,8 @@ pub struct DriveModel {
 #[derive(Clone, Debug)]
 pub struct DriveInput {
     pub name: String,
+    /// A file-name-safe stem for the run's plots.
+    pub plot_stem: String,
     pub time: Vec<f64>,
     pub drive: DriveKind,
     pub rigid: bool,
@@ -182,6 +184,7 @@ impl DriveInput {
     pub fn from_run(r: &Run) -> DriveInput {
         let mut d = DriveInput {
             name: r.name(),
+            plot_stem: r.plot_stem(),
             time: r.time.clone(),
             drive: r.drive,
             rigid: r.rigid,
@@ -1746,7 +1749,7 @@ pub fn plots(
                 &t,
                 &[("baseline", &every(&e0), orange), ("final", &every(&e1), blue)],
             )?;
-            files.push((format!("plots/residual_{}.svg", inp.name.trim_end_matches(".csv")), svg.into_bytes()));
+            files.push((format!("plots/residual_{}.svg", inp.plot_stem), svg.into_bytes()));
             Ok(())
         };
     for (i, inp) in prob.inputs.iter().enumerate() {

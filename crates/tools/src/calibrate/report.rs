@@ -586,7 +586,7 @@ pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output:
         let e0: Vec<f64> = o.baseline.residual[offset..offset + n].to_vec();
         let e1: Vec<f64> = o.final_fit.residual[offset..offset + n].to_vec();
         offset += n;
-        let stem = run.name().trim_end_matches(".csv").to_string();
+        let stem = run.plot_stem();
         let svg = line_plot(
             &format!("{}: measured link angle and the model before/after", run.name()),
             "link angle (rad)",
