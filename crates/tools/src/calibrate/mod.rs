@@ -263,11 +263,10 @@ fn calibrate_device(
     sim: &sim::Simulator,
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
-    let sim = sim;
     let (group, temperatures) = group_runs(&runs);
     let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
-    let mut prob = fit::Problem::new(&sim, inputs, measured, group, &temperatures)?;
+    let mut prob = fit::Problem::new(sim, inputs, measured, group, &temperatures)?;
     let laws = search::damping_laws(&prob);
     // the black-box references need no FMU: computed beside the search
     let groups = prob.group.clone();
@@ -477,13 +476,12 @@ fn calibrate_drive_with(
     sim: &sim::Simulator,
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
-    let sim = sim;
     let (group, temperatures) = group_runs(&runs);
     let mut prob = drive::DriveProblem::new(sim, &runs, group, temperatures.len());
     let mut held_prob = if held.is_empty() {
         None
     } else {
-        Some(drive::DriveProblem::new(&sim, &held, held_out_groups(&held, &temperatures), temperatures.len()))
+        Some(drive::DriveProblem::new(sim, &held, held_out_groups(&held, &temperatures), temperatures.len()))
     };
     let budget = stepwise::Budget::seconds(args.search_budget);
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut(), &budget)?;

@@ -212,10 +212,7 @@ pub fn find_corrupt(t: &[f64], x: &[f64], q: Quantity) -> Vec<Finding> {
 /// touch) and its resolution (the smallest step it takes).
 fn noise_scales(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let n = x.len();
-    let mut e = vec![0.0; n];
-    for k in 1..n - 1 {
-        e[k] = deviation(t, x, k);
-    }
+    let e: Vec<f64> = (0..n).map(|k| if k == 0 || k == n - 1 { 0.0 } else { deviation(t, x, k) }).collect();
     let floor = 1.4826 * median(e[1..n - 1].iter().map(|v| v.abs()).collect());
     let resolution = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
     let resolution = if resolution.is_finite() { resolution } else { 0.0 };
