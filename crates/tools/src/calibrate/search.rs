@@ -520,6 +520,39 @@ pub struct LawRow {
     pub bic: f64,
 }
 
+/// The runs started at rest whose estimated initial speed the final model prefers, each judged on
+/// its own at the model's parameters (its BIC must fall by `BIC_MARGIN`), then one refit if any
+/// run changed. No refit comes first, so the comparison does not lean towards the moving starts.
+fn restart_moving_runs(prob: &mut Problem, current: Fit, estimated: &[f64]) -> Fit {
+    let before: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    let candidates: Vec<usize> =
+        (0..estimated.len()).filter(|&r| estimated[r] != 0.0 && before[r] == 0.0).collect();
+    prob.inputs.iter_mut().zip(estimated).for_each(|(i, &v)| i.initial_link_speed = v);
+    let moving = prob.outputs(&current.spec, &current.p).map(|o| prob.residual(&o));
+    prob.inputs.iter_mut().zip(&before).for_each(|(i, &v)| i.initial_link_speed = v);
+    let Some(moving) = moving else { return current };
+    let lengths = prob.lengths();
+    let starts: Vec<usize> = lengths.iter().scan(0, |o, &n| Some(std::mem::replace(o, *o + n))).collect();
+    let sse = |r: &[f64], run: usize| r[starts[run]..starts[run] + lengths[run]].iter().map(|e| e * e).sum::<f64>();
+    let mut changed = false;
+    for &r in &candidates {
+        let n = lengths[r] as f64;
+        debug(format_args!("run {r}: at rest SSE {:.4e}, moving {:.4e}", sse(&current.residual, r), sse(&moving, r)));
+        if n * (sse(&current.residual, r) / sse(&moving, r)).ln() > n.ln() + BIC_MARGIN {
+            prob.inputs[r].initial_link_speed = estimated[r];
+            changed = true;
+        }
+    }
+    debug(format_args!(
+        "restarted moving: {:?}",
+        prob.inputs.iter().map(|i| i.initial_link_speed).collect::<Vec<_>>()
+    ));
+    if !changed {
+        return current;
+    }
+    levenberg_marquardt(prob, current.spec.clone(), current.p.clone(), MAX_ITERATIONS).unwrap_or(current)
+}
+
 /// Runs started moving (`conditioning::initial_speed` saw the link moving at its first sample) are
 /// fitted again at rest with `fit`'s structure; a run keeps the moving start only when it lowers
 /// that run's BIC by more than `BIC_MARGIN` (one more number per run). A link that starts at rest
@@ -531,28 +564,24 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
     if speeds.iter().all(|&v| v == 0.0) {
         return moving;
     }
-    // Each run's start is judged on its own, at the moving fit's parameters: a refit of every run
-    // at rest would let the runs that do start moving (a segment after a gap) drag the shared
-    // parameters and so decide for the others.
     prob.inputs.iter_mut().for_each(|i| i.initial_link_speed = 0.0);
-    let Some(at_rest) = prob.outputs(&moving.spec, &moving.p) else {
+    let Ok(resting) = levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS) else {
         prob.inputs.iter_mut().zip(&speeds).for_each(|(i, v)| i.initial_link_speed = *v);
         return moving;
     };
-    let resting_residual = prob.residual(&at_rest);
     let lengths = prob.lengths();
-    let per_run = |r: &[f64]| -> Vec<f64> {
+    let per_run = |f: &Fit| -> Vec<f64> {
         let mut offset = 0;
         lengths
             .iter()
             .map(|&n| {
-                let s = r[offset..offset + n].iter().map(|e| e * e).sum();
+                let s = f.residual[offset..offset + n].iter().map(|e| e * e).sum();
                 offset += n;
                 s
             })
             .collect()
     };
-    let (sm, sr) = (per_run(&moving.residual), per_run(&resting_residual));
+    let (sm, sr) = (per_run(&moving), per_run(&resting));
     let mut kept = 0;
     for (r, inp) in prob.inputs.iter_mut().enumerate() {
         let n = lengths[r] as f64;
@@ -561,14 +590,14 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
             kept += 1;
         }
     }
-    debug(format_args!(
-        "initial speeds: estimated {speeds:?}, kept {:?}",
-        prob.inputs.iter().map(|i| i.initial_link_speed).collect::<Vec<_>>()
-    ));
+    if kept == 0 {
+        return resting;
+    }
     if kept == speeds.iter().filter(|&&v| v != 0.0).count() {
         return moving;
     }
-    levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS).unwrap_or(moving)
+    let start = if resting.sse < moving.sse { resting.p.clone() } else { moving.p.clone() };
+    levenberg_marquardt(prob, moving.spec.clone(), start, MAX_ITERATIONS).unwrap_or(moving)
 }
 
 /// Simulations run so far (for `debug`).
@@ -848,10 +877,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     let zeroed = !current.spec.effects.is_empty()
         && prob.inputs.iter().zip(&estimated_speeds).any(|(i, &v)| v != 0.0 && i.initial_link_speed == 0.0);
     if zeroed {
-        prob.inputs.iter_mut().zip(&estimated_speeds).for_each(|(i, &v)| i.initial_link_speed = v);
-        if let Ok(moving) = levenberg_marquardt(prob, current.spec.clone(), current.p.clone(), MAX_ITERATIONS) {
-            current = moving;
-        }
+        current = restart_moving_runs(prob, current, &estimated_speeds);
     }
     if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
