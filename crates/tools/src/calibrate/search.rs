@@ -525,8 +525,7 @@ pub struct LawRow {
 /// run changed. No refit comes first, so the comparison does not lean towards the moving starts.
 fn restart_moving_runs(prob: &mut Problem, current: Fit, estimated: &[f64]) -> Fit {
     let before: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
-    let candidates: Vec<usize> =
-        (0..estimated.len()).filter(|&r| estimated[r] != 0.0 && before[r] == 0.0).collect();
+    let candidates: Vec<usize> = (0..estimated.len()).filter(|&r| estimated[r] != 0.0 && before[r] == 0.0).collect();
     prob.inputs.iter_mut().zip(estimated).for_each(|(i, &v)| i.initial_link_speed = v);
     let moving = prob.outputs(&current.spec, &current.p).map(|o| prob.residual(&o));
     prob.inputs.iter_mut().zip(&before).for_each(|(i, &v)| i.initial_link_speed = v);
@@ -543,10 +542,7 @@ fn restart_moving_runs(prob: &mut Problem, current: Fit, estimated: &[f64]) -> F
             changed = true;
         }
     }
-    debug(format_args!(
-        "restarted moving: {:?}",
-        prob.inputs.iter().map(|i| i.initial_link_speed).collect::<Vec<_>>()
-    ));
+    debug(format_args!("restarted moving: {:?}", prob.inputs.iter().map(|i| i.initial_link_speed).collect::<Vec<_>>()));
     if !changed {
         return current;
     }
