@@ -740,6 +740,13 @@ pub fn validate(s: &Snapshot) -> Result<(), String> {
     let th = &m.thermal;
     finite(th.housing_temperature, "housing temperature")?;
     finite(th.pcl_temperature, "PCL temperature")?;
+    if !(th.pcl_temperature > 0.0 && th.housing_temperature > 0.0) {
+        // Model::step discards a step that would leave either at or below 0 K
+        return Err(format!(
+            "PCL temperature {} K and housing temperature {} K: both must be above 0 K",
+            th.pcl_temperature, th.housing_temperature
+        ));
+    }
     finite(th.pcl_enthalpy, "PCL enthalpy")?;
     finite(th.heat_lost, "heat lost")?;
     if !(th.heater_energy.is_finite() && th.heater_energy >= 0.0) {
@@ -1008,36 +1015,62 @@ mod tests {
         b
     }
 
-    /// The fuzzer's find (issue 31): heating through a melting step 1e-3 K wide with a solid heat
-    /// capacity of 1 J/(kg·K) leaves T within the runtime's inversion tolerance of h⁻¹(H); the state
-    /// restores.
+    /// The fuzzer's finds (issue 31), each a state the runtime reached and the check refused:
+    /// heating into a melting step 1e-3 K wide (the check re-split the latent heat at T_f = T; the
+    /// inverse series ran ten widths out, 2.4e-3 K off), and a PCL of 1e-9 kg under 5.7 kW (the
+    /// explicit thermal stages blew up to −1e305 K, finite: now a discarded step). Every state the
+    /// runtime keeps, steps that fail included, restores.
     #[test]
-    fn a_state_heated_into_a_sharp_melting_step_restores() {
-        let mut m = Model::default();
-        let v = |name| VARIABLES.iter().find(|v| v.name == name).unwrap();
-        for (name, x) in [
-            ("pcl_specific_heat_solid", 1.0),
-            ("pcl_melting_width", 1e-3),
-            ("crystallisation_nucleation_constant", 1e8),
-        ] {
-            match v(name).access {
-                Access::Real { set: Some(set), .. } => set(&mut m, x),
-                _ => unreachable!(),
+    fn states_the_fuzzer_found_refused_now_restore() {
+        type Case = (&'static [(&'static str, f64)], f64, &'static [f64]);
+        let cases: [Case; 3] = [
+            (
+                &[
+                    ("pcl_specific_heat_solid", 1.0),
+                    ("pcl_melting_width", 1e-3),
+                    ("crystallisation_nucleation_constant", 1e8),
+                ],
+                1.399550829980205e3,
+                &[0.2],
+            ),
+            (
+                &[
+                    ("pcl_specific_heat_solid", 1.0),
+                    ("initial_housing_temperature", 8.89418101276832e3),
+                    ("pcl_melting_width", 1e-3),
+                ],
+                0.0,
+                &[0.01],
+            ),
+            (&[("pcl_mass", 1e-9)], 5.733507033453997e3, &[0.001, 0.05]),
+        ];
+        for (i, (params, heater, steps)) in cases.iter().enumerate() {
+            let mut m = Model::default();
+            for (name, x) in params.iter() {
+                match VARIABLES.iter().find(|v| v.name == *name).unwrap().access {
+                    Access::Real { set: Some(set), .. } => set(&mut m, *x),
+                    _ => unreachable!(),
+                }
             }
+            m.initialize();
+            m.inputs.heater_power = *heater;
+            let mut time = 0.0;
+            for h in steps.iter() {
+                if m.step(*h).is_ok() {
+                    time += h;
+                }
+            }
+            let s = Snapshot {
+                model: m,
+                phase: Phase::StepComplete,
+                time,
+                start_time: 0.0,
+                stop_time: None,
+                terminated: false,
+            };
+            let back = deserialize(&serialize(&s)).unwrap_or_else(|e| panic!("case {i}: {e}"));
+            assert_eq!(back, s, "case {i}");
         }
-        m.initialize();
-        m.inputs.heater_power = 1.399550829980205e3;
-        m.step(0.2).unwrap();
-        let s = Snapshot {
-            model: m,
-            phase: Phase::StepComplete,
-            time: 0.2,
-            start_time: 0.0,
-            stop_time: None,
-            terminated: false,
-        };
-        let back = deserialize(&serialize(&s)).expect("a state the runtime reached restores");
-        assert_eq!(back, s);
     }
 
     #[test]

@@ -601,6 +601,10 @@ impl<'a> Driver<'a> {
                         }
                         self.time = lst;
                     }
+                    // a forged buffer may carry another time than the state it was made from: the
+                    // copy restores to the time it holds, which the FMU just reported
+                    self.states.push((copy, self.time));
+                    return Ok(());
                 }
                 self.states.push((copy, saved_time));
                 Ok(())

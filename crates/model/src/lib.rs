@@ -64,6 +64,9 @@ pub enum StepFailure {
     SolverBudget { at_time_in_step: f64 },
     /// The step is shorter than [`MIN_RESOLVABLE_STEP`]; nothing was done.
     StepTooSmall { h: f64 },
+    /// A temperature fell to 0 K or below: the thermal network's explicit stages are unstable for
+    /// these parameters at this sub-step (a heat capacity far below its conductances' h).
+    TemperatureNotPositive { which: &'static str, kelvin: f64 },
 }
 
 /// The shortest step the model integrates: the square root of the smallest normal double, so that
@@ -94,6 +97,11 @@ impl std::fmt::Display for StepFailure {
                 write!(f, "the adaptive solver could not meet solver_tolerance {at_time_in_step} s into the step")
             }
             StepFailure::NonFinite => write!(f, "a state became NaN or infinite"),
+            StepFailure::TemperatureNotPositive { which, kelvin } => write!(
+                f,
+                "the {which} temperature would be {kelvin:e} K: the thermal network is unstable at this sub-step for \
+                 these parameters (a heat capacity too small for its conductances); lower max_internal_step"
+            ),
             StepFailure::StepTooSmall { h } => write!(
                 f,
                 "the step {h:e} s is too small to resolve (the shortest is {MIN_RESOLVABLE_STEP:e} s, where h² \
@@ -812,6 +820,12 @@ impl Model {
         if !finite {
             self.set_state(&before);
             return Err(StepFailure::NonFinite);
+        }
+        for (which, kelvin) in [("PCL", self.thermal.pcl_temperature), ("housing", self.thermal.housing_temperature)] {
+            if kelvin <= 0.0 {
+                self.set_state(&before);
+                return Err(StepFailure::TemperatureNotPositive { which, kelvin });
+            }
         }
         self.transmitted_torque_mean = self.step_mean_torque(h, motor_start, link_start, torque_start);
         Ok(())

@@ -220,6 +220,11 @@ impl EnthalpyCurve {
 /// [`ANCHOR_LATTICE`] apart and a 1 ms step moves the PCL by < 3 mK even at 15 W.
 const SERIES_LIMIT: f64 = 1e-2;
 
+/// ...and no more than this fraction of the melting width: the series' radius is set by the melt
+/// step's width, so the default 2.5 K keeps 1e-2 K, while a step 1e-3 K wide would put 1e-2 K ten
+/// widths out, where the series diverges (a state 2.4e-3 K off its enthalpy, found by the fuzzer).
+const SERIES_WIDTH_FRACTION: f64 = 4e-3;
+
 /// Spacing of the anchor temperatures of the inverse series, K (a binary fraction: exact).
 const ANCHOR_LATTICE: f64 = 1.0 / 128.0;
 
@@ -288,7 +293,7 @@ impl Inversion {
     /// h⁻¹ at the enthalpy h0 + a·h'(T0) (a in K).
     #[inline]
     fn temperature_at(&self, p: &Params, a: f64) -> f64 {
-        if a.abs() <= SERIES_LIMIT {
+        if a.abs() <= SERIES_LIMIT.min(SERIES_WIDTH_FRACTION * p.pcl_melting_width) {
             let c = &self.c;
             // Estrin's order: each Runge–Kutta stage waits on this, so its depth is the cost.
             let a2 = a * a;
