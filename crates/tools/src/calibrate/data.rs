@@ -342,7 +342,7 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         ));
     };
     let time = cols[0].take().unwrap_or_default();
-    let time_for_gaps = time.clone();
+    let gaps = gaps_of(&lines, &time);
     let motor = cols[1].take().unwrap_or_default();
     let link = cols[2].take().unwrap_or_else(|| motor.clone());
     let mut run = Run {
@@ -364,7 +364,7 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         load: cols[6].take(),
         controller: None,
         meta,
-        gaps: gaps_of(&lines, &time_for_gaps),
+        gaps,
         lines,
         repairs,
         segment: None,

@@ -42,9 +42,7 @@ pub fn is_even_grid(t: &[f64]) -> bool {
     if t.len() < 3 {
         return true;
     }
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).collect();
-    let m = d.len() / 2;
-    let median = *d.select_nth_unstable_by(m, f64::total_cmp).1;
+    let median = super::quality::median_period(t);
     t.windows(2).all(|w| ((w[1] - w[0]) - median).abs() <= 1e-3 * median)
 }
 
