@@ -8,7 +8,7 @@ pub const SOURCE_HASH_ENTRY: &str = "documentation/source-hash.txt";
 
 /// The crates the FMU binary is compiled from: their `src/` and manifest (not their tests, benches
 /// or examples, which go into no binary).
-const CRATES: [&str; 3] = ["crates/fmi2", "crates/model", "crates/fmu"];
+const CRATES: [&str; 4] = ["crates/fmi2", "crates/model", "crates/variables", "crates/fmu"];
 /// The package the closure of locked dependencies starts from.
 const FMU_PACKAGE: &str = "thermovia-fmu";
 /// What writes the rest of the archive: modelDescription.xml and documentation/.

@@ -17,4 +17,5 @@ pub mod component;
 pub mod description;
 #[allow(unsafe_code)]
 mod export;
-pub mod variables;
+/// The variable table, in its own crate so the MuJoCo plugin reads it without linking the FMI layer.
+pub use thermovia_variables as variables;

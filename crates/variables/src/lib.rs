@@ -1,6 +1,9 @@
 //! The one table of FMU variables. `modelDescription.xml`, the value-reference dispatch in the FMI
-//! layer, the start values and the README's variable table are all generated from `VARIABLES`,
-//! so they cannot disagree. Start values are read from `Model::default()` through each row's getter.
+//! layer, the start values, the README's variable table and the MuJoCo plugin's config keys are all
+//! generated from `VARIABLES`, so they cannot disagree. Start values are read from `Model::default()`
+//! through each row's getter.
+
+#![forbid(unsafe_code)]
 
 use thermovia_model::material::MaterialTable;
 use thermovia_model::{
