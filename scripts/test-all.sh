@@ -11,4 +11,5 @@ cargo fmt --all --check
 cargo clippy --release --workspace --all-targets --quiet -- -D warnings
 cargo run --release -p fmu-build
 cargo test --release --workspace
+cargo build --release -p thermovia-mujoco   # the MuJoCo plugin the Python tests load
 .venv/bin/python -m pytest tests/python -q

@@ -71,6 +71,8 @@ mujoco, GL_PROBLEM = _import_mujoco()
 
 HERE = pathlib.Path(__file__).resolve().parent
 ROOT = HERE.parent.parent
+sys.path.insert(0, str(ROOT / "crates" / "mujoco" / "python"))
+import thermovia_joint as tj  # noqa: E402
 DEFAULT_FMU = ROOT / "target" / "fmu" / "ThermoVIA.fmu"
 DEFAULT_MODEL = HERE / "arm3.xml"
 JOINTS = ("base_yaw", "shoulder", "elbow")
@@ -175,6 +177,14 @@ class JointSettings:
     parameters: dict = field(default_factory=dict)
 
 
+def pd_torque(s: JointSettings, y: dict, q_ref: float, feedforward: float) -> float:
+    """The joint controller: PD on the motor angle, its reference raised by the transmission's
+    deflection under the feed-forward (feedforward / K_eff at the joint's current temperature), plus
+    the feed-forward. `y`: the joint's motor_angle, motor_speed and effective_stiffness."""
+    target = q_ref + feedforward / y["effective_stiffness"]
+    return s.kp * (target - y["motor_angle"]) - s.kd * y["motor_speed"] + feedforward
+
+
 class FmuJoint:
     """One ThermoVIA FMU instance in link-driven mode at one MuJoCo hinge, through fmpy."""
 
@@ -225,11 +235,7 @@ class FmuJoint:
         return self.fmu.getReal([self.vr[name]])[0]
 
     def motor_torque(self, q_ref: float, feedforward: float) -> float:
-        """PD on the motor angle, its reference raised by the transmission's deflection under the
-        feed-forward (feedforward / K_eff at the joint's current temperature), plus the feed-forward."""
-        s = self.settings
-        target = q_ref + feedforward / self.y["effective_stiffness"]
-        return s.kp * (target - self.y["motor_angle"]) - s.kd * self.y["motor_speed"] + feedforward
+        return pd_torque(self.settings, self.y, q_ref, feedforward)
 
     def step(self, t: float, h: float, q: float, qd: float, tau_m: float, heater: float) -> float:
         c0 = time.perf_counter()
@@ -417,35 +423,56 @@ class Record:
         return {k: np.array(v) for k, v in self.__dict__.items() if k not in ("frames", "seconds")}
 
 
-def run_cosim(
-    m,
-    unzipdir,
-    md,
-    plan: Plan,
-    duration: float,
-    h: float,
-    settings: dict,
-    record_every: int = 10,
-    frame_label=None,
-    renderer=None,
-    stop_when=None,
-) -> Record:
-    """The arm with a ThermoVIA FMU at every joint, co-simulated at step h for `duration` s. `plan`
-    gives `reference(t)` (joint angles) and `heater` (None, or (t, PCL temperatures °C) -> W per joint):
-    a `Plan` or a `TouchTask`."""
+class FmuArm:
+    """The arm's joints as FMU instances in link-driven mode, through fmpy: the co-simulation."""
+
+    def __init__(self, m, d, cols, q0, unzipdir, md, settings: dict):
+        self.cols = cols
+        # each motor starts where the link is in equilibrium: deflected by its gravity torque over K_eff
+        stiffness = {t: transmission_at(unzipdir, md, t)[0] for t in {settings[j].pcl_c for j in JOINTS}}
+        self.joints = [
+            FmuJoint(unzipdir, md, j, settings[j], float(q0[i]),
+                     motor0=float(q0[i] + d.qfrc_bias[cols[i]] / stiffness[settings[j].pcl_c]))
+            for i, j in enumerate(JOINTS)
+        ]
+        self.last = [0.0] * len(JOINTS)
+
+    def y(self, d, i: int) -> dict:
+        return self.joints[i].y
+
+    def drive(self, m, d, t: float, h: float, ref, heat) -> None:
+        d.qfrc_applied[:] = 0.0
+        for i, j in enumerate(self.joints):
+            c = self.cols[i]
+            tau = j.step(t, h, float(d.qpos[c]), float(d.qvel[c]), j.motor_torque(ref[i], d.qfrc_bias[c]), heat[i])
+            j.apply(m, d, c, tau)
+            self.last[i] = tau
+
+    def torques(self, d) -> list:
+        return list(self.last)
+
+    def timing(self) -> dict:
+        return {"fmu_do_step": sum(j.fmu_seconds for j in self.joints),
+                "fmpy_get_set": sum(j.call_seconds for j in self.joints)}
+
+    def close(self) -> None:
+        for j in self.joints:
+            j.close()
+
+
+def run_arm(m, engine, plan, duration: float, h: float, record_every: int = 10, frame_label=None, renderer=None,
+            stop_when=None) -> Record:
+    """The arm for `duration` s at step h, its joints driven by `engine(m, d, cols, q0)`: an
+    `FmuArm` (co-simulation) or a `PluginArm` (the native plugin). `plan` gives `reference(t)`
+    (joint angles) and `heater` (None, or (t, PCL temperatures °C) -> W per joint): a `Plan` or a
+    `TouchTask`."""
     m.opt.timestep = h
     d = mujoco.MjData(m)
     cols = [dof(m, j) for j in JOINTS]
     q0 = plan.reference(0.0)
     d.qpos[cols] = q0
     mujoco.mj_forward(m, d)
-    # each motor starts where the link is in equilibrium: deflected by its gravity torque over K_eff
-    stiffness = {t: transmission_at(unzipdir, md, t)[0] for t in {settings[j].pcl_c for j in JOINTS}}
-    joints = [
-        FmuJoint(unzipdir, md, j, settings[j], float(q0[i]),
-                 motor0=float(q0[i] + d.qfrc_bias[cols[i]] / stiffness[settings[j].pcl_c]))
-        for i, j in enumerate(JOINTS)
-    ]
+    joints = engine(m, d, cols, q0)
     rec = Record()
     engine_s = 0.0
     t_wall = time.perf_counter()
@@ -454,16 +481,9 @@ def run_cosim(
         for n in range(n_steps):
             t = n * h
             ref = plan.reference(t)
-            temps = [j.y["pcl_temperature"] - ZERO_C for j in joints]
-            heat = plan.heater(t, temps) if plan.heater else [0.0] * len(joints)
-            taus = []
-            d.qfrc_applied[:] = 0.0
-            for i, j in enumerate(joints):
-                c = cols[i]
-                tm = j.motor_torque(ref[i], d.qfrc_bias[c])
-                tau = j.step(t, h, float(d.qpos[c]), float(d.qvel[c]), tm, heat[i])
-                j.apply(m, d, c, tau)
-                taus.append(tau)
+            temps = [joints.y(d, i)["pcl_temperature"] - ZERO_C for i in range(len(JOINTS))]
+            heat = plan.heater(t, temps) if plan.heater else [0.0] * len(JOINTS)
+            joints.drive(m, d, t, h, ref, heat)
             e0 = time.perf_counter()
             mujoco.mj_step(m, d)
             engine_s += time.perf_counter() - e0
@@ -472,32 +492,133 @@ def run_cosim(
             if n % record_every == 0 or n == n_steps - 1:
                 rec.t.append(t + h)
                 rec.q.append(d.qpos[cols].copy())
-                rec.torque.append(taus)
-                rec.pcl_c.append([j.y["pcl_temperature"] - ZERO_C for j in joints])
-                rec.stiffness.append([j.y["effective_stiffness"] for j in joints])
+                rec.torque.append(joints.torques(d))
+                rec.pcl_c.append([joints.y(d, i)["pcl_temperature"] - ZERO_C for i in range(len(JOINTS))])
+                rec.stiffness.append([joints.y(d, i)["effective_stiffness"] for i in range(len(JOINTS))])
                 rec.contact.append(contact_force(m, d, "tip", "table"))
             label = frame_label(t + h, h) if frame_label is not None else None
             if label and renderer is not None:
                 renderer.update_scene(d)
                 rec.frames.append((t + h, label, renderer.render().copy()))
-            if stop_when is not None and stop_when(t + h, joints, d):
+            if stop_when is not None and stop_when(t + h):
                 break
     finally:
-        for j in joints:
-            j.close()
+        joints.close()
     total = time.perf_counter() - t_wall
-    fmu_s = sum(j.fmu_seconds for j in joints)
-    calls_s = sum(j.call_seconds for j in joints)
+    parts = joints.timing()
     rec.seconds = {
         "simulated": (n + 1) * h,
         "wall": total,
         "engine": engine_s,
-        "fmu_do_step": fmu_s,
-        "fmpy_get_set": calls_s,
-        "master": total - engine_s - fmu_s - calls_s,
+        **parts,
+        "master": total - engine_s - sum(parts.values()),
         "real_time_factor": (n + 1) * h / total,
     }
     return rec
+
+
+def run_cosim(m, unzipdir, md, plan, duration: float, h: float, settings: dict, **kw) -> Record:
+    """The arm with a ThermoVIA FMU at every joint, co-simulated through fmpy (see `run_arm`)."""
+    return run_arm(m, lambda m, d, cols, q0: FmuArm(m, d, cols, q0, unzipdir, md, settings), plan, duration, h, **kw)
+
+
+# ---------------------------------------------------------------------------------------------
+# the same arm with the native plugin (crates/mujoco): no FMU, no fmpy, one mj_step
+
+
+def plugin_config(s: JointSettings) -> dict:
+    """The plugin's config for a joint of these settings: the FMU's parameter names."""
+    temp = s.pcl_c + ZERO_C
+    return {"initial_pcl_temperature": temp, "initial_housing_temperature": temp,
+            "ambient_temperature": ROOM_C + ZERO_C, **s.parameters}
+
+
+def plugin_transmission(s: JointSettings) -> tuple:
+    """(K_eff, C_eff) of the plugin's transmission at the joint's initial temperature, read from a
+    one-joint scene after its reset (the same model as the FMU's)."""
+    cfg = "".join(f'<config key="{k}" value="{v!r}"/>' for k, v in plugin_config(s).items())
+    xml = f"""<mujoco><extension><plugin plugin="thermovia.joint"/></extension>
+      <option timestep="1e-4"/><worldbody><body><joint name="j" damping="1e3"/>
+      <geom type="sphere" size="0.1" mass="10"/></body></worldbody>
+      <actuator><plugin name="j" joint="j" plugin="thermovia.joint">{cfg}</plugin></actuator></mujoco>"""
+    m = tj.model_from_xml(xml)
+    y = tj.read(m, mujoco.MjData(m), "j")
+    return y["effective_stiffness"], y["effective_damping"]
+
+
+def plugin_arm_xml(xml_path, settings: dict) -> str:
+    """arm3.xml with a `thermovia.joint` actuator on every joint (named after it) and a zero-gain heater
+    actuator beside it (`<joint>_heater`, 0–50 W). Each joint's damping is its transmission's C_eff at
+    its initial temperature, taken implicitly by MuJoCo and given back by the plugin (implicit_damping)."""
+    tree = ET.parse(xml_path)
+    root = tree.getroot()
+    ext = root.find("extension")
+    if ext is None:
+        ext = ET.Element("extension")
+        root.insert(0, ext)
+    ET.SubElement(ext, "plugin", {"plugin": tj.PLUGIN})
+    actuator = root.find("actuator")
+    if actuator is None:
+        actuator = ET.SubElement(root, "actuator")
+    for name in JOINTS:
+        damping = plugin_transmission(settings[name])[1]
+        joint = next(e for e in root.iter("joint") if e.get("name") == name)
+        joint.set("damping", repr(damping))
+        a = ET.SubElement(actuator, "plugin", {"name": name, "joint": name, "plugin": tj.PLUGIN})
+        for k, v in {**plugin_config(settings[name]), "heater": f"{name}_heater", "implicit_damping": damping}.items():
+            ET.SubElement(a, "config", {"key": k, "value": v if isinstance(v, str) else repr(v)})
+        ET.SubElement(actuator, "general", {"name": f"{name}_heater", "joint": name, "gainprm": "0", "biasprm": "0",
+                                            "ctrlrange": "0 50", "ctrllimited": "true"})
+    return ET.tostring(root, encoding="unicode")
+
+
+class PluginArm:
+    """The arm's joints as `thermovia.joint` actuators: the PD writes each motor torque into ctrl, the
+    heater power into the heater actuator's ctrl; the joint's state is read from plugin_state."""
+
+    NAMES = ("motor_angle", "motor_speed", "pcl_temperature", "effective_stiffness", "transmitted_torque_mean")
+
+    def __init__(self, m, d, cols, q0, settings: dict):
+        self.cols = cols
+        self.settings = [settings[j] for j in JOINTS]
+        self.act = [m.actuator(j).id for j in JOINTS]
+        self.heat = [m.actuator(f"{j}_heater").id for j in JOINTS]
+        self.at = {n: [tj.index(m, j, n) for j in JOINTS] for n in self.NAMES}
+        # each motor starts where the link is in equilibrium, as in the co-simulation
+        for i, j in enumerate(JOINTS):
+            k = d.plugin_state[self.at["effective_stiffness"][i]]
+            tj.set_motor(m, d, j, float(q0[i] + d.qfrc_bias[cols[i]] / k))
+
+    def y(self, d, i: int) -> dict:
+        return {n: float(d.plugin_state[self.at[n][i]]) for n in self.NAMES}
+
+    def drive(self, m, d, t: float, h: float, ref, heat) -> None:
+        for i in range(len(JOINTS)):
+            d.ctrl[self.act[i]] = pd_torque(self.settings[i], self.y(d, i), ref[i], d.qfrc_bias[self.cols[i]])
+            d.ctrl[self.heat[i]] = heat[i]
+
+    def torques(self, d) -> list:
+        return [float(d.plugin_state[a]) for a in self.at["transmitted_torque_mean"]]
+
+    def timing(self) -> dict:
+        return {}
+
+    def close(self) -> None:
+        pass
+
+
+def load_plugin_arm(xml_path, settings: dict):
+    """The plugin's arm model, compiled (the plugin library is loaded first)."""
+    try:
+        return tj.model_from_xml(plugin_arm_xml(xml_path, settings))
+    except ValueError as e:
+        raise CouplingError(f"{xml_path} with the thermovia.joint plugin: {e}") from e
+
+
+def run_plugin(xml_path, plan, duration: float, h: float, settings: dict, **kw) -> Record:
+    """The arm with a `thermovia.joint` actuator at every joint (see `run_arm`)."""
+    m = load_plugin_arm(xml_path, settings)
+    return run_arm(m, lambda m, d, cols, q0: PluginArm(m, d, cols, q0, settings), plan, duration, h, **kw)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -595,11 +716,15 @@ def accuracy_study(xml_path, unzipdir, md, plan, duration, settings, steps=(0.5e
     for h in steps:
         m = load_arm(xml_path)
         co = run_cosim(m, unzipdir, md, plan, duration, h, settings, record_every=1)
+        native = run_plugin(xml_path, plan, duration, h, settings, record_every=1)
         mono = run_monolithic(xml, plan, duration, h, settings, record_every=1)
         rows.append({
             "step_s": h,
             "coupling_max_angle_error_rad": float(np.max(np.abs(_at(co, times) - _at(mono, times)))),
             "cosim_max_angle_error_rad": float(np.max(np.abs(_at(co, times) - qref))),
+            "plugin_max_angle_error_rad": float(np.max(np.abs(_at(native, times) - qref))),
+            "plugin_vs_cosim_max_angle_error_rad": float(np.max(np.abs(_at(native, times) - _at(co, times)))),
+            "plugin_contact_force_n": float(np.interp(duration - 0.05, native.t, native.contact)),
             "monolithic_same_step_max_angle_error_rad": float(np.max(np.abs(_at(mono, times) - qref))),
             "cosim_contact_force_n": float(np.interp(duration - 0.05, co.t, co.contact)),
             "reference_contact_force_n": float(np.interp(duration - 0.05, ref.t, ref.contact)),
@@ -916,7 +1041,7 @@ def run_example(args) -> str:
     task = TouchTask(p, args.heater_power, args.soft_c)
     renderer, why = (None, "frames not asked for (--no-frames)") if args.no_frames else make_renderer(m)
     rec = run_cosim(m, unzipdir, md, task, args.max_seconds, args.step, settings, record_every=20,
-                    frame_label=task.frame_label, renderer=renderer, stop_when=lambda t, j, d: task.done(t))
+                    frame_label=task.frame_label, renderer=renderer, stop_when=task.done)
     if task.heated_at is None:
         raise CouplingError(f"the elbow did not reach {args.soft_c} °C within {args.max_seconds} s at {args.heater_power} W")
     t = np.array(rec.t)

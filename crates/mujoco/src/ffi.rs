@@ -257,12 +257,12 @@ extern "C" fn reset(m: *const mjModel, plugin_state: *mut f64, plugin_data: *mut
     guarded("reset", (), || {
         // SAFETY: plugin_data is this instance's pointer from `init` (or null before it).
         unsafe {
-            let (Some(inst), Some(state)) =
-                ((plugin_data as *mut Instance).as_mut(), state_of(m, plugin_state, instance))
-            else {
-                return;
-            };
-            inst.joint.reset(state);
+            // MuJoCo passes this instance's own block of plugin_state here (not the whole array)
+            let n = *(*m).plugin_statenum.add(instance as usize) as usize;
+            let Some(inst) = (plugin_data as *mut Instance).as_mut() else { return };
+            if n == STATE_SIZE && !plugin_state.is_null() {
+                inst.joint.reset(std::slice::from_raw_parts_mut(plugin_state, n));
+            }
         }
     })
 }
