@@ -8,5 +8,5 @@ cd "$(dirname "$0")/.."
 scripts/setup-system.sh
 scripts/setup-python.sh
 cargo run --release -p fmu-build
-cargo build --release --bin thermovia   # for the cross-check with `thermovia arm`
+cargo build --release --bin thermovia -p thermovia-mujoco   # the plugin, and `thermovia arm` for the cross-check
 .venv/bin/python examples/mujoco/thermovia_mujoco.py --out out/mujoco "$@"

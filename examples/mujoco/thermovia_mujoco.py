@@ -177,12 +177,12 @@ class JointSettings:
     parameters: dict = field(default_factory=dict)
 
 
-def pd_torque(s: JointSettings, y: dict, q_ref: float, feedforward: float) -> float:
+def pd_torque(kp, kd, motor_angle, motor_speed, stiffness, q_ref, feedforward):
     """The joint controller: PD on the motor angle, its reference raised by the transmission's
     deflection under the feed-forward (feedforward / K_eff at the joint's current temperature), plus
-    the feed-forward. `y`: the joint's motor_angle, motor_speed and effective_stiffness."""
-    target = q_ref + feedforward / y["effective_stiffness"]
-    return s.kp * (target - y["motor_angle"]) - s.kd * y["motor_speed"] + feedforward
+    the feed-forward. Scalars, or numpy arrays for several joints at once."""
+    target = q_ref + feedforward / stiffness
+    return kp * (target - motor_angle) - kd * motor_speed + feedforward
 
 
 class FmuJoint:
@@ -235,7 +235,8 @@ class FmuJoint:
         return self.fmu.getReal([self.vr[name]])[0]
 
     def motor_torque(self, q_ref: float, feedforward: float) -> float:
-        return pd_torque(self.settings, self.y, q_ref, feedforward)
+        s, y = self.settings, self.y
+        return pd_torque(s.kp, s.kd, y["motor_angle"], y["motor_speed"], y["effective_stiffness"], q_ref, feedforward)
 
     def step(self, t: float, h: float, q: float, qd: float, tau_m: float, heater: float) -> float:
         c0 = time.perf_counter()
@@ -437,8 +438,11 @@ class FmuArm:
         ]
         self.last = [0.0] * len(JOINTS)
 
-    def y(self, d, i: int) -> dict:
-        return self.joints[i].y
+    def temperatures_c(self, d) -> list:
+        return [j.y["pcl_temperature"] - ZERO_C for j in self.joints]
+
+    def stiffnesses(self, d) -> list:
+        return [j.y["effective_stiffness"] for j in self.joints]
 
     def drive(self, m, d, t: float, h: float, ref, heat) -> None:
         d.qfrc_applied[:] = 0.0
@@ -481,8 +485,7 @@ def run_arm(m, engine, plan, duration: float, h: float, record_every: int = 10, 
         for n in range(n_steps):
             t = n * h
             ref = plan.reference(t)
-            temps = [joints.y(d, i)["pcl_temperature"] - ZERO_C for i in range(len(JOINTS))]
-            heat = plan.heater(t, temps) if plan.heater else [0.0] * len(JOINTS)
+            heat = plan.heater(t, joints.temperatures_c(d)) if plan.heater else [0.0] * len(JOINTS)
             joints.drive(m, d, t, h, ref, heat)
             e0 = time.perf_counter()
             mujoco.mj_step(m, d)
@@ -493,8 +496,8 @@ def run_arm(m, engine, plan, duration: float, h: float, record_every: int = 10, 
                 rec.t.append(t + h)
                 rec.q.append(d.qpos[cols].copy())
                 rec.torque.append(joints.torques(d))
-                rec.pcl_c.append([joints.y(d, i)["pcl_temperature"] - ZERO_C for i in range(len(JOINTS))])
-                rec.stiffness.append([joints.y(d, i)["effective_stiffness"] for i in range(len(JOINTS))])
+                rec.pcl_c.append(joints.temperatures_c(d))
+                rec.stiffness.append(joints.stiffnesses(d))
                 rec.contact.append(contact_force(m, d, "tip", "table"))
             label = frame_label(t + h, h) if frame_label is not None else None
             if label and renderer is not None:
@@ -574,31 +577,38 @@ def plugin_arm_xml(xml_path, settings: dict) -> str:
 
 class PluginArm:
     """The arm's joints as `thermovia.joint` actuators: the PD writes each motor torque into ctrl, the
-    heater power into the heater actuator's ctrl; the joint's state is read from plugin_state."""
+    heater power into the heater actuator's ctrl; the joints' states are read from plugin_state."""
 
     NAMES = ("motor_angle", "motor_speed", "pcl_temperature", "effective_stiffness", "transmitted_torque_mean")
 
     def __init__(self, m, d, cols, q0, settings: dict):
-        self.cols = cols
+        self.cols = np.array(cols)
         self.settings = [settings[j] for j in JOINTS]
-        self.act = [m.actuator(j).id for j in JOINTS]
-        self.heat = [m.actuator(f"{j}_heater").id for j in JOINTS]
-        self.at = {n: [tj.index(m, j, n) for j in JOINTS] for n in self.NAMES}
+        self.kp = np.array([s.kp for s in self.settings])
+        self.kd = np.array([s.kd for s in self.settings])
+        self.act = np.array([m.actuator(j).id for j in JOINTS])
+        self.heat = np.array([m.actuator(f"{j}_heater").id for j in JOINTS])
+        self.at = {n: np.array([tj.index(m, j, n) for j in JOINTS]) for n in self.NAMES}
         # each motor starts where the link is in equilibrium, as in the co-simulation
         for i, j in enumerate(JOINTS):
             k = d.plugin_state[self.at["effective_stiffness"][i]]
             tj.set_motor(m, d, j, float(q0[i] + d.qfrc_bias[cols[i]] / k))
 
-    def y(self, d, i: int) -> dict:
-        return {n: float(d.plugin_state[self.at[n][i]]) for n in self.NAMES}
+    def temperatures_c(self, d) -> list:
+        return (d.plugin_state[self.at["pcl_temperature"]] - ZERO_C).tolist()
+
+    def stiffnesses(self, d) -> list:
+        return d.plugin_state[self.at["effective_stiffness"]].tolist()
 
     def drive(self, m, d, t: float, h: float, ref, heat) -> None:
-        for i in range(len(JOINTS)):
-            d.ctrl[self.act[i]] = pd_torque(self.settings[i], self.y(d, i), ref[i], d.qfrc_bias[self.cols[i]])
-            d.ctrl[self.heat[i]] = heat[i]
+        """`pd_torque` for the three joints at once."""
+        ps, at = d.plugin_state, self.at
+        d.ctrl[self.act] = pd_torque(self.kp, self.kd, ps[at["motor_angle"]], ps[at["motor_speed"]],
+                                     ps[at["effective_stiffness"]], ref, d.qfrc_bias[self.cols])
+        d.ctrl[self.heat] = heat
 
     def torques(self, d) -> list:
-        return [float(d.plugin_state[a]) for a in self.at["transmitted_torque_mean"]]
+        return d.plugin_state[self.at["transmitted_torque_mean"]].tolist()
 
     def timing(self) -> dict:
         return {}
@@ -939,6 +949,7 @@ def plot_accuracy(out: pathlib.Path, study: dict) -> str:
     h = [r["step_s"] * 1e3 for r in rows]
     fig, ax = plt.subplots(figsize=(6, 4))
     ax.loglog(h, [r["cosim_max_angle_error_rad"] for r in rows], "o-", label="co-simulation (FMU joints)")
+    ax.loglog(h, [r["plugin_max_angle_error_rad"] for r in rows], "x", ms=10, mew=2, label="plugin (thermovia.joint)")
     ax.loglog(h, [r["monolithic_same_step_max_angle_error_rad"] for r in rows], "s--", label="monolithic, same step")
     ax.set_xlabel("coupling step (ms)")
     ax.set_ylabel("largest joint-angle error (rad)")
@@ -969,6 +980,8 @@ Examples:
     ap.add_argument("--fmu", type=pathlib.Path, default=DEFAULT_FMU, help="the packaged FMU [%(default)s]")
     ap.add_argument("--model", type=pathlib.Path, default=DEFAULT_MODEL, help="MJCF with hinges %s [%%(default)s]" % ", ".join(JOINTS))
     ap.add_argument("--step", type=float, default=1e-3, help="coupling step = MuJoCo step, s [%(default)s]")
+    ap.add_argument("--engine", choices=("plugin", "fmu"), default="plugin",
+                    help="the joints as the native plugin (thermovia.joint) or as FMUs through fmpy [%(default)s]")
     ap.add_argument("--heater-power", type=float, default=10.0, help="elbow heater power, W [%(default)s]")
     ap.add_argument("--soft-c", type=float, default=60.0, help="PCL temperature the elbow is heated to, °C [%(default)s]")
     ap.add_argument("--max-seconds", type=float, default=600.0, help="longest simulated time to wait for the heating, s [%(default)s]")
@@ -1039,9 +1052,19 @@ def run_example(args) -> str:
     stability = check_step(m, unzipdir, md, args.step, settings)
     p = postures(m)
     task = TouchTask(p, args.heater_power, args.soft_c)
-    renderer, why = (None, "frames not asked for (--no-frames)") if args.no_frames else make_renderer(m)
-    rec = run_cosim(m, unzipdir, md, task, args.max_seconds, args.step, settings, record_every=20,
-                    frame_label=task.frame_label, renderer=renderer, stop_when=task.done)
+    if args.engine == "plugin":
+        m_run = load_plugin_arm(args.model, settings)
+
+        def engine(m, d, cols, q0):
+            return PluginArm(m, d, cols, q0, settings)
+    else:
+        m_run = m
+
+        def engine(m, d, cols, q0):
+            return FmuArm(m, d, cols, q0, unzipdir, md, settings)
+    renderer, why = (None, "frames not asked for (--no-frames)") if args.no_frames else make_renderer(m_run)
+    rec = run_arm(m_run, engine, task, args.max_seconds, args.step, record_every=20,
+                  frame_label=task.frame_label, renderer=renderer, stop_when=task.done)
     if task.heated_at is None:
         raise CouplingError(f"the elbow did not reach {args.soft_c} °C within {args.max_seconds} s at {args.heater_power} W")
     t = np.array(rec.t)
@@ -1081,6 +1104,7 @@ def run_example(args) -> str:
         frame_note = f"{len(rec.frames)} frames rendered off-screen (MUJOCO_GL={os.environ.get('MUJOCO_GL')})"
     report = {
         "step_s": args.step,
+        "engine": args.engine,
         "stability": stability,
         "contact_force_n": {"cold": cold_force, "soft": soft_force, "ratio": soft_force / cold_force if cold_force else None},
         "elbow_heated_c": args.soft_c,
@@ -1105,8 +1129,10 @@ def run_example(args) -> str:
 def markdown(r: dict) -> str:
     s = ["# ThermoVIA joints in MuJoCo\n"]
     s.append(
-        f"Three-joint arm (`examples/mujoco/arm3.xml`), a ThermoVIA FMU in link-driven mode at every joint, "
-        f"coupling step {r['step_s'] * 1e3:g} ms (stability limit {r['stability']['limit_s'] * 1e3:.3g} ms, "
+        "Three-joint arm (`examples/mujoco/arm3.xml`), "
+        + ("a `thermovia.joint` actuator (the native plugin) at every joint"
+           if r["engine"] == "plugin" else "a ThermoVIA FMU in link-driven mode at every joint, through fmpy")
+        + f", step {r['step_s'] * 1e3:g} ms (the co-simulation's stability limit {r['stability']['limit_s'] * 1e3:.3g} ms, "
         f"set by {r['stability']['limiting']}).\n"
     )
     c = r["contact_force_n"]
@@ -1133,14 +1159,16 @@ def markdown(r: dict) -> str:
             f"{a['reference_step_s'] * 1e3:g} ms with RK4, is the reference (move and press, cold). The third column is "
             "MuJoCo's own step error (the same sampled controller and integrator, no co-simulation); the fourth isolates "
             "the coupling.\n\n"
-            "| coupling step (ms) | co-simulation: largest joint-angle error (rad) | monolithic at the same step (rad) | co-simulation against the monolithic at the same step (rad) | contact force co-sim / reference (N) |\n|---|---|---|---|---|\n"
+            "The plugin runs the co-simulation's coupling inside mj_step; cold, with its implicit damping equal to "
+            "C_eff, it is the co-simulation to the bit (last but one column).\n\n"
+            "| coupling step (ms) | co-simulation: largest joint-angle error (rad) | plugin: largest joint-angle error (rad) | monolithic at the same step (rad) | co-simulation against the monolithic at the same step (rad) | plugin against co-simulation (rad) | contact force co-sim / plugin / reference (N) |\n|---|---|---|---|---|---|---|\n"
         )
         for row in a["rows"]:
             s[-1] += (
-                f"| {row['step_s'] * 1e3:g} | {row['cosim_max_angle_error_rad']:.2e} | "
+                f"| {row['step_s'] * 1e3:g} | {row['cosim_max_angle_error_rad']:.2e} | {row['plugin_max_angle_error_rad']:.2e} | "
                 f"{row['monolithic_same_step_max_angle_error_rad']:.2e} | {row['coupling_max_angle_error_rad']:.2e} | "
-                f"{row['cosim_contact_force_n']:.3f} / "
-                f"{row['reference_contact_force_n']:.3f} |\n"
+                f"{row['plugin_vs_cosim_max_angle_error_rad']:.1e} | {row['cosim_contact_force_n']:.3f} / "
+                f"{row['plugin_contact_force_n']:.3f} / {row['reference_contact_force_n']:.3f} |\n"
             )
         s.append("\n![accuracy](accuracy.png)\n")
     x = r["two_link_crosscheck"]
@@ -1164,12 +1192,21 @@ def markdown(r: dict) -> str:
         s.append(f"{x}.\n")
     t = r["timing"]
     s.append("## Speed\n")
-    s.append(
-        f"Real-time factor {t['real_time_factor']:.2f} at {r['step_s'] * 1e3:g} ms ({t['simulated']:.1f} s simulated in "
-        f"{t['wall']:.1f} s). Where the time goes: MuJoCo {100 * t['engine'] / t['wall']:.0f} %, the FMUs' fmi2DoStep "
-        f"{100 * t['fmu_do_step'] / t['wall']:.0f} %, fmpy's get/set calls {100 * t['fmpy_get_set'] / t['wall']:.0f} %, "
-        f"the Python master {100 * t['master'] / t['wall']:.0f} %.\n"
-    )
+    if r["engine"] == "fmu":
+        s.append(
+            f"Real-time factor {t['real_time_factor']:.2f} at {r['step_s'] * 1e3:g} ms ({t['simulated']:.1f} s simulated in "
+            f"{t['wall']:.1f} s) through the FMU co-simulation. Where the time goes: MuJoCo {100 * t['engine'] / t['wall']:.0f} %, "
+            f"the FMUs' fmi2DoStep {100 * t['fmu_do_step'] / t['wall']:.0f} %, fmpy's get/set calls "
+            f"{100 * t['fmpy_get_set'] / t['wall']:.0f} %, the Python master {100 * t['master'] / t['wall']:.0f} %.\n"
+        )
+    else:
+        s.append(
+            f"Real-time factor {t['real_time_factor']:.2f} at {r['step_s'] * 1e3:g} ms ({t['simulated']:.1f} s simulated in "
+            f"{t['wall']:.1f} s) through the `thermovia.joint` plugin. Where the time goes: mj_step with the three joints "
+            f"inside it {100 * t['engine'] / t['wall']:.0f} %, the Python loop (controller, heater, recording) "
+            f"{100 * t['master'] / t['wall']:.0f} %. `examples/mujoco/bench_plugin.py` measures the plugin against the "
+            "co-simulation, under `mujoco.rollout` and per joint.\n"
+        )
     return "\n".join(s)
 
 

@@ -83,15 +83,25 @@ pub struct Joint {
     model: Model,
     ambient_temperature: f64,
     implicit_damping: f64,
+    motor_torque_range: Range,
+    heater_power_range: Range,
     pending: Option<Pending>,
 }
 
-fn clamp_to(name: &str, x: f64) -> f64 {
-    let v = by_name(name).expect("an input of the table");
-    if !x.is_finite() {
-        return 0.0_f64.clamp(v.min.unwrap_or(f64::MIN), v.max.unwrap_or(f64::MAX));
+/// An input's range from the variable table, looked up once per joint.
+#[derive(Clone, Copy, Debug)]
+struct Range(f64, f64);
+
+impl Range {
+    fn of(name: &str) -> Range {
+        let v = by_name(name).expect("an input of the table");
+        Range(v.min.unwrap_or(f64::MIN), v.max.unwrap_or(f64::MAX))
     }
-    x.clamp(v.min.unwrap_or(f64::MIN), v.max.unwrap_or(f64::MAX))
+
+    /// Into the range; a non-finite value counts as 0.
+    fn clamp(self, x: f64) -> f64 {
+        (if x.is_finite() { x } else { 0.0 }).clamp(self.0, self.1)
+    }
 }
 
 impl Joint {
@@ -102,6 +112,8 @@ impl Joint {
             model,
             ambient_temperature: setup.ambient_temperature,
             implicit_damping: setup.implicit_damping,
+            motor_torque_range: Range::of("motor_torque"),
+            heater_power_range: Range::of("heater_power"),
             pending: None,
         }
     }
@@ -136,8 +148,8 @@ impl Joint {
     /// refused the step) leaves nothing pending: the joint keeps its state.
     pub fn compute(&mut self, state: &[f64], u: StepInputs) -> Result<f64, String> {
         let u = StepInputs {
-            motor_torque: clamp_to("motor_torque", u.motor_torque),
-            heater_power: clamp_to("heater_power", u.heater_power),
+            motor_torque: self.motor_torque_range.clamp(u.motor_torque),
+            heater_power: self.heater_power_range.clamp(u.heater_power),
             ..u
         };
         if let Some(p) = &self.pending {
