@@ -110,6 +110,19 @@ fn the_tools_reach_the_model_only_through_the_c_api() {
     assert!(!deps.iter().any(|d| d == "thermovia-fmu" || d == "thermovia-model"), "{deps:?}");
 }
 
+#[test]
+fn the_mujoco_plugin_stands_beside_the_fmu_on_the_model() {
+    let deps = dependencies("thermovia-mujoco");
+    for needed in ["thermovia-model", "thermovia-variables"] {
+        assert!(deps.iter().any(|d| d == needed), "{deps:?}");
+    }
+    for banned in ["thermovia-fmu", "thermovia-fmi2", "thermovia-importer", "thermovia-tools", "clap", "libloading"] {
+        assert!(!deps.iter().any(|d| d == banned), "thermovia-mujoco depends on {banned}: {deps:?}");
+    }
+    let deps = dependencies("thermovia-variables");
+    assert!(!deps.iter().any(|d| d == "thermovia-fmi2" || d == "thermovia-fmu"), "{deps:?}");
+}
+
 /// A submission is refused whole past 256 MiB of diffs: one profiler dump committed by mistake
 /// (perf.data, callgrind.out.*) sinks a session's work. Whatever a script can make again stays out;
 /// the largest file kept is the EMPS validation log (1.4 MiB).
