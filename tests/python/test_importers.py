@@ -83,7 +83,7 @@ def test_libcosim(reference):
     variables = {v.name.decode(): v.reference for v in execution.slave_variables(index)}
     # Known limitation: libcosim drops FMI 2.0 Enumeration variables, so motor_drive, thermal_drive and
     # material_table cannot be set (they stay at their start values). If this starts failing after an
-    # upgrade, update docs/importers.md.
+    # upgrade, update docs/fmi.md ("The three importers in detail").
     assert "motor_drive" not in variables and "heater_power" in variables
     # inputs as initial values: set before initialization, and nothing overwrites them afterwards
     for name, value in INPUTS.items():
