@@ -418,10 +418,13 @@ class Record:
     stiffness: list = field(default_factory=list)
     contact: list = field(default_factory=list)
     frames: list = field(default_factory=list)  # (t, label, rgb array)
+    # each touch's first contact: {t, approach_speed_m_s (the tip's downward speed the step before),
+    # peak_force_n (largest over its first 0.1 s), bounces (contacts lost and made again within 0.2 s)}
+    impacts: list = field(default_factory=list)
     seconds: dict = field(default_factory=dict)
 
     def arrays(self) -> dict:
-        return {k: np.array(v) for k, v in self.__dict__.items() if k not in ("frames", "seconds")}
+        return {k: np.array(v) for k, v in self.__dict__.items() if k not in ("frames", "impacts", "seconds")}
 
 
 class FmuArm:
@@ -478,6 +481,9 @@ def run_arm(m, engine, plan, duration: float, h: float, record_every: int = 10, 
     mujoco.mj_forward(m, d)
     joints = engine(m, d, cols, q0)
     rec = Record()
+    tip = m.site("tip").id
+    heights = [float(d.site_xpos[tip][2])] * 2  # the tip's height after the last two steps
+    force, last_contact = 0.0, -math.inf
     engine_s = 0.0
     t_wall = time.perf_counter()
     n_steps = int(round(duration / h))
@@ -492,13 +498,27 @@ def run_arm(m, engine, plan, duration: float, h: float, record_every: int = 10, 
             engine_s += time.perf_counter() - e0
             if not np.all(np.isfinite(d.qpos)):
                 raise CouplingError(f"the arm's state ran away at t = {t:.4f} s (coupling step {h} s)")
-            if n % record_every == 0 or n == n_steps - 1:
+            touching = d.ncon > 0 and (f := contact_force(m, d, "tip", "table")) > 0.0
+            if touching and force == 0.0:
+                if t + h - last_contact > 0.2:  # a new touch, not a bounce of the last one
+                    rec.impacts.append({"t": t + h, "approach_speed_m_s": (heights[0] - heights[1]) / h,
+                                        "peak_force_n": 0.0, "bounces": 0})
+                else:
+                    rec.impacts[-1]["bounces"] += 1
+            if touching:
+                last_contact = t + h
+                if t + h - rec.impacts[-1]["t"] <= 0.1:
+                    rec.impacts[-1]["peak_force_n"] = max(rec.impacts[-1]["peak_force_n"], f)
+            had_contact, force = force > 0.0, (f if touching else 0.0)
+            heights = [heights[1], float(d.site_xpos[tip][2])]
+            # every step while the tip touches (impacts last a few ms), else every `record_every`
+            if n % record_every == 0 or n == n_steps - 1 or touching or had_contact:
                 rec.t.append(t + h)
                 rec.q.append(d.qpos[cols].copy())
                 rec.torque.append(joints.torques(d))
                 rec.pcl_c.append(joints.temperatures_c(d))
                 rec.stiffness.append(joints.stiffnesses(d))
-                rec.contact.append(contact_force(m, d, "tip", "table"))
+                rec.contact.append(force)
             label = frame_label(t + h, h) if frame_label is not None else None
             if label and renderer is not None:
                 renderer.update_scene(d)
@@ -894,9 +914,17 @@ def write_frames(out: pathlib.Path, frames) -> list:
 
     names = []
     images = []
+    from PIL import ImageFont
+
+    font = ImageFont.load_default(size=20)
     for t, label, rgb in frames:
         img = Image.fromarray(rgb)
-        ImageDraw.Draw(img).text((8, 8), f"{label}  t = {t:.2f} s", fill=(0, 0, 0))
+        draw = ImageDraw.Draw(img)
+        text = f"{label}   t = {t:.2f} s"
+        box = draw.textbbox((10, 10), text, font=font)
+        # on a white box: the sky behind the top left corner is black
+        draw.rectangle((box[0] - 6, box[1] - 4, box[2] + 6, box[3] + 4), fill=(255, 255, 255))
+        draw.text((10, 10), text, fill=(0, 0, 0), font=font)
         images.append(img)
     if images:
         w, h = images[0].size
@@ -910,31 +938,70 @@ def write_frames(out: pathlib.Path, frames) -> list:
     return names
 
 
-def plot_run(out: pathlib.Path, rec: Record, events: dict) -> str:
+def plot_run(out: pathlib.Path, rec: Record, touches: list, heat_on: float) -> str:
+    """The two touches side by side at full resolution (contact force, joint torques), then the heating
+    over the whole run (PCL temperatures, K_eff). Legends sit outside the axes."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     a = rec.arrays()
-    fig, ax = plt.subplots(4, 1, figsize=(8, 9), sharex=True)
-    for i, j in enumerate(JOINTS):
-        ax[0].plot(a["t"], a["torque"][:, i], label=j)
-        ax[2].plot(a["t"], a["pcl_c"][:, i], label=j)
-        ax[3].plot(a["t"], a["stiffness"][:, i], label=j)
-    ax[0].set_ylabel("joint torque (N·m)\n(transmission, step mean)")
-    ax[1].plot(a["t"], a["contact"], color="k")
-    ax[1].set_ylabel("contact force (N)")
-    ax[2].set_ylabel("PCL temperature (°C)")
-    ax[3].set_ylabel("K_eff (N·m/rad)")
-    ax[3].set_xlabel("time (s)")
-    for x in ax:
-        for label, t in events.items():
-            x.axvline(t, color="0.7", lw=0.8)
-        x.grid(alpha=0.3)
-    ax[0].legend(loc="upper right")
-    fig.tight_layout()
-    fig.savefig(out / "run.png", dpi=90)
+    t = a["t"]
+    colours = ("#0072B2", "#E69F00", "#009E73")  # colour-blind safe
+    styles = ("-", "--", "-.")
+    fig = plt.figure(figsize=(10, 9))
+    grid = fig.add_gridspec(4, 2, height_ratios=[1, 1, 1, 1], hspace=0.5, wspace=0.25, top=0.88)
+    names = ("touch, cold", "touch, elbow at its target temperature")
+    force_axes, torque_axes = [], []
+    for col, ((start, end), name) in enumerate(zip(touches, names)):
+        sel = (t >= start - 0.6) & (t <= end + 0.5)
+        ax = fig.add_subplot(grid[0, col])
+        ax.plot(t[sel] - start, a["contact"][sel], color="k", lw=1.2)
+        for hit in rec.impacts:
+            if start - 0.6 <= hit["t"] <= end + 0.5:
+                ax.annotate(f"impact {hit['peak_force_n']:.0f} N\nat {hit['approach_speed_m_s'] * 1e3:.0f} mm/s",
+                            (hit["t"] - start, hit["peak_force_n"]), textcoords="offset points", xytext=(12, -18),
+                            fontsize=8)
+        hold = (t >= end - 0.3) & (t <= end)
+        press = float(np.mean(a["contact"][hold]))
+        ax.annotate(f"steady press {press:.2f} N", ((start + end) / 2 - start, press), textcoords="offset points",
+                    xytext=(0, 14), ha="center", fontsize=8)
+        ax.set_title(name, fontsize=10)
+        ax.set_ylabel("contact force (N)")
+        ax.grid(alpha=0.3)
+        force_axes.append(ax)
+        ax2 = fig.add_subplot(grid[1, col], sharex=ax)
+        for i, j in enumerate(JOINTS):
+            ax2.plot(t[sel] - start, a["torque"][sel, i], color=colours[i], ls=styles[i], label=j)
+        ax2.set_ylabel("joint torque (N·m)")
+        torque_axes.append(ax2)
+        ax2.set_xlabel("time from reaching the press posture (s)")
+        ax2.grid(alpha=0.3)
+    lo, hi = min(ax.get_ylim()[0] for ax in torque_axes), max(ax.get_ylim()[1] for ax in torque_axes)
+    for ax in torque_axes:
+        ax.set_ylim(lo, hi)
+    top = max(ax.get_ylim()[1] for ax in force_axes)
+    for ax in force_axes:
+        ax.set_ylim(-0.05 * top, 1.15 * top)
+    handles, labels = ax2.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, bbox_to_anchor=(0.5, 0.905), frameon=False,
+               title="joints")
+    for row, (key, label) in enumerate((("pcl_c", "PCL temperature (°C)"), ("stiffness", "K_eff (N·m/rad)"))):
+        ax = fig.add_subplot(grid[2 + row, :])
+        for i, j in enumerate(JOINTS):
+            ax.plot(t, a[key][:, i], color=colours[i], ls=styles[i], label=j)
+        events = ((touches[0][0], "touch, cold"), (heat_on, "heater on"), (touches[1][0], "touch, hot"))
+        for k, (x, what) in enumerate(events):
+            ax.axvline(x, color="0.6", lw=0.8)
+            if row == 0:  # staggered, so labels of close events do not overlap
+                ax.annotate(what, (x, 1.0), xycoords=("data", "axes fraction"), xytext=(3, -12 - 12 * (k % 2)),
+                            textcoords="offset points", fontsize=8, color="0.3")
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+        if row == 1:
+            ax.set_xlabel("time (s)")
+    fig.savefig(out / "run.png", dpi=90, bbox_inches="tight")
     plt.close(fig)
     return "run.png"
 
@@ -1095,7 +1162,7 @@ def run_example(args) -> str:
 
     args.out.parent.mkdir(parents=True, exist_ok=True)
     tmp = pathlib.Path(tempfile.mkdtemp(prefix=".mujoco-", dir=args.out.parent))
-    files = [plot_run(tmp, rec, {"touch cold": cold_span[0], "heater on": task.heat_on, "touch soft": soft_span[0]})]
+    files = [plot_run(tmp, rec, [cold_span, soft_span], task.heat_on)]
     if study:
         files.append(plot_accuracy(tmp, study))
     frame_note = why
@@ -1111,6 +1178,7 @@ def run_example(args) -> str:
         "heater_power_w": args.heater_power,
         "heating_seconds": task.heated_at - task.heat_on,
         "stiffness_at_touch": {"cold": cold_k, "soft": soft_k},
+        "impacts": rec.impacts,
         "pcl_temperature_c_at_touch": {"cold": during(rec.pcl_c, cold_span).tolist(), "soft": during(rec.pcl_c, soft_span).tolist()},
         "accuracy": study,
         "two_link_crosscheck": cross if cross else f"skipped: no thermovia binary at {args.thermovia}",
@@ -1124,6 +1192,22 @@ def run_example(args) -> str:
         shutil.rmtree(args.out)
     tmp.rename(args.out)
     return f"thermovia_mujoco: wrote {args.out}/report.md ({', '.join(files)}); contact force cold {cold_force:.2f} N, soft {soft_force:.2f} N"
+
+
+def impacts_text(impacts: list) -> str:
+    """Why the impact peaks look as they do: they are set before the transmission can yield."""
+    if len(impacts) < 2:
+        return ""
+    a, b = impacts[0], impacts[-1]
+    return (
+        f"Each touch starts with an impact: {a['peak_force_n']:.1f} N cold and {b['peak_force_n']:.1f} N hot, the tip "
+        f"arriving at {a['approach_speed_m_s'] * 1e3:.0f} and {b['approach_speed_m_s'] * 1e3:.0f} mm/s. An impact lasts "
+        "a few milliseconds and is set by the approach speed, the arm's inertia and MuJoCo's contact softness, before "
+        "any transmission can yield, so heating the elbow hardly changes it; the tip then bounces "
+        f"({a['bounces']} and {b['bounces']} re-contacts) and settles to the steady press, where the softened elbow "
+        "shows. Contact forces are recorded at every step while the tip touches, so the peaks are the simulation's "
+        "own.\n\n"
+    )
 
 
 def markdown(r: dict) -> str:
@@ -1144,6 +1228,7 @@ def markdown(r: dict) -> str:
         f"| cold | {c['cold']:.3f} | {r['stiffness_at_touch']['cold'][2]:.3f} |\n"
         f"| soft | {c['soft']:.3f} | {r['stiffness_at_touch']['soft'][2]:.3f} |\n\n"
         f"The softened elbow presses with {100 * (c['ratio'] or 0):.0f} % of the cold force.\n\n"
+        + impacts_text(r["impacts"]) +
         f"![run](run.png)\n"
     )
     if "frames.png" in r["files"]:
