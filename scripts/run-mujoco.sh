@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The MuJoCo example (issue 21): a three-joint arm with a ThermoVIA FMU at every joint, the touch /
+# The MuJoCo example: a three-joint arm with a ThermoVIA joint (the native plugin) at every joint, the touch /
 # heat / touch task, its report with plots and off-screen frames in out/mujoco. Installs what it
 # needs first (Debian's libosmesa6 for the frames, the pinned venv with mujoco and fmpy) and builds
 # the FMU. Extra arguments go to the example (python examples/mujoco/thermovia_mujoco.py --help).
