@@ -1,10 +1,13 @@
-"""fmpy checks of the packaged FMU: validation, simulate_fmu against the Rust harness, and an FMU
-state serialized by fmpy and restored into a fresh instance. fmpy is imported at module level on
-purpose: without it this file fails to collect, so CI fails instead of skipping."""
+"""fmpy checks of the packaged FMU: validation, simulate_fmu against the Rust harness, an FMU
+state serialized by fmpy and restored into a fresh instance, and the example on the FMU's own page.
+fmpy is imported at module level on purpose: without it this file fails to collect, so CI fails
+instead of skipping."""
 import math
 import shutil
 import subprocess
 import sys
+import xml.etree.ElementTree as ET
+import zipfile
 from pathlib import Path
 
 import numpy as np
@@ -104,3 +107,17 @@ def test_state_serialized_by_fmpy_continues_bit_identically_in_a_fresh_instance(
         fmu.freeFMUState(st)
         fmu.terminate()
         fmu.freeInstance()
+
+
+def test_the_example_on_the_fmus_page_prints_what_it_says(tmp_path, monkeypatch, capsys):
+    """documentation/index.html's fmpy example, run as a user would, next to ThermoVIA.fmu: it prints
+    what its last comment says."""
+    with zipfile.ZipFile(FMU) as archive:
+        page = ET.fromstring(archive.read("documentation/index.html"))
+    code = page.find(".//{http://www.w3.org/1999/xhtml}pre[@class='example']").text
+    shutil.copy(FMU, tmp_path / "ThermoVIA.fmu")
+    monkeypatch.chdir(tmp_path)
+    exec(compile(code, "documentation/index.html", "exec"), {})
+    promised = code.rstrip().splitlines()[-1].rsplit("# ", 1)[1]
+    printed = capsys.readouterr().out.strip().splitlines()  # fmpy's warnings, then the example's line
+    assert printed[-1] == promised

@@ -7,6 +7,10 @@ use crate::variables::{format_number, Access, Causality, Enumeration, VARIABLES}
 
 pub const MODEL_IDENTIFIER: &str = "ThermoVIA";
 
+/// The DefaultExperiment; its step is the communication step the documentation recommends.
+pub const DEFAULT_STOP_TIME: f64 = 20.0;
+pub const DEFAULT_STEP_SIZE: f64 = 1e-3;
+
 pub const LOG_CATEGORIES: [(&str, &str); 6] = [
     ("logEvents", "Initialisation, termination, reset and FMU-state events"),
     ("logStatusWarning", "Calls that returned fmi2Warning"),
@@ -139,8 +143,8 @@ fn render(guid: &str) -> String {
 
     let mut de = BytesStart::new("DefaultExperiment");
     de.push_attribute(("startTime", "0"));
-    de.push_attribute(("stopTime", "20"));
-    de.push_attribute(("stepSize", "0.001"));
+    de.push_attribute(("stopTime", format_number(DEFAULT_STOP_TIME).as_str()));
+    de.push_attribute(("stepSize", format_number(DEFAULT_STEP_SIZE).as_str()));
     put(Event::Empty(de));
 
     put(Event::Start(BytesStart::new("ModelVariables")));

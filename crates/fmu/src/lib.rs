@@ -3,6 +3,7 @@
 //! - [`variables`]: the one table of FMU variables, which generates `modelDescription.xml`, the
 //!   value-reference dispatch, the start values and the README's variable table.
 //! - [`description`]: `modelDescription.xml` and its GUID, written from the table.
+//! - [`documentation`]: `documentation/index.html`, the FMU's front page, written from the table.
 //! - [`component`]: one FMU instance in safe Rust: the FMI 2.0 co-simulation state machine,
 //!   argument checks, dispatch, FMU-state bytes.
 //! - `export`: the 34 `fmi2*` C functions. This module is the only place in the workspace's
@@ -15,6 +16,7 @@
 
 pub mod component;
 pub mod description;
+pub mod documentation;
 #[allow(unsafe_code)]
 mod export;
 /// The variable table, in its own crate so the MuJoCo plugin reads it without linking the FMI layer.
