@@ -3,7 +3,7 @@
 use quick_xml::events::{BytesDecl, BytesEnd, BytesStart, Event};
 use quick_xml::Writer;
 
-use crate::variables::{format_number, Access, Causality, Enumeration, VARIABLES};
+use crate::variables::{format_number, Access, Causality, Enumeration, T_MIN, VARIABLES};
 
 pub const MODEL_IDENTIFIER: &str = "ThermoVIA";
 
@@ -167,7 +167,9 @@ fn render(guid: &str) -> String {
         }
         if is_real && !v.unit.is_empty() {
             t.push_attribute(("unit", v.unit));
-            if v.unit == "K" {
+            // degC only for thermometric temperatures (outputs, and inputs and parameters with the
+            // temperature range): a melting width or U*/R shown in °C would read 2.5 K as −270.65 °C
+            if v.unit == "K" && v.min.is_none_or(|m| m == T_MIN) {
                 t.push_attribute(("displayUnit", "degC"));
             }
         }

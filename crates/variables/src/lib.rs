@@ -238,7 +238,7 @@ macro_rules! real_output {
 
 /// Temperatures: from 1 K to 10,000 K (every material property here is long gone at either end,
 /// but the numerics stay finite).
-const T_MIN: f64 = 1.0;
+pub const T_MIN: f64 = 1.0;
 const T_MAX: f64 = 1e4;
 /// Angles: ±1e6 rad (160,000 turns).
 const ANGLE: f64 = 1e6;
