@@ -37,6 +37,45 @@ fn missing_column_names_file_line_and_column() {
     assert!(s.contains("link_angle_rad"), "{s}");
 }
 
+/// Issue 30: a mistyped column name gets the did-you-mean `thermovia simulate` gives a variable
+/// name, at the header's line and the mistyped cell's column.
+#[test]
+fn a_mistyped_column_name_gets_a_suggestion_at_its_line_and_column() {
+    let e = err(&GOOD.replace("link_angle_rad", "link_angel_rad"));
+    assert_eq!((e.line, e.column.clone()), (Some(4), Some((3, "link_angel_rad".into()))), "{e}");
+    let s = e.to_string();
+    assert!(
+        s.starts_with("bad.csv:4:3 (column \"link_angel_rad\"): missing required column \"link_angle_rad\""),
+        "{s}"
+    );
+    assert!(s.contains("did you mean link_angle_rad for \"link_angel_rad\"?"), "{s}");
+    // an optional column the run then lacks: the temperature
+    let e = err(&GOOD.replace("# temperature_c=40\n", "").replace(",extra", ",temprature_c"));
+    assert_eq!((e.line, e.column.clone()), (Some(3), Some((4, "temprature_c".into()))), "{e}");
+    assert!(e.to_string().contains("did you mean temperature_c for \"temprature_c\"?"), "{e}");
+    // nothing close: no suggestion, and a known column is never offered for another
+    let e = err(&GOOD.replace("link_angle_rad", "zzz"));
+    assert!(!e.to_string().contains("did you mean") && e.column.is_none(), "{e}");
+    let e = err("# temperature_c=40\ntime_s,motor_angle_rad,motor_torque_nm\n0,0,0\n");
+    assert!(!e.to_string().contains("did you mean"), "{e}");
+}
+
+/// Issue 30: a value of 1e300 is echoed as 1.0000e300, not as its 301 digits.
+#[test]
+fn huge_values_are_echoed_short() {
+    let e = err(&GOOD.replace("0.001,0.001,0.0005", "1e300,0.001,0.0005"));
+    assert_eq!((e.line, e.column.as_ref().map(|c| c.0)), (Some(7), Some(1)), "{e}");
+    assert!(e.to_string().contains("previous sample 1.0000e300 s") && e.to_string().len() < 150, "{e}");
+    let e = err(&GOOD.replace("0.001,0.001,0.0005", "0.001,1e300,0.0005"));
+    assert!(e.to_string().contains("1.0000e300 is an angle beyond"), "{e}");
+    // a temperature in the metadata gets the column's range, at its line
+    let e = err(&GOOD.replace("# temperature_c=40", "# temperature_c=1e300"));
+    assert_eq!(e.line, Some(1), "{e}");
+    assert!(e.to_string().contains("temperature_c=1e300 is a temperature outside 1 K"), "{e}");
+    let e = err(&GOOD.replace("# temperature_c=40", "# temperature_c=-300"));
+    assert_eq!(e.line, Some(1), "{e}");
+}
+
 #[test]
 fn text_in_a_number_column_names_line_and_column() {
     let e = err(&GOOD.replace("0.002,0.002,0.0011", "0.002,abc,0.0011"));

@@ -195,3 +195,104 @@ fn info_lists_variables_capabilities_and_the_default_experiment() {
     let e = error_line(&thermovia(&["info", "/nonexistent/x.fmu"]));
     assert!(e.contains("/nonexistent/x.fmu") && e.contains("no such file"), "{e}");
 }
+
+/// Issue 30: every list option of the tools takes its values comma- or space-separated, and its
+/// help shows the default in the comma form (both work; one form everywhere).
+#[test]
+fn list_options_take_commas_or_spaces_and_show_defaults_that_work() {
+    use clap::{Args, Command};
+    let commands = [
+        thermovia_tools::sweep::SweepArgs::augment_args(Command::new("sweep")),
+        thermovia_tools::calibrate::SynthArgs::augment_args(Command::new("synth")),
+        thermovia_tools::calibrate::CalibrateArgs::augment_args(Command::new("calibrate")),
+        thermovia_tools::arm::ArmArgs::augment_args(Command::new("arm")),
+    ];
+    let mut lists = Vec::new();
+    for cmd in &commands {
+        for a in cmd.get_arguments().filter(|a| a.get_value_delimiter().is_some()) {
+            let id = format!("{} --{}", cmd.get_name(), a.get_long().unwrap_or("?"));
+            assert!(a.get_num_args().is_some_and(|n| n.max_values() > 1), "{id} takes one value after the option");
+            assert!(a.get_default_values().len() <= 1, "{id}: the help would show its default space-separated");
+            lists.push(id);
+        }
+    }
+    assert_eq!(
+        lists,
+        [
+            "sweep --temperatures",
+            "sweep --frequencies",
+            "sweep --heating-powers",
+            "synth --temperatures",
+            "synth --frequencies"
+        ]
+    );
+    for cmd in ["sweep", "synth"] {
+        let o = thermovia(&[cmd, "--help"]);
+        let help = String::from_utf8_lossy(&o.stdout);
+        assert!(help.contains("comma- or space-separated) [default: 22,40,50,60]"), "{help}");
+    }
+    // both spellings, mixed, through the binary's own parser
+    let dir = scratch("lists");
+    let o = thermovia(&[
+        "synth",
+        "--out",
+        dir.to_str().unwrap(),
+        "--temperatures",
+        "22",
+        "60",
+        "--frequencies",
+        "0.5,1",
+        "--duration",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let mut files: Vec<String> =
+        std::fs::read_dir(&dir).unwrap().map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect();
+    files.sort();
+    assert_eq!(files, ["run_22C_0.5Hz.csv", "run_22C_1Hz.csv", "run_60C_0.5Hz.csv", "run_60C_1Hz.csv", "truth.json"]);
+    // negative values still reach the tool's own check, after a space as after a comma
+    for frequencies in [&["1", "-2"][..], &["1,-2"]] {
+        let mut args = vec!["sweep", "--frequencies"];
+        args.extend_from_slice(frequencies);
+        let e = error_line(&thermovia(&args));
+        assert!(e.contains("--frequencies -2: each frequency must be a finite number > 0 Hz"), "{e}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Issue 30: `sweep` and `synth` take the motor amplitude in radians, as every angle of the command
+/// line, under one name that says so; a value in degrees is caught.
+#[test]
+fn sweep_and_synth_take_the_amplitude_in_radians_under_one_name() {
+    let dir = scratch("amplitude");
+    for cmd in ["sweep", "synth"] {
+        let help = String::from_utf8_lossy(&thermovia(&[cmd, "--help"]).stdout).into_owned();
+        assert!(help.contains("--amplitude-rad <AMPLITUDE_RAD>"), "{help}");
+        assert!(!help.contains("--amplitude-deg") && !help.contains("--amplitude <"), "{help}");
+        let e = error_line(&thermovia(&[cmd, "--amplitude-rad", "30", "--out", dir.join(cmd).to_str().unwrap()]));
+        assert!(
+            e.contains("--amplitude-rad 30: must be a number > 0 and ≤ π rad (in degrees? 30° is 0.523599 rad)"),
+            "{e}"
+        );
+        let e = error_line(&thermovia(&[cmd, "--amplitude-deg", "30"]));
+        assert!(e.contains("--amplitude-rad"), "{e}");
+    }
+    let out = dir.join("synth");
+    let o = thermovia(&[
+        "synth",
+        "--out",
+        out.to_str().unwrap(),
+        "--amplitude-rad",
+        "0.2",
+        "--temperatures",
+        "22",
+        "--frequencies",
+        "1",
+        "--duration",
+        "0.5",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let run = std::fs::read_to_string(out.join("run_22C_1Hz.csv")).unwrap();
+    assert!(run.contains("# motor_amplitude_rad=0.2\n"), "{run}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

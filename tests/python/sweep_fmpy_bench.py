@@ -26,7 +26,7 @@ OUTPUTS = [
 ]
 
 # the Rust defaults (SweepArgs)
-DEFAULTS = dict(temperatures=[22.0, 40.0, 50.0, 60.0], frequencies=[0.5, 1.0], amplitude_deg=30.0, step=1e-3,
+DEFAULTS = dict(temperatures=[22.0, 40.0, 50.0, 60.0], frequencies=[0.5, 1.0], amplitude_rad=math.pi / 6, step=1e-3,
                 settle_cycles=6, cycles=4, motor_kp=400.0, motor_kd=3.0, heater_max_w=10.0, heater_kp=4.0,
                 heater_ki=0.2, warmup_step=0.1, soak=600.0, reach_tolerance=0.5)
 
@@ -140,7 +140,7 @@ def sweep(fmu_path, o=DEFAULTS, md=None, unzipdir=None):
                 omega = 2.0 * math.pi * f
                 n = int(round(1.0 / (f * o["step"])))
                 steps = n * (o["settle_cycles"] + o["cycles"])
-                motor, link = harmonic_run(sim, math.radians(o["amplitude_deg"]), omega, o["motor_kp"], o["motor_kd"],
+                motor, link = harmonic_run(sim, o["amplitude_rad"], omega, o["motor_kp"], o["motor_kd"],
                                            jm, bm, heater, o["step"], steps)
                 t = np.arange(steps + 1) * o["step"]
                 w = slice(len(t) - n * o["cycles"], len(t))

@@ -216,10 +216,9 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
 
 /// Parses one run from its text (`path` only names it in errors).
 pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<Run, DataError> {
-    // the metadata decides which columns the file must have: read it first
-    let head = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&[]))
-        .map(|t| t.meta)
-        .unwrap_or_default();
+    // the metadata decides which columns the file must have: read it first (with the header's names)
+    let head_table = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&[])).ok();
+    let head = head_table.as_ref().map(|t| t.meta.clone()).unwrap_or_default();
     let word = |key: &str, allowed: &[&str], default: &str| -> Result<String, DataError> {
         match head.get(key) {
             None => Ok(default.to_string()),
@@ -266,13 +265,26 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
     let table = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&columns))
         .map_err(|mut e| {
             if e.message.starts_with("missing required column") {
-                e.message += &format!(
+                let declared = format!(
                     " (axis={}, drive={}, transmission={})",
                     axis.name(),
                     drive.name(),
                     if rigid { "rigid" } else { "compliant" }
                 );
+                let known: Vec<&str> = columns.iter().map(|c| c.0).chain(["heater_power_w"]).collect();
+                let header = head_table.as_ref().map_or(&[][..], |h| &h.names[..]);
+                if let Some((c, cell, wanted)) = misspelled_column(header, &columns, &known) {
+                    // point at the header cell that is most likely the missing column, mistyped
+                    e.column = Some((c + 1, cell.clone()));
+                    e.message = format!(
+                        "missing required column {wanted:?} (did you mean {wanted} for {cell:?}? header has: {}){declared}",
+                        header.join(", ")
+                    );
+                } else {
+                    e.message += &declared;
+                }
             }
+            e.message = super::quality::compact_numbers(&e.message);
             e
         })?;
     let (meta, last_line) = (table.meta, table.last_line);
@@ -325,21 +337,45 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
     if n < 3 {
         return Err(DataError::line(path, last_line, format!("only {n} data rows; a run needs at least 3")));
     }
+    // the metadata's temperature groups the runs even beside a column: it gets the column's range
+    let meta_temperature = match meta.get("temperature_c") {
+        None => None,
+        Some(v) => {
+            let t: f64 = v.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {
+                meta_error(path, text, "temperature_c", format!("metadata temperature_c={v:?} is not a number"))
+            })?;
+            let (lo, hi) = super::quality::TEMPERATURE_RANGE_C;
+            if !(lo..=hi).contains(&t) {
+                return Err(meta_error(
+                    path,
+                    text,
+                    "temperature_c",
+                    format!("metadata temperature_c={v} is a temperature outside 1 K … 1e4 K"),
+                ));
+            }
+            Some(t)
+        }
+    };
     let temperature_c = if has_temperature_column {
         cols[3].take().unwrap_or_default()
-    } else if let Some(v) = meta.get("temperature_c") {
-        let t: f64 = v.parse().ok().filter(|t: &f64| t.is_finite()).ok_or_else(|| {
-            meta_error(path, text, "temperature_c", format!("metadata temperature_c={v:?} is not a number"))
-        })?;
+    } else if let Some(t) = meta_temperature {
         vec![t; n]
     } else if rigid {
         // a rigid drive has no PCL: the temperature only labels the run
         vec![22.0; n]
     } else {
-        return Err(file_error(
+        let mut e = file_error(
             path,
             "the run has no temperature: neither a temperature_c column nor `# temperature_c=` metadata".into(),
-        ));
+        );
+        let header = head_table.as_ref().map_or(&[][..], |h| &h.names[..]);
+        let known: Vec<&str> = columns.iter().map(|c| c.0).chain(["heater_power_w"]).collect();
+        if let Some((c, cell, _)) = misspelled_column(header, &[("temperature_c", true)], &known) {
+            e.line = head_table.as_ref().map(|h| h.header_line);
+            e.column = Some((c + 1, cell.clone()));
+            e.message += &format!(" (did you mean temperature_c for {cell:?}?)");
+        }
+        return Err(e);
     };
     let time = cols[0].take().unwrap_or_default();
     let gaps = gaps_of(&lines, &time);
@@ -444,11 +480,11 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
                 path,
                 text,
                 "controller_period_s",
-                format!(
+                super::quality::compact_numbers(&format!(
                     "controller_period_s={} but the samples are {mean_dt:.6} s apart (median): drive=reference \
                      replays one controller update per sample",
                     controller.period
-                ),
+                )),
             ));
         }
         run.controller = Some(controller);
@@ -464,7 +500,7 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
             format!(
                 "the run does not move: every position column is constant over its {n} samples (at {} {}); a fit \
                  needs motion, since the transmission and every effect show only while something moves",
-                run.motor[0],
+                super::quality::short(run.motor[0]),
                 run.axis.units().0
             ),
         ));
@@ -495,6 +531,21 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         }
     }
     Ok(run)
+}
+
+/// The first required column missing from `header` and the header cell closest to its name (by
+/// the importer's did-you-mean, the one `thermovia simulate` uses for variable names), among the
+/// cells that are no known column: (0-based position, cell, the column it should be).
+fn misspelled_column<'a>(
+    header: &'a [String],
+    columns: &[(&'a str, bool)],
+    known: &[&str],
+) -> Option<(usize, &'a String, &'a str)> {
+    let (wanted, _) = columns.iter().find(|(name, required)| *required && !header.iter().any(|h| h == name))?;
+    let unknown = header.iter().filter(|h| !known.contains(&h.as_str())).map(String::as_str);
+    let best = thermovia_importer::model_description::did_you_mean(wanted, unknown).into_iter().next()?;
+    let c = header.iter().position(|h| *h == best)?;
+    Some((c, &header[c], wanted))
 }
 
 /// Frequency of the largest spectral peak of `x(t)` (mean removed) between 1/T and 50 Hz: a coarse

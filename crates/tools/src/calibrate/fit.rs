@@ -412,7 +412,7 @@ impl<'a> Problem<'a> {
             let f = if f.is_finite() { f } else { 1.0 };
             tables.push(
                 sim.transmission_table(t + crate::report::ZERO_CELSIUS, f)
-                    .map_err(|e| format!("the FMU's transmission at {t} °C: {e}"))?,
+                    .map_err(|e| format!("the FMU's transmission at {} °C: {e}", super::quality::short(*t)))?,
             );
         }
         Ok(Problem {

@@ -406,7 +406,23 @@ fn calibrate_device(
             "final": report::held_out_metrics(&h.measured, &f),
         });
     }
-    report["warnings"] = serde_json::json!(report::device_warnings(&runs, &report));
+    // synthetic runs carry their truth beside them: say how close the loop came. The fit never uses
+    // it, so a truth.json that cannot be read is a warning, not a refusal.
+    let mut truth_warning = None;
+    if let Some(path) = report::truth_file(&args.inputs) {
+        let read = std::fs::read_to_string(&path).map_err(|e| e.to_string());
+        match read.and_then(|t| serde_json::from_str::<serde_json::Value>(&t).map_err(|e| e.to_string())) {
+            Ok(truth) => {
+                if let Some(t) = report::truth_comparison(&path, &truth, &report) {
+                    report["truth_comparison"] = t;
+                }
+            }
+            Err(e) => truth_warning = Some(format!("{}: {e}: no comparison with the truth", path.display())),
+        }
+    }
+    let mut warnings = report::device_warnings(&runs, &report);
+    warnings.extend(truth_warning);
+    report["warnings"] = serde_json::json!(warnings);
     report["data_quality"] = data_quality_json(&runs.iter().chain(&held).collect::<Vec<_>>());
     let mut files = vec![
         ("report.json".to_string(), (serde_json::to_string_pretty(&report)? + "\n").into_bytes()),

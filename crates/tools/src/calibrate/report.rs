@@ -313,7 +313,7 @@ pub fn device_warnings(runs: &[Run], report: &serde_json::Value) -> Vec<String> 
     }
     for (stage, key) in [("baseline", "identified_baseline"), ("final", "identified")] {
         for g in report[key].as_array().into_iter().flatten() {
-            if g["at_bound"].as_bool() == Some(true) {
+            if g["at_bound"].as_bool() == Some(true) && (stage == "final" || baseline_bound_matters(report, g)) {
                 warnings.push(format!(
                 "{stage} fit at {} °C: the transmission stopped at a bound (K = {:.4e} N·m/rad within {:.0e}–{:.2e}, C = \
                  {:.4e} N·m·s/rad within {:.0e}–{:.2e}; the upper ends are what the sample rate can show for this \
@@ -331,6 +331,31 @@ pub fn device_warnings(runs: &[Run], report: &serde_json::Value) -> Vec<String> 
         }
     }
     warnings
+}
+
+/// Whether a baseline stopped at a bound (`identified_baseline` entry `g`) is worth a warning: when
+/// the final model still sits at a bound at that temperature, or does not fit (unexplained, or a
+/// residual that is not white), the added effects may be standing in for the transmission. A
+/// baseline that only lacked an effect the loop then found (gravity pulls a rigid-looking link)
+/// often goes rigid; the final fit, inside its bounds and white, shows nothing was filled in.
+fn baseline_bound_matters(report: &Value, g: &Value) -> bool {
+    let final_at_bound = report["identified"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .any(|f| f["temperature_c"] == g["temperature_c"] && f["at_bound"] != false);
+    final_at_bound || report["unexplained"] != false || report["residual_white"] == false
+}
+
+/// The baseline's temperatures whose bound was no warning (`baseline_bound_matters`), for report.md.
+fn baseline_bounds_resolved(report: &Value) -> Vec<String> {
+    report["identified_baseline"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter(|g| g["at_bound"] == true && !baseline_bound_matters(report, g))
+        .map(|g| g["temperature_c"].to_string())
+        .collect()
 }
 
 /// (internal name, plausible limit, fitted value) of each parameter of effect `e` in `fit` that has
@@ -426,6 +451,17 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         s += &format!("- **{}**: {}{limit}\n", e.name(), fmt_params(&o.final_fit, e));
     }
     s += &identified_markdown(j);
+    let resolved = baseline_bounds_resolved(j);
+    if !resolved.is_empty() {
+        s += &format!(
+            "\nThe baseline's transmission stopped at a bound at {} °C (`identified_baseline`); the final model is \
+             inside its bounds there and fits, so what the loop added filled no gap of the transmission.\n",
+            resolved.join(", ")
+        );
+    }
+    if let Some(t) = j.get("truth_comparison") {
+        s += &truth_markdown(t);
+    }
     s += &format!(
         "\n## Residual\n\n{}\n\nAgainst a flexible reference fitted to the same runs: {}.\n\nunexplained: **{}** ({})\n\n",
         remaining_structure(&o.final_signatures),
@@ -653,4 +689,257 @@ pub fn held_out_metrics(measured: &[Vec<f64>], outputs: &[Vec<f64>]) -> Value {
         "relerr_percent": 100.0 * err / norm,
         "samples": y.len(),
     })
+}
+
+/// The `truth.json` beside the runs (what `thermovia synth` and tests/truth/truth_model.py write):
+/// one file shared by every input's folder, else None (inputs from several truths are not compared).
+pub fn truth_file(inputs: &[std::path::PathBuf]) -> Option<std::path::PathBuf> {
+    let mut candidates = inputs.iter().map(|p| {
+        let dir = if p.is_dir() { p.as_path() } else { p.parent().unwrap_or(std::path::Path::new("")) };
+        dir.join("truth.json")
+    });
+    let first = candidates.next()?;
+    (first.is_file() && candidates.all(|c| c == first)).then_some(first)
+}
+
+/// The parameter whose zero means an effect is absent from a truth (`thermovia synth` writes every
+/// effect, switched off at zero); None: any non-zero parameter counts.
+fn magnitude_key(effect: &str) -> Option<&'static str> {
+    match effect {
+        "gravity" => Some("mgl_nm"),
+        "asymmetric_friction" => None,
+        _ => super::fit::Effect::from_name(effect).map(|e| e.params()[0].0),
+    }
+}
+
+/// `truth_comparison` of report.json: the truth's effects and transmission against what the device
+/// loop identified (`report` holds `added_effects` and `identified`). Two truths are read:
+/// `thermovia synth`'s (effects at the top level, the moduli as factors on the FMU's table) and
+/// tests/truth/truth_model.py's (`effects`, and `runs` with each run's stiffness and damping).
+/// None when `truth` is neither.
+pub fn truth_comparison(file: &std::path::Path, truth: &Value, report: &Value) -> Option<Value> {
+    let library: Vec<&str> = super::fit::Effect::ALL.iter().map(|e| e.name()).collect();
+    let effects: Vec<(&String, &Value)> = match truth["effects"].as_object() {
+        Some(e) => e.iter().collect(),
+        None => truth.as_object()?.iter().filter(|(k, v)| library.contains(&k.as_str()) && v.is_object()).collect(),
+    };
+    let present = |name: &str, params: &Value| match magnitude_key(name) {
+        Some(k) => params[k].as_f64().is_some_and(|v| v != 0.0),
+        None => params.as_object().into_iter().flatten().any(|(_, v)| v.as_f64().is_some_and(|v| v != 0.0)),
+    };
+    let added = report["added_effects"].as_array().cloned().unwrap_or_default();
+    let identified = |effect: &str| added.iter().find(|e| e["effect"] == effect).map(|e| &e["parameters"]);
+    let relative = |t: f64, i: Option<f64>| i.filter(|_| t != 0.0).map(|i| i / t - 1.0);
+    let mut rows = Vec::new();
+    for (name, params) in effects.iter().filter(|(n, p)| present(n, p)) {
+        let found = identified(name);
+        for (p, t) in params.as_object().into_iter().flatten().filter_map(|(p, v)| v.as_f64().map(|t| (p, t))) {
+            let i = found.and_then(|f| f[p.as_str()].as_f64());
+            rows.push(json!({"effect": name, "parameter": p, "true": t, "identified": i,
+                "relative_error": relative(t, i), "absolute_error": i.map(|i| i - t),
+                "status": if found.is_some() { "found" } else if library.contains(&name.as_str()) { "missed" } else { "outside the library" }}));
+        }
+    }
+    for e in &added {
+        let name = e["effect"].as_str().unwrap_or("?");
+        if effects.iter().any(|(n, p)| n.as_str() == name && present(n, p)) {
+            continue;
+        }
+        for (p, i) in e["parameters"].as_object().into_iter().flatten() {
+            rows.push(json!({"effect": name, "parameter": p, "true": 0.0, "identified": i,
+                "relative_error": null, "absolute_error": i, "status": "extra"}));
+        }
+    }
+    // the transmission per temperature: the truth's own numbers, or its factors on the FMU's table
+    // (synth scales the PCL's E' and E'' only; the springs stay at the table's)
+    let table_truth = |g: &Value| -> Option<(f64, f64)> {
+        let (se, sl) = (truth["storage_modulus_scale"].as_f64()?, truth["loss_modulus_scale"].as_f64()?);
+        let (k, c, springs) = (
+            g["table_stiffness"].as_f64()?,
+            g["table_damping"].as_f64()?,
+            g["nominal_spring_bank_stiffness"].as_f64()?,
+        );
+        Some((springs + se * (k - springs), sl * c))
+    };
+    let run_truth = |temperature: f64| -> Option<(f64, f64)> {
+        let r = truth["runs"].as_array()?.iter().min_by(|a, b| {
+            let d = |r: &Value| (r["temperature_c"].as_f64().unwrap_or(f64::INFINITY) - temperature).abs();
+            d(a).total_cmp(&d(b))
+        })?;
+        // runs are grouped to the nearest 0.5 °C
+        ((r["temperature_c"].as_f64()? - temperature).abs() <= 0.5)
+            .then_some((r["stiffness"].as_f64()?, r["damping"].as_f64()?))
+    };
+    let from_runs = truth["runs"].is_array();
+    let mut transmission = Vec::new();
+    for g in report["identified"].as_array().into_iter().flatten() {
+        let temperature = g["temperature_c"].as_f64().unwrap_or(f64::NAN);
+        let Some((k, c)) = (if from_runs { run_truth(temperature) } else { table_truth(g) }) else { continue };
+        let (ki, ci) = (g["stiffness"].as_f64(), g["damping"].as_f64());
+        transmission.push(json!({"temperature_c": temperature,
+            "stiffness_true": k, "stiffness_identified": ki, "stiffness_relative_error": relative(k, ki),
+            "damping_true": c, "damping_identified": ci, "damping_relative_error": relative(c, ci)}));
+    }
+    if effects.is_empty() && transmission.is_empty() {
+        return None;
+    }
+    let mut notes = vec![if from_runs {
+        "the transmission's truth: each run's stiffness and damping in truth.json".to_string()
+    } else {
+        "the transmission's truth: truth.json's storage and loss modulus scales on the FMU's table, K = springs + \
+         scale × (table K − springs), C = scale × table C at the damping reference frequency"
+            .to_string()
+    }];
+    if report["identified"].as_array().into_iter().flatten().any(|g| g["inertia_declared"] == false) {
+        notes.push(
+            "the link inertia is not declared in every run: the identified K and C are relative to the FMU's default"
+                .into(),
+        );
+    }
+    Some(json!({"file": file.display().to_string(), "parameters": rows, "transmission": transmission, "notes": notes}))
+}
+
+/// report.md's section for `truth_comparison`.
+fn truth_markdown(t: &Value) -> String {
+    use super::quality::short;
+    let num = |v: &Value| v.as_f64().map_or("—".to_string(), short);
+    // two decimals of a percent, and an exponent below them (a fit to the noise is often closer)
+    let rel = |v: &Value| {
+        v.as_f64().map_or("—".to_string(), |e| match 100.0 * e {
+            0.0 => "0 %".to_string(),
+            p if p.abs() >= 0.01 => format!("{p:+.2} %"),
+            p => format!("{p:+.1e} %"),
+        })
+    };
+    let mut s = format!("\n## Against the truth ({})\n\n", t["file"].as_str().unwrap_or("truth.json"));
+    let rows = t["parameters"].as_array().cloned().unwrap_or_default();
+    if rows.is_empty() {
+        s += "The truth has no effect, and none was added.\n";
+    } else {
+        s += "| effect | parameter | true | identified | relative error |\n|---|---|---|---|---|\n";
+        for r in &rows {
+            let identified = match r["status"].as_str() {
+                Some("found") | Some("extra") => num(&r["identified"]),
+                other => format!("{} ({})", num(&r["identified"]), other.unwrap_or("?")),
+            };
+            let extra = if r["status"] == "extra" { " (not in the truth)" } else { "" };
+            s += &format!(
+                "| {}{extra} | {} | {} | {identified} | {} |\n",
+                r["effect"].as_str().unwrap_or("?"),
+                r["parameter"].as_str().unwrap_or("?"),
+                num(&r["true"]),
+                rel(&r["relative_error"])
+            );
+        }
+    }
+    if let Some(tr) = t["transmission"].as_array().filter(|a| !a.is_empty()) {
+        s += "\n| T (°C) | K true | K identified | error | C true | C identified | error |\n|---|---|---|---|---|---|---|\n";
+        for g in tr {
+            s += &format!(
+                "| {} | {} | {} | {} | {} | {} | {} |\n",
+                g["temperature_c"],
+                num(&g["stiffness_true"]),
+                num(&g["stiffness_identified"]),
+                rel(&g["stiffness_relative_error"]),
+                num(&g["damping_true"]),
+                num(&g["damping_identified"]),
+                rel(&g["damping_relative_error"])
+            );
+        }
+    }
+    for n in t["notes"].as_array().into_iter().flatten().filter_map(Value::as_str) {
+        let mut c = n.chars();
+        s += &format!("\n{}{}.\n", c.next().map(|f| f.to_uppercase().to_string()).unwrap_or_default(), c.as_str());
+    }
+    s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A device report's parts that the warnings and the truth comparison read.
+    fn report(baseline_at_bound: bool, final_at_bound: bool, white: bool) -> Value {
+        let entry = |at_bound: bool, k: f64, c: f64| {
+            json!({"temperature_c": 40.0, "at_bound": at_bound, "stiffness": k, "damping": c, "inertia_declared": true,
+                "stiffness_range": [1e-2, 1.78e5], "damping_range": [1e-7, 226.0], "table_stiffness": 12.0,
+                "table_damping": 0.4, "nominal_spring_bank_stiffness": 2.0})
+        };
+        json!({
+            "identified_baseline": [entry(baseline_at_bound, 1.78e5, 1e-7)],
+            "identified": [entry(final_at_bound, 10.1, 0.49)],
+            "added_effects": [{"effect": "gravity", "parameters": {"mgl_nm": 1.2, "offset_rad": 0.1}},
+                              {"effect": "link_damping", "parameters": {"damping_nms": 0.001}}],
+            "unexplained": !white,
+            "residual_white": white,
+        })
+    }
+
+    fn bound_warnings(r: &Value) -> Vec<String> {
+        device_warnings(&[], r).into_iter().filter(|w| w.contains("stopped at a bound")).collect()
+    }
+
+    /// Issue 30: a baseline at a bound is warned about only when it matters, when the final model
+    /// still sits at a bound or does not fit; otherwise report.md says it was resolved.
+    #[test]
+    fn a_baseline_at_a_bound_is_a_warning_only_when_the_final_fit_does_not_resolve_it() {
+        assert!(bound_warnings(&report(true, false, true)).is_empty());
+        let md_note = baseline_bounds_resolved(&report(true, false, true));
+        assert_eq!(md_note, ["40.0"]);
+        let w = bound_warnings(&report(true, true, true));
+        assert_eq!(w.len(), 2, "{w:?}");
+        assert!(w[0].starts_with("baseline fit at 40 °C") && w[1].starts_with("final fit at 40 °C"), "{w:?}");
+        let w = bound_warnings(&report(true, false, false));
+        assert!(w.len() == 1 && w[0].starts_with("baseline fit at 40 °C"), "{w:?}");
+        assert!(baseline_bounds_resolved(&report(true, false, false)).is_empty());
+        assert!(bound_warnings(&report(false, false, true)).is_empty());
+    }
+
+    /// Issue 30: the truth beside synthetic runs is compared with what was identified, in either
+    /// truth's form (`thermovia synth`'s, tests/truth/truth_model.py's).
+    #[test]
+    fn the_truth_is_compared_effect_by_effect_and_per_temperature() {
+        let r = report(false, false, true);
+        let synth = json!({"storage_modulus_scale": 0.8, "loss_modulus_scale": 1.25,
+            "coulomb_friction": {"torque_nm": 0.03}, "backlash": {"width_rad": 0.0},
+            "gravity": {"mgl_nm": 1.249, "offset_rad": 0.1},
+            "frequency_dependent_modulus": {"stiffness_nm_per_rad": 0.0, "relaxation_time_s": 0.1}, "seed": 1});
+        let t = truth_comparison(std::path::Path::new("d/truth.json"), &synth, &r).unwrap();
+        let rows = t["parameters"].as_array().unwrap();
+        let row = |e: &str, p: &str| rows.iter().find(|x| x["effect"] == e && x["parameter"] == p).unwrap().clone();
+        assert_eq!(rows.len(), 4, "absent effects (zero) are not rows: {rows:?}");
+        assert_eq!(row("coulomb_friction", "torque_nm")["status"], "missed");
+        let g = row("gravity", "mgl_nm");
+        assert_eq!((g["status"].as_str(), g["identified"].as_f64()), (Some("found"), Some(1.2)));
+        assert!((g["relative_error"].as_f64().unwrap() - (1.2 / 1.249 - 1.0)).abs() < 1e-12);
+        assert_eq!(row("gravity", "offset_rad")["relative_error"].as_f64(), Some(0.0));
+        let extra = row("link_damping", "damping_nms");
+        assert_eq!((extra["status"].as_str(), extra["true"].as_f64()), (Some("extra"), Some(0.0)));
+        assert!(extra["relative_error"].is_null());
+        // K = springs + 0.8 × (table − springs) = 10, C = 1.25 × 0.4 = 0.5
+        let k = &t["transmission"][0];
+        assert_eq!((k["stiffness_true"].as_f64(), k["damping_true"].as_f64()), (Some(10.0), Some(0.5)));
+        assert!((k["stiffness_relative_error"].as_f64().unwrap() - 0.01).abs() < 1e-12);
+        let md = truth_markdown(&t);
+        assert!(md.contains("| gravity | mgl_nm | 1.249 | 1.2 | -3.92 % |"), "{md}");
+        assert!(md.contains("| coulomb_friction | torque_nm | 0.03 | — (missed) | — |"), "{md}");
+        assert!(md.contains("| 40.0 | 10 | 10.1 | +1.00 % | 0.5 | 0.49 | -2.00 % |"), "{md}");
+        assert!(
+            md.contains("| gravity | offset_rad | 0.1 | 0.1 | 0 % |") && md.contains("\nThe transmission's truth: "),
+            "{md}"
+        );
+        // tests/truth/truth_model.py's form: effects under "effects", K and C per run
+        let runs = json!({"effects": {"gravity": {"mgl_nm": 1.2, "offset_rad": 0.0},
+            "hardening_spring": {"alpha_per_rad2": 5.0, "out_of_library": true}},
+            "runs": [{"temperature_c": 22.0, "stiffness": 1.0, "damping": 0.1},
+                     {"temperature_c": 40.0, "stiffness": 10.0, "damping": 0.5}]});
+        let t = truth_comparison(std::path::Path::new("truth.json"), &runs, &r).unwrap();
+        let rows = t["parameters"].as_array().unwrap();
+        let offset = rows.iter().find(|x| x["parameter"] == "offset_rad").unwrap();
+        assert!(offset["relative_error"].is_null() && offset["absolute_error"].as_f64() == Some(0.1), "{offset}");
+        assert!(rows.iter().any(|x| x["effect"] == "hardening_spring" && x["status"] == "outside the library"));
+        assert_eq!(t["transmission"][0]["stiffness_true"].as_f64(), Some(10.0));
+        // a JSON that is no truth is not compared
+        assert!(truth_comparison(std::path::Path::new("x.json"), &json!({"a": 1}), &r).is_none());
+    }
 }

@@ -20,11 +20,11 @@ pub struct SynthArgs {
     /// Folder to write the run files to (written atomically).
     #[cfg_attr(feature = "cli", arg(long, default_value = "out/synth"))]
     pub out: PathBuf,
-    /// Run temperatures, °C.
-    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', default_values_t = vec![22.0, 40.0, 50.0, 60.0]))]
+    /// Run temperatures, °C (comma- or space-separated).
+    #[cfg_attr(feature = "cli", arg(long, num_args = 1.., value_delimiter = ',', default_value = "22,40,50,60"))]
     pub temperatures: Vec<f64>,
-    /// Motor frequencies, Hz.
-    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', default_values_t = vec![0.5, 1.0]))]
+    /// Motor frequencies, Hz (comma- or space-separated).
+    #[cfg_attr(feature = "cli", arg(long, num_args = 1.., value_delimiter = ',', default_value = "0.5,1"))]
     pub frequencies: Vec<f64>,
     /// Length of each run, s.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 20.0))]
@@ -32,9 +32,9 @@ pub struct SynthArgs {
     /// Sampling rate, Hz.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 1000.0))]
     pub rate: f64,
-    /// Motor amplitude θ0, rad.
+    /// Motor amplitude θ0, rad, as every angle of the command line.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 0.3))]
-    pub amplitude: f64,
+    pub amplitude_rad: f64,
     /// Standard deviation of the Gaussian sensor noise added before quantisation, rad.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 1e-4))]
     pub noise_std: f64,
@@ -180,6 +180,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
     if !(args.rate > 0.0) || !args.rate.is_finite() {
         return Err(format!("--rate {}: must be a finite number > 0 Hz", args.rate).into());
     }
+    crate::sweep::check_amplitude(args.amplitude_rad)?;
     let n = (args.duration * args.rate).round() as usize + 1;
     if n < 3 {
         return Err(format!(
@@ -202,7 +203,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
         for &f in &args.frequencies {
             let time: Vec<f64> = (0..n).map(|k| k as f64 / args.rate).collect();
             let w = 2.0 * std::f64::consts::PI * f;
-            let motor: Vec<f64> = time.iter().map(|t| args.amplitude * (w * t).sin()).collect();
+            let motor: Vec<f64> = time.iter().map(|t| args.amplitude_rad * (w * t).sin()).collect();
             let temp_c: Vec<f64> =
                 time.iter().map(|t| temp - args.heating_k * (-3.0 * t / args.duration).exp()).collect();
             let input = SimInput {
@@ -219,7 +220,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
             let mut text = String::new();
             text += "# source=thermovia synth (truth model through the FMU; truth.json holds the truth)\n";
             text += &format!("# temperature_c={temp}\n# frequency_hz={f}\n# link_inertia_kgm2={}\n", args.link_inertia);
-            text += &format!("# motor_amplitude_rad={}\n# sample_rate_hz={}\n", args.amplitude, args.rate);
+            text += &format!("# motor_amplitude_rad={}\n# sample_rate_hz={}\n", args.amplitude_rad, args.rate);
             text += "time_s,motor_angle_rad,link_angle_rad,temperature_c\n";
             for k in 0..n {
                 let m = quantize(motor[k] + args.noise_std * rng.normal());

@@ -40,15 +40,16 @@ pub struct SweepArgs {
     /// The FMU to drive [default: target/fmu/ThermoVIA.fmu of this workspace].
     #[cfg_attr(feature = "cli", arg(long))]
     pub fmu: Option<PathBuf>,
-    /// Housing temperatures of the runs, °C (comma-separated).
-    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', default_value = "22,40,50,60"))]
+    /// Housing temperatures of the runs, °C (comma- or space-separated).
+    #[cfg_attr(feature = "cli", arg(long, num_args = 1.., value_delimiter = ',', default_value = "22,40,50,60"))]
     pub temperatures: Vec<f64>,
-    /// Motor frequencies, Hz (comma-separated). The step must divide each period.
-    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', default_value = "0.5,1"))]
+    /// Motor frequencies, Hz (comma- or space-separated). The step must divide each period.
+    #[cfg_attr(feature = "cli", arg(long, num_args = 1.., value_delimiter = ',', default_value = "0.5,1"))]
     pub frequencies: Vec<f64>,
-    /// Motor amplitude θ0, degrees (the paper's value is lost; 15–45° plausible).
-    #[cfg_attr(feature = "cli", arg(long, default_value_t = 30.0))]
-    pub amplitude_deg: f64,
+    /// Motor amplitude θ0, rad, as every angle of the command line (the paper's value is lost;
+    /// 0.26–0.79 rad, 15–45°, plausible) [default: π/6 = 0.5236, 30°].
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = std::f64::consts::FRAC_PI_6, hide_default_value = true))]
+    pub amplitude_rad: f64,
     /// Communication step of the harmonic runs, s.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 1e-3))]
     pub step: f64,
@@ -93,8 +94,8 @@ pub struct SweepArgs {
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 0.1))]
     pub error_limit: f64,
     /// Heater powers of the heating study (22 °C → the highest temperature, housing held vs
-    /// constant power), W (comma-separated).
-    #[cfg_attr(feature = "cli", arg(long, value_delimiter = ',', default_value = "5,10,15"))]
+    /// constant power), W (comma- or space-separated).
+    #[cfg_attr(feature = "cli", arg(long, num_args = 1.., value_delimiter = ',', default_value = "5,10,15"))]
     pub heating_powers: Vec<f64>,
     /// Heater power of the heating–cooling cycle study, W (0: no cycle study).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = 10.0))]
@@ -231,6 +232,7 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
             return Err(format!("{option} {value}: must be a finite number > 0 {unit}"));
         }
     }
+    check_amplitude(a.amplitude_rad)?;
     if !(a.soak >= 0.0) {
         return Err(format!("--soak {}: must be ≥ 0 s", a.soak));
     }
@@ -258,6 +260,21 @@ fn validate(a: &SweepArgs) -> Result<(), String> {
         }
     }
     Ok(())
+}
+
+/// `--amplitude-rad` of `sweep` and `synth`: at most a half turn, which also catches an amplitude
+/// meant in degrees (30 for 30°).
+pub fn check_amplitude(amplitude_rad: f64) -> Result<(), String> {
+    use crate::calibrate::quality::short;
+    if amplitude_rad > 0.0 && amplitude_rad <= std::f64::consts::PI {
+        return Ok(());
+    }
+    let hint = if amplitude_rad > std::f64::consts::PI && amplitude_rad <= 360.0 {
+        format!(" (in degrees? {}° is {} rad)", short(amplitude_rad), short(amplitude_rad.to_radians()))
+    } else {
+        String::new()
+    };
+    Err(format!("--amplitude-rad {}: must be a number > 0 and ≤ π rad{hint}", short(amplitude_rad)))
 }
 
 /// What one temperature gives: its conditions (one per frequency), its warm-up if heated, and what
@@ -325,7 +342,7 @@ fn temperature_block(
         inst.set("excitation_frequency", f)?;
         let omega = 2.0 * std::f64::consts::PI * f;
         let motor = MotorLoop {
-            amplitude: args.amplitude_deg.to_radians(),
+            amplitude: args.amplitude_rad,
             omega,
             kp: args.motor_kp,
             kd: args.motor_kd,

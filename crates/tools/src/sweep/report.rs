@@ -30,7 +30,9 @@ fn summary_json(r: &SweepResult) -> serde_json::Value {
         "settings": {
             "temperatures_c": r.args.temperatures,
             "frequencies_hz": r.args.frequencies,
-            "motor_amplitude_deg": r.args.amplitude_deg,
+            "motor_amplitude_rad": r.args.amplitude_rad,
+            // kept for readers of older summaries; rounded so π/6 reads 30, not 29.999999999999996
+            "motor_amplitude_deg": (r.args.amplitude_rad.to_degrees() * 1e9).round() / 1e9,
             "step_s": r.args.step,
             "settle_cycles": r.args.settle_cycles,
             "cycles": r.args.cycles,
@@ -252,8 +254,12 @@ pub fn markdown(r: &SweepResult) -> String {
     let _ = writeln!(s, "## Protocol\n");
     let _ = writeln!(
         s,
-        "- Motor: torque-driven; PD + feedforward τ = J_m θr'' + B_m θr' + {} (θr − θm) + {} (θr' − θm'), θr = {}° sin ωt from rest; step {} s.",
-        a.motor_kp, a.motor_kd, a.amplitude_deg, a.step
+        "- Motor: torque-driven; PD + feedforward τ = J_m θr'' + B_m θr' + {} (θr − θm) + {} (θr' − θm'), θr = {} rad ({:.1}°) sin ωt from rest; step {} s.",
+        a.motor_kp,
+        a.motor_kd,
+        crate::calibrate::quality::short(a.amplitude_rad),
+        a.amplitude_rad.to_degrees(),
+        a.step
     );
     let _ = writeln!(
         s,
@@ -312,7 +318,7 @@ pub fn markdown(r: &SweepResult) -> String {
     let _ = writeln!(
         s,
         "\nDecay uses the measured motor amplitude (first harmonic); the commanded one is {:.5} rad. Transient: time after which the link stays within 0.1 % of θ0 of its steady sinusoid. PCL °C is the model's estimate (no sensor).\n",
-        a.amplitude_deg.to_radians()
+        a.amplitude_rad
     );
 
     let _ = writeln!(s, "## Frequency-response check\n");
