@@ -144,7 +144,10 @@ pub fn parse(path: &Path, text: &str, select: Columns) -> Result<Table, DataErro
             if slot == 0 {
                 if let Some(&prev) = column.last() {
                     if v <= prev {
-                        return Err(col_err(format!("time {v} s does not increase (previous sample {prev} s)")));
+                        return Err(col_err(format!(
+                            "time {cell} s does not increase (previous sample {} s)",
+                            compact(prev)
+                        )));
                     }
                 }
             }
@@ -152,4 +155,26 @@ pub fn parse(path: &Path, text: &str, select: Columns) -> Result<Table, DataErro
         }
     }
     Ok(Table { meta, names, header_line, last_line, row_lines, positions: selected, columns })
+}
+
+/// A number as a message shows it: Rust's `{}` never uses an exponent, so 1e300 would print 301
+/// digits; beyond 1e15 or below 1e-4 (and not 0) it is written with one.
+pub fn compact(x: f64) -> String {
+    if x != 0.0 && !(1e-4..1e15).contains(&x.abs()) {
+        format!("{x:e}")
+    } else {
+        format!("{x}")
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn huge_and_tiny_numbers_print_with_an_exponent() {
+        assert_eq!(super::compact(1e300), "1e300");
+        assert_eq!(super::compact(-2.5e-7), "-2.5e-7");
+        assert_eq!(super::compact(0.001), "0.001");
+        assert_eq!(super::compact(12.5), "12.5");
+        assert_eq!(super::compact(0.0), "0");
+    }
 }
