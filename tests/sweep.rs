@@ -298,6 +298,29 @@ fn outputs_are_complete_and_written_atomically() {
     assert!(report.contains("## Against the paper") && report.contains("| claim |"));
     let svg = std::fs::read_to_string(out.join("fig7_decay_normalized.svg")).unwrap();
     assert!(svg.starts_with("<svg") && svg.contains("<text"));
+    let texts = |svg: &str| -> Vec<String> {
+        svg.split("<text")
+            .skip(1)
+            .map(|t| t[t.find('>').unwrap() + 1..t.find("</text>").unwrap()].trim().to_string())
+            .collect()
+    };
+    // Fig. 7 beside the paper: like with like, or the figure says they differ (the note is wrapped
+    // into lines: read it as one text)
+    let words = texts(&svg).join(" ");
+    assert!(words.contains("sign kept"), "fig7 must keep the sign of Decay: {words}");
+    if r.conditions.iter().all(|c| c.decay_rad < 0.0) {
+        assert!(words.contains("not comparable"), "fig7 must say the model's Decay has the other sign: {words}");
+    }
+    // every figure's numbers are clean tick labels: no "-0", no "20.0", no float noise
+    for f in files.iter().filter(|f| f.ends_with(".svg")) {
+        for t in texts(&std::fs::read_to_string(out.join(f)).unwrap()) {
+            let t = t.as_str();
+            if t.parse::<f64>().is_ok() {
+                let decimals = t.split(['.', 'e']).nth(1).map_or(0, str::len);
+                assert!(t != "-0" && !t.ends_with(".0") && decimals <= 4, "{f}: tick label {t:?}");
+            }
+        }
+    }
 
     // A destination that cannot be created fails cleanly and leaves nothing behind.
     let blocker = base.join("file");

@@ -5,7 +5,7 @@ use std::path::Path;
 use super::dynamics::ArmConfig;
 use super::sim::Trace;
 use super::{ArmReport, TaskMetrics};
-use crate::report::plot::{chart, Series, BLUE_, GREEN_, GREY_, ORANGE_, PURPLE_, RED_};
+use crate::report::plot::{chart, Axes, Dash, Marker, Series, Style, BLACK_, BLUE_, GREY_, RED_};
 
 fn ms(v: Option<f64>) -> String {
     v.map_or("none".into(), |v| format!("{:.2} ms", v * 1e3))
@@ -77,145 +77,99 @@ pub(super) fn write_report(
     let ys = traces.iter().flat_map(|t| t.tip.iter().map(|p| p[1])).chain(plan.iter().map(|p| p.1));
     let (ylo, yhi) = ys.fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), y| (a.min(y), b.max(y)));
     let tip = |t: &Trace| t.tip.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>();
+    // one look across the arm's plots: blue cold, vermillion heated; the plan and the wall in grey
+    // and black without markers
+    let (cold, hot) = (Style::line(BLUE_).marker(Marker::Circle), Style::line(RED_).marker(Marker::Square));
+    let planned = Style::line(GREY_).dash(Dash::Dashed);
+    let wall = Style::line(BLACK_).dash(Dash::Dotted);
     chart(
         &dir.join("tip_path.svg"),
-        "Tip path: cold vs heated joints, same move into the same wall",
-        "x (m)",
-        "y (m)",
+        &Axes::new("Tip path: cold vs heated joints, same move into the same wall", "x (m)", "y (m)").equal_aspect(),
         &[
-            Series { name: "planned", points: plan, color: GREY_, markers: false },
-            Series { name: "wall", points: vec![(cfg.wall_x, ylo), (cfg.wall_x, yhi)], color: GREEN_, markers: false },
-            Series { name: "cold joints (22 °C)", points: tip(&traces[0]), color: BLUE_, markers: false },
-            Series { name: "heated joints", points: tip(&traces[1]), color: RED_, markers: false },
+            Series::new("planned", plan, planned),
+            Series::new("wall", vec![(cfg.wall_x, ylo), (cfg.wall_x, yhi)], wall),
+            Series::new("cold joints (22 °C)", tip(&traces[0]), cold),
+            Series::new("heated joints", tip(&traces[1]), hot),
         ],
-        true,
     )?;
     let ts = |t: &Trace, f: &dyn Fn(usize) -> f64| (0..t.t.len()).map(|k| (t.t[k], f(k))).collect::<Vec<_>>();
+    // light marks, so the co-simulated lines show through where they agree
+    let reference = Style::points(BLACK_, Marker::Diamond).hollow().width(1).size(3);
     chart(
         &dir.join("tip_x.svg"),
-        "Tip x against time",
-        "t (s)",
-        "x (m)",
+        &Axes::new("Tip x against time", "t (s)", "x (m)"),
         &[
-            Series {
-                name: "planned",
-                points: ts(&traces[0], &|k| cfg.tip(cfg.plan(traces[0].t[k]).0)[0]),
-                color: GREY_,
-                markers: false,
-            },
-            Series {
-                name: "wall",
-                points: vec![(0.0, cfg.wall_x), (cfg.duration, cfg.wall_x)],
-                color: GREEN_,
-                markers: false,
-            },
-            Series { name: "cold", points: ts(&traces[0], &|k| traces[0].tip[k][0]), color: BLUE_, markers: false },
-            Series { name: "heated", points: ts(&traces[1], &|k| traces[1].tip[k][0]), color: RED_, markers: false },
-            Series {
-                name: "monolithic reference (cold, heated)",
-                points: reference_points(&refs[0]),
-                color: GREY_,
-                markers: true,
-            },
-            Series { name: "", points: reference_points(&refs[1]), color: GREY_, markers: true },
+            Series::new("planned", ts(&traces[0], &|k| cfg.tip(cfg.plan(traces[0].t[k]).0)[0]), planned),
+            Series::new("wall", vec![(0.0, cfg.wall_x), (cfg.duration, cfg.wall_x)], wall),
+            Series::new("cold", ts(&traces[0], &|k| traces[0].tip[k][0]), cold),
+            Series::new("heated", ts(&traces[1], &|k| traces[1].tip[k][0]), hot),
+            Series::new("monolithic reference (cold, heated)", reference_points(&refs[0]), reference),
+            Series::new("", reference_points(&refs[1]), reference),
         ],
-        false,
     )?;
     chart(
         &dir.join("contact_force.svg"),
-        "Interaction force at the wall",
-        "t (s)",
-        "force (N)",
+        &Axes::new("Interaction force at the wall", "t (s)", "force (N)"),
         &[
-            Series {
-                name: "cold",
-                points: ts(&traces[0], &|k| traces[0].contact_force[k]),
-                color: BLUE_,
-                markers: false,
-            },
-            Series {
-                name: "heated",
-                points: ts(&traces[1], &|k| traces[1].contact_force[k]),
-                color: RED_,
-                markers: false,
-            },
+            Series::new("cold", ts(&traces[0], &|k| traces[0].contact_force[k]), cold),
+            Series::new("heated", ts(&traces[1], &|k| traces[1].contact_force[k]), hot),
         ],
-        false,
     )?;
+    // colour by temperature, dash and marker by joint
+    let elbow = |s: Style| s.dash(Dash::Dashed).marker(Marker::Triangle);
     chart(
         &dir.join("joint_torques.svg"),
-        "Transmitted joint torques τ_t",
-        "t (s)",
-        "torque (N·m)",
+        &Axes::new("Transmitted joint torques τ_t", "t (s)", "torque (N·m)"),
         &[
-            Series {
-                name: "shoulder, cold",
-                points: ts(&traces[0], &|k| traces[0].transmitted_torque[k][0]),
-                color: BLUE_,
-                markers: false,
-            },
-            Series {
-                name: "elbow, cold",
-                points: ts(&traces[0], &|k| traces[0].transmitted_torque[k][1]),
-                color: PURPLE_,
-                markers: false,
-            },
-            Series {
-                name: "shoulder, heated",
-                points: ts(&traces[1], &|k| traces[1].transmitted_torque[k][0]),
-                color: RED_,
-                markers: false,
-            },
-            Series {
-                name: "elbow, heated",
-                points: ts(&traces[1], &|k| traces[1].transmitted_torque[k][1]),
-                color: ORANGE_,
-                markers: false,
-            },
+            Series::new("shoulder, cold", ts(&traces[0], &|k| traces[0].transmitted_torque[k][0]), cold),
+            Series::new("elbow, cold", ts(&traces[0], &|k| traces[0].transmitted_torque[k][1]), elbow(cold)),
+            Series::new("shoulder, heated", ts(&traces[1], &|k| traces[1].transmitted_torque[k][0]), hot),
+            Series::new("elbow, heated", ts(&traces[1], &|k| traces[1].transmitted_torque[k][1]), elbow(hot)),
         ],
-        false,
     )?;
     let err = |sc: &str| {
         r.accuracy
             .iter()
             .filter(|e| e.scenario == sc)
-            .map(|e| ((e.step_s * 1e3).log10(), (100.0 * e.relative_error).log10()))
+            .map(|e| (e.step_s * 1e3, 100.0 * e.relative_error))
             .collect::<Vec<_>>()
     };
-    let hs: Vec<f64> = r.accuracy.iter().map(|e| (e.step_s * 1e3).log10()).collect();
+    let hs: Vec<f64> = r.accuracy.iter().map(|e| e.step_s * 1e3).collect();
     let (hlo, hhi) = hs.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| (a.min(v), b.max(v)));
+    // log axes in their own units: a reader reads "2 ms, 1.6 %", not log10 values
     chart(
         &dir.join("coupling_error.svg"),
-        "Co-simulation vs monolithic: max tip error / tip travel",
-        "log10 communication step (ms)",
-        "log10 error (%)",
+        &Axes::new(
+            "Co-simulation vs monolithic: max tip error / tip travel",
+            "communication step (ms)",
+            "max tip error (% of travel)",
+        )
+        .log_x()
+        .log_y(),
         &[
-            Series { name: "cold", points: err("cold"), color: BLUE_, markers: true },
-            Series { name: "heated", points: err("hot"), color: RED_, markers: true },
-            Series { name: "1 %", points: vec![(hlo, 0.0), (hhi, 0.0)], color: GREY_, markers: false },
+            Series::new("cold", err("cold"), cold),
+            Series::new("heated", err("hot"), hot),
+            Series::new("1 %", vec![(hlo, 1.0), (hhi, 1.0)], planned),
         ],
-        false,
     )?;
     let sw = &r.switching;
     let col = |i: usize| sw.samples.iter().map(|s| (s[0], s[i])).collect::<Vec<_>>();
     chart(
         &dir.join("impedance_switch_temperature.svg"),
-        &format!("Heating at {} W, then passive cooling", sw.heater_power_w),
-        "t (s)",
-        "temperature (°C)",
+        &Axes::new(format!("Heating at {} W, then passive cooling", sw.heater_power_w), "t (s)", "temperature (°C)"),
         &[
-            Series { name: "PCL (model)", points: col(1), color: RED_, markers: false },
-            Series { name: "housing (thermocouple)", points: col(2), color: ORANGE_, markers: false },
+            Series::new("PCL (model)", col(1), hot),
+            Series::new(
+                "housing (thermocouple)",
+                col(2),
+                Style::line(BLUE_).dash(Dash::Dashed).marker(Marker::Triangle),
+            ),
         ],
-        false,
     )?;
     chart(
         &dir.join("impedance_switch_stiffness.svg"),
-        "Joint stiffness K_eff while heating and cooling",
-        "t (s)",
-        "K_eff (N·m/rad)",
-        &[Series { name: "K_eff", points: col(3), color: BLUE_, markers: false }],
-        false,
+        &Axes::new("Joint stiffness K_eff while heating and cooling", "t (s)", "K_eff (N·m/rad)"),
+        &[Series::new("K_eff", col(3), cold)],
     )?;
     // the impact under both damping laws: from 50 ms before the first contact to 0.5 s after it
     let first = r.tasks.iter().chain(&r.prony.tasks).filter_map(|t| t.first_contact_s).fold(f64::INFINITY, f64::min);
@@ -227,18 +181,17 @@ pub(super) fn write_report(
                 .map(|(t, f)| (*t, *f))
                 .collect()
         };
+        // colour by temperature, dash and marker by damping law
+        let prony = |s: Style| s.dash(Dash::Dashed).marker(Marker::Triangle);
         chart(
             &dir.join("impact_damping_law.svg"),
-            "Wall force at the impact: hysteretic vs Prony damping",
-            "t (s)",
-            "force (N)",
+            &Axes::new("Wall force at the impact: hysteretic vs Prony damping", "t (s)", "force (N)"),
             &[
-                Series { name: "cold, hysteretic", points: window(&traces[0]), color: BLUE_, markers: false },
-                Series { name: "cold, Prony", points: window(&prony_traces[0]), color: PURPLE_, markers: false },
-                Series { name: "heated, hysteretic", points: window(&traces[1]), color: RED_, markers: false },
-                Series { name: "heated, Prony", points: window(&prony_traces[1]), color: ORANGE_, markers: false },
+                Series::new("cold, hysteretic", window(&traces[0]), cold),
+                Series::new("cold, Prony", window(&prony_traces[0]), prony(cold)),
+                Series::new("heated, hysteretic", window(&traces[1]), hot),
+                Series::new("heated, Prony", window(&prony_traces[1]), prony(hot)),
             ],
-            false,
         )?;
     }
     w("report.md", &markdown(cfg, r))

@@ -1734,8 +1734,7 @@ pub fn plots(
     o: &DriveOutcome,
     axis: Axis,
 ) -> Result<crate::output::Files, Box<dyn std::error::Error>> {
-    use plotters::style::RGBColor;
-    let (orange, blue) = (RGBColor(255, 127, 14), RGBColor(31, 119, 180));
+    use super::report::{BASELINE, FINAL};
     let mut files = Vec::new();
     let mut one =
         |inp: &DriveInput, b: &Simulated, f: &Simulated, set: &str| -> Result<(), Box<dyn std::error::Error>> {
@@ -1747,7 +1746,7 @@ pub fn plots(
                 &format!("{} ({set}): position error before and after", inp.name),
                 &format!("measured − model ({})", axis.units().0),
                 &t,
-                &[("baseline", &every(&e0), orange), ("final", &every(&e1), blue)],
+                &[("baseline", &every(&e0), BASELINE), ("final", &every(&e1), FINAL)],
             )?;
             files.push((format!("plots/residual_{}.svg", inp.plot_stem), svg.into_bytes()));
             Ok(())

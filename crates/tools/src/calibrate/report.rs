@@ -8,7 +8,9 @@ use super::data::Run;
 use super::diagnose::Signatures;
 use super::fit::{Effect, Fit, Problem};
 use super::search::Outcome;
-use crate::report::plot::{range, thin};
+use crate::report::plot::{
+    chart_svg, draw, figure, log_axis, log_range, panel, thin, Axes, Dash, Marker, Series, Style, BLUE_, GREY_, RED_,
+};
 
 /// Error metrics of a fit over every sample used.
 pub fn metrics(prob: &Problem, fit: &Fit) -> Value {
@@ -538,12 +540,22 @@ pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> 
             .filter(|p| p.0.is_finite() && p.1 > 0.0)
             .collect()
     };
+    // the bar's lower end on a log axis: 2σ below, but never at or below zero
+    let low = |p: &(f64, f64, f64)| (p.1 - 2.0 * p.2).max(p.1 / 10.0);
+    let high = |p: &(f64, f64, f64)| p.1 + 2.0 * p.2.max(0.0);
+    let baseline_style = Style::points(RED_, Marker::Square).hollow();
+    let final_style = Style::points(BLUE_, Marker::Circle);
     let mut svg = String::new();
     {
-        let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let panels = root.split_evenly((1, 2));
-        for (panel, (what, unit)) in panels.iter().zip([("stiffness", "K (N·m/rad)"), ("damping", "C (N·m·s/rad)")])
+        let root = SVGBackend::with_string(&mut svg, (1100, 480)).into_drawing_area();
+        let legend = [
+            ("final fit (± 2σ bars where wider than the marker)".to_string(), final_style),
+            ("baseline".to_string(), baseline_style),
+        ];
+        let body = figure(&root, "Identified transmission per temperature", &legend)?;
+        let panels = body.split_evenly((1, 2));
+        for (panel_area, (what, unit)) in
+            panels.iter().zip([("stiffness", "K (N·m/rad)"), ("damping", "C (N·m·s/rad)")])
         {
             let (fin, base) = (points("identified", what), points("identified_baseline", what));
             let all: Vec<&(f64, f64, f64)> = fin.iter().chain(&base).collect();
@@ -551,69 +563,41 @@ pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> 
                 continue;
             }
             let (t0, t1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
-            let (v0, v1) = all.iter().fold((f64::INFINITY, 0.0f64), |(a, b), p| {
-                (a.min((p.1 - 2.0 * p.2).max(p.1 / 10.0)), b.max(p.1 + 2.0 * p.2))
-            });
-            let mut ch = ChartBuilder::on(panel)
-                .caption(format!("identified {what} per temperature (final ± 2σ, baseline)"), ("sans-serif", 15))
-                .margin(10)
-                .x_label_area_size(32)
-                .y_label_area_size(70)
-                .build_cartesian_2d((t0 - 5.0)..(t1 + 5.0), ((v0 / 1.5)..(v1 * 1.5)).log_scale())?;
-            ch.configure_mesh().x_desc("temperature (°C)").y_desc(unit).draw()?;
-            let blue = RGBColor(31, 119, 180);
-            let orange = RGBColor(255, 127, 14);
-            ch.draw_series(base.iter().map(|p| Circle::new((p.0 + 0.6, p.1), 4, orange.filled())))?
-                .label("baseline")
-                .legend(move |(x, y)| Circle::new((x + 9, y), 4, orange.filled()));
-            ch.draw_series(fin.iter().map(|p| {
-                ErrorBar::new_vertical(p.0, (p.1 - 2.0 * p.2).max(p.1 / 10.0), p.1, p.1 + 2.0 * p.2, blue.filled(), 8)
-            }))?
-            .label("final ± 2σ")
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], blue));
-            ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
+            let (v0, v1) = log_range(all.iter().flat_map(|p| [low(p), high(p)]));
+            let mut ch = panel(panel_area, what, "temperature (°C)", unit, (t0 - 5.0)..(t1 + 5.0), log_axis(v0, v1))?;
+            // the baseline a little to the right, so a baseline on the final value stays visible
+            draw(&mut ch, &base.iter().map(|p| (p.0 + 0.8, p.1)).collect::<Vec<_>>(), baseline_style)?;
+            ch.draw_series(
+                fin.iter().map(|p| ErrorBar::new_vertical(p.0, low(p), p.1, high(p), BLUE_.stroke_width(2), 10)),
+            )?;
+            draw(&mut ch, &fin.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(), final_style)?;
         }
         root.present()?;
     }
     Ok(svg)
 }
+
+/// How the report draws the measured signal, the baseline model and the final one (also the drive
+/// rig's plots): the measured trace wide and grey under the models, each model in its colour with
+/// its marker.
+pub(crate) const MEASURED: Style = Style::line(GREY_).width(4);
+pub(crate) const BASELINE: Style = Style::line(RED_).width(1).marker(Marker::Triangle);
+pub(crate) const FINAL: Style = Style::line(BLUE_).width(1).marker(Marker::Circle);
 
 pub(crate) fn line_plot(
     title: &str,
     ylabel: &str,
     t: &[f64],
-    series: &[(&str, &[f64], RGBColor)],
+    series: &[(&str, &[f64], Style)],
 ) -> Result<String, Box<dyn std::error::Error>> {
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let (y0, y1) = range(series.iter().flat_map(|s| s.1.iter().copied()));
-        let mut ch = ChartBuilder::on(&root)
-            .caption(title, ("sans-serif", 16))
-            .margin(10)
-            .x_label_area_size(32)
-            .y_label_area_size(70)
-            .build_cartesian_2d(t[0]..t[t.len() - 1], y0..y1)?;
-        ch.configure_mesh().x_desc("time (s)").y_desc(ylabel).draw()?;
-        for (name, y, c) in series {
-            let c = *c;
-            ch.draw_series(LineSeries::new(thin(t, y, 4000), c.stroke_width(1)))?
-                .label(*name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
-        }
-        ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
-        root.present()?;
-    }
-    Ok(svg)
+    let series: Vec<Series> =
+        series.iter().map(|(name, y, style)| Series::new(*name, thin(t, y, 4000).collect(), *style)).collect();
+    chart_svg(&Axes::new(title, "time (s)", ylabel).size(1000, 460), &series)
 }
 
 pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output::Files, Box<dyn std::error::Error>> {
     let mut files = Vec::new();
     let mut offset = 0;
-    let blue = RGBColor(31, 119, 180);
-    let orange = RGBColor(255, 127, 14);
-    let green = RGBColor(44, 160, 44);
     let freqs: Vec<f64> = (1..=400).map(|k| k as f64 * 0.025).collect();
     let mut spec_before = vec![0.0; freqs.len()];
     let mut spec_after = vec![0.0; freqs.len()];
@@ -628,9 +612,9 @@ pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output:
             "link angle (rad)",
             &run.time,
             &[
-                ("measured", &prob.measured[r], RGBColor(0, 0, 0)),
-                ("baseline", &o.baseline.outputs[r], orange),
-                ("final", &o.final_fit.outputs[r], blue),
+                ("measured", &prob.measured[r], MEASURED),
+                ("baseline", &o.baseline.outputs[r], BASELINE.dash(Dash::Dashed)),
+                ("final", &o.final_fit.outputs[r], FINAL),
             ],
         )?;
         files.push((format!("plots/fit_{stem}.svg"), svg.into_bytes()));
@@ -638,7 +622,7 @@ pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output:
             &format!("{}: residual before and after", run.name()),
             "measured − model (rad)",
             &run.time,
-            &[("baseline", &e0, orange), ("final", &e1, blue)],
+            &[("baseline", &e0, BASELINE), ("final", &e1, FINAL)],
         )?;
         files.push((format!("plots/residual_{stem}.svg"), svg.into_bytes()));
         for (acc, e) in [(&mut spec_before, &e0), (&mut spec_after, &e1)] {
@@ -647,27 +631,16 @@ pub fn plots(runs: &[Run], prob: &Problem, o: &Outcome) -> Result<crate::output:
             }
         }
     }
-    let mut svg = String::new();
-    {
-        let root = SVGBackend::with_string(&mut svg, (1000, 420)).into_drawing_area();
-        root.fill(&WHITE)?;
-        let lo = spec_before.iter().chain(&spec_after).cloned().fold(f64::INFINITY, f64::min).max(1e-9);
-        let hi = spec_before.iter().chain(&spec_after).cloned().fold(0.0, f64::max).max(lo * 10.0);
-        let mut ch = ChartBuilder::on(&root)
-            .caption("Residual amplitude spectrum, mean over runs", ("sans-serif", 16))
-            .margin(10)
-            .x_label_area_size(32)
-            .y_label_area_size(70)
-            .build_cartesian_2d(0.0..10.0, (lo..hi).log_scale())?;
-        ch.configure_mesh().x_desc("frequency (Hz)").y_desc("amplitude (rad)").draw()?;
-        for (name, y, c) in [("baseline", &spec_before, orange), ("final", &spec_after, green)] {
-            ch.draw_series(LineSeries::new(freqs.iter().copied().zip(y.iter().copied()), c.stroke_width(1)))?
-                .label(name)
-                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], c));
-        }
-        ch.configure_series_labels().background_style(WHITE.mix(0.85)).border_style(BLACK).draw()?;
-        root.present()?;
-    }
+    let spectrum = |y: &[f64]| freqs.iter().copied().zip(y.iter().copied()).collect::<Vec<_>>();
+    let svg = chart_svg(
+        &Axes::new("Residual amplitude spectrum, mean over runs", "frequency (Hz)", "amplitude (rad)")
+            .log_y()
+            .size(1000, 460),
+        &[
+            Series::new("baseline", spectrum(&spec_before), BASELINE),
+            Series::new("final", spectrum(&spec_after), FINAL),
+        ],
+    )?;
     files.push(("plots/residual_spectrum.svg".into(), svg.into_bytes()));
     Ok(files)
 }

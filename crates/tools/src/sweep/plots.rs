@@ -1,14 +1,19 @@
-//! SVG figures of a sweep (plotters, SVG backend): trajectories like the paper's Fig. 6, normalised
-//! Decay like Fig. 7, moduli against temperature like Fig. 4, and the warm-up.
+//! SVG figures of a sweep (plotters, SVG backend): trajectories like the paper's Fig. 6, Decay like
+//! Fig. 7, moduli against temperature like Fig. 4, and the warm-up. Layout, tick labels, legends and
+//! styles come from [`crate::report::plot`].
 
 use std::error::Error;
 use std::path::Path;
 
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use super::rig::{self, ZERO_CELSIUS};
 use super::SweepResult;
-use crate::report::plot::{legend, range, thin, PALETTE};
+use crate::report::plot::{
+    draw, figure, figure_rows, log_axis, log_range, number, panel, plot_pixels, range, thin, wrap, Dash, Entry, Marker,
+    Style, BLACK_, BLUE_, GREY_, PALETTE, PURPLE_, RED_,
+};
 
 type R = Result<(), Box<dyn Error>>;
 
@@ -32,43 +37,71 @@ pub fn write_all(r: &SweepResult, dir: &Path) -> Result<usize, Box<dyn Error>> {
     Ok(n)
 }
 
+/// The i-th frequency's (or target's, or law's) style: its colour and its marker.
+fn nth(i: usize) -> Style {
+    Style::nth(i)
+}
+
+/// Light grey over the analysed cycles (translucent, so the grid shows through).
+fn shade_analysed<DB: DrawingBackend, X: Ranged<ValueType = f64>, Y: Ranged<ValueType = f64>>(
+    ch: &mut ChartContext<'_, DB, Cartesian2d<X, Y>>,
+    (t0, t1): (f64, f64),
+    (y0, y1): (f64, f64),
+) -> R
+where
+    DB::ErrorType: 'static,
+{
+    ch.draw_series(std::iter::once(Rectangle::new([(t0, y0), (t1, y1)], BLACK.mix(0.07).filled())))?;
+    Ok(())
+}
+
 fn trajectories(r: &SweepResult, f: f64, path: &Path) -> R {
     let conds: Vec<_> = r.conditions.iter().filter(|c| c.frequency_hz == f).collect();
-    let root = SVGBackend::new(path, (1100, 260 * conds.len() as u32 + 40)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (title, body) = root.split_vertically(40);
-    title.draw(&Text::new(
-        format!("Motor and link angle at {f} Hz from rest (left), link − motor (right); shaded: analysed cycles"),
-        (10, 12),
-        ("sans-serif", 18),
-    ))?;
+    let root = SVGBackend::new(path, (1200, 290 * conds.len() as u32 + 90)).into_drawing_area();
+    // the three angles coincide to a fraction of a degree: a wide motor line under a thin link
+    // line, a dashed reference, and markers at staggered places tell them apart where they overlap
+    let reference = Style::line(BLACK_).width(1).dash(Dash::Dashed);
+    let motor = Style::line(BLUE_).width(4);
+    let link = Style::line(RED_).width(1).marker(Marker::Triangle);
+    let diff = Style::line(PURPLE_).width(1);
+    let legend: Vec<Entry> = vec![
+        ("reference θ0 sin ωt".into(), reference),
+        ("motor θm".into(), motor),
+        ("link θl".into(), link),
+        ("link − motor (right)".into(), diff),
+    ];
+    let body = figure(
+        &root,
+        &format!("Motor and link angle at {f} Hz from rest (left), link − motor (right); shaded: the analysed cycles"),
+        &legend,
+    )?;
     let rows = body.split_evenly((conds.len(), 2));
     for (i, c) in conds.iter().enumerate() {
         let t = &c.trace.time;
         let deg = |o: usize| c.trace.column(o).iter().map(|v| v.to_degrees()).collect::<Vec<_>>();
         let (m, l) = (deg(rig::O_MOTOR_ANGLE), deg(rig::O_LINK_ANGLE));
-        let reference: Vec<f64> = c.trace.reference.iter().map(|v| v.to_degrees()).collect();
+        let reference_deg: Vec<f64> = c.trace.reference.iter().map(|v| v.to_degrees()).collect();
         let (y0, y1) = range(m.iter().chain(&l).cloned());
         let t_end = *t.last().unwrap_or(&1.0);
         let t_win = t[c.window.0];
-        let mut ch = ChartBuilder::on(&rows[2 * i])
-            .caption(format!("{} °C (PCL {:.1} °C)", c.temperature_c, c.pcl_temperature_c), ("sans-serif", 15))
-            .margin(6)
-            .x_label_area_size(28)
-            .y_label_area_size(48)
-            .build_cartesian_2d(0.0..t_end, y0..y1)?;
-        ch.configure_mesh().x_desc("time (s)").y_desc("angle (°)").light_line_style(WHITE).draw()?;
-        ch.draw_series(std::iter::once(Rectangle::new([(t_win, y0), (t_end, y1)], RGBColor(235, 235, 235).filled())))?;
-        ch.draw_series(LineSeries::new(thin(t, &reference, 1500), PALETTE[2].stroke_width(1)))?
-            .label("reference θ0 sin ωt")
-            .legend(legend(PALETTE[2]));
-        ch.draw_series(LineSeries::new(thin(t, &m, 1500), PALETTE[0].stroke_width(2)))?
-            .label("motor θm")
-            .legend(legend(PALETTE[0]));
-        ch.draw_series(LineSeries::new(thin(t, &l, 1500), PALETTE[1].stroke_width(1)))?
-            .label("link θl")
-            .legend(legend(PALETTE[1]));
-        ch.configure_series_labels().background_style(WHITE.mix(0.8)).border_style(BLACK).draw()?;
+        let steady = c.window.0..(c.window.0 + c.window.1).min(t.len());
+        let worst = |a: &[f64], b: &[f64]| {
+            a[steady.clone()].iter().zip(&b[steady.clone()]).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max)
+        };
+        // say on the panel how close the curves are: the reader cannot see 0.1° at this scale
+        let caption = format!(
+            "{} °C (PCL {:.1} °C): |θl − θm| ≤ {}°, |θm − ref| ≤ {}°",
+            c.temperature_c,
+            c.pcl_temperature_c,
+            number(worst(&l, &m), 2),
+            number(worst(&m, &reference_deg), 2)
+        );
+        let mut ch = panel(&rows[2 * i], &caption, "time (s)", "angle (°)", 0.0..t_end, y0..y1)?;
+        shade_analysed(&mut ch, (t_win, t_end), (y0, y1))?;
+        // the wide motor line first, the thin link on it, the dashed reference on top of both
+        draw(&mut ch, &thin(t, &m, 1500).collect::<Vec<_>>(), motor)?;
+        draw(&mut ch, &thin(t, &l, 1500).collect::<Vec<_>>(), link)?;
+        draw(&mut ch, &thin(t, &reference_deg, 1500).collect::<Vec<_>>(), reference)?;
 
         let d: Vec<f64> = l.iter().zip(&m).map(|(a, b)| a - b).collect();
         let (d0, d1) = range(d[c.window.0..].iter().cloned());
@@ -76,77 +109,138 @@ fn trajectories(r: &SweepResult, f: f64, path: &Path) -> R {
             d0.min(range(d.iter().cloned()).0.max(3.0 * d0 - 2.0 * d1)),
             d1.max(range(d.iter().cloned()).1.min(3.0 * d1 - 2.0 * d0)),
         );
-        let mut ch = ChartBuilder::on(&rows[2 * i + 1])
-            .caption(
-                format!("link − motor, Decay {:+.2} mrad, phase {:.3}°", c.decay_rad * 1e3, c.phase_deg),
-                ("sans-serif", 15),
-            )
-            .margin(6)
-            .x_label_area_size(28)
-            .y_label_area_size(56)
-            .build_cartesian_2d(0.0..t_end, d0..d1)?;
-        ch.configure_mesh().x_desc("time (s)").y_desc("θl − θm (°)").light_line_style(WHITE).draw()?;
-        ch.draw_series(std::iter::once(Rectangle::new([(t_win, d0), (t_end, d1)], RGBColor(235, 235, 235).filled())))?;
-        ch.draw_series(LineSeries::new(
-            thin(t, &d, 3000).filter(|p| p.1 >= d0 && p.1 <= d1),
-            PALETTE[4].stroke_width(1),
-        ))?;
+        let clipped = d.iter().any(|v| *v < d0 || *v > d1);
+        let caption = format!(
+            "link − motor: Decay {:+.2} mrad, phase {:.3}°{}",
+            c.decay_rad * 1e3,
+            c.phase_deg,
+            if clipped { " (start-up off scale)" } else { "" }
+        );
+        let mut ch = panel(&rows[2 * i + 1], &caption, "time (s)", "θl − θm (°)", 0.0..t_end, d0..d1)?;
+        shade_analysed(&mut ch, (t_win, t_end), (d0, d1))?;
+        let kept: Vec<(f64, f64)> = thin(t, &d, 3000).filter(|p| p.1 >= d0 && p.1 <= d1).collect();
+        draw(&mut ch, &kept, diff)?;
     }
     root.present()?;
     Ok(())
 }
 
+/// Decay against temperature as the paper's Fig. 7 shows it, normalised to the first temperature,
+/// but with its sign: D(T) / |D(first)|. The paper's Decay is positive (the link swings less than
+/// the motor); the model's is negative (the link overshoots). A plain ratio D(60)/D(22) of two
+/// negative numbers is positive and would sit beside the paper's "5×" as if it agreed.
 fn decay(r: &SweepResult, path: &Path) -> R {
-    let root = SVGBackend::new(path, (800, 500)).into_drawing_area();
-    root.fill(&WHITE)?;
     let temps = &r.args.temperatures;
+    let (first, last) = (temps[0], *temps.last().unwrap_or(&temps[0]));
+    let root = SVGBackend::new(path, (900, 640)).into_drawing_area();
+    let paper = Style::points(BLACK_, Marker::Triangle).hollow();
+    // the frequencies' curves nearly coincide: hollow markers and a dash keep both visible
+    let model = |i: usize| nth(i).hollow().dash(if i == 0 { Dash::Solid } else { Dash::Dashed });
+    let mut legend: Vec<Entry> =
+        r.args.frequencies.iter().enumerate().map(|(i, f)| (format!("model, {f} Hz"), model(i))).collect();
+    legend.push(("paper, 0.5 Hz (Fig. 7: “nearly five times” at 60 °C)".into(), paper));
+    let body = figure(
+        &root,
+        &format!("Decay D = θ0 − Θ relative to its size at {first} °C, sign kept (cf. the paper's Fig. 7)"),
+        &legend,
+    )?;
+    let (plot_area, note_area) = body.split_vertically(body.dim_in_pixel().1 - 92);
+
+    let series: Vec<Vec<(f64, f64)>> = r
+        .args
+        .frequencies
+        .iter()
+        .map(|&f| {
+            let of_f = || r.conditions.iter().filter(move |c| c.frequency_hz == f);
+            let reference = of_f().find(|c| c.temperature_c == first).map(|c| c.decay_rad.abs());
+            of_f().filter_map(|c| Some((c.temperature_c, c.decay_rad / reference.filter(|d| *d > 0.0)?))).collect()
+        })
+        .collect();
+    let paper_pts = [(first, 1.0), (last, super::report::PAPER_DECAY_RATIO_60_22_HALF_HZ)];
     let (x0, x1) = range(temps.iter().cloned());
-    let vals = r.conditions.iter().filter_map(|c| c.decay_normalized);
-    let (y0, y1) = range(vals.chain([0.0, super::report::PAPER_DECAY_RATIO_60_22_HALF_HZ, 1.0]));
-    let mut ch = ChartBuilder::on(&root)
-        .caption("Decay normalised to the first temperature (cf. the paper's Fig. 7)", ("sans-serif", 17))
-        .margin(10)
-        .x_label_area_size(36)
-        .y_label_area_size(50)
-        .build_cartesian_2d(x0..x1, y0..y1)?;
-    ch.configure_mesh().x_desc("housing temperature (°C)").y_desc("Decay / Decay(first)").draw()?;
-    for (i, &f) in r.args.frequencies.iter().enumerate() {
-        let pts: Vec<(f64, f64)> = r
-            .conditions
-            .iter()
-            .filter(|c| c.frequency_hz == f)
-            .filter_map(|c| Some((c.temperature_c, c.decay_normalized?)))
-            .collect();
-        let col = PALETTE[i % PALETTE.len()];
-        ch.draw_series(LineSeries::new(pts.clone(), col.stroke_width(2)))?
-            .label(format!(
-                "model, {f} Hz (Decay sign: {})",
-                if r.conditions.iter().any(|c| c.frequency_hz == f && c.decay_rad < 0.0) {
-                    "negative, overshoot"
-                } else {
-                    "positive"
-                }
-            ))
-            .legend(legend(col));
-        ch.draw_series(pts.iter().map(|&p| Circle::new(p, 4, col.filled())))?;
+    let (y0, y1) = range(series.iter().flatten().chain(&paper_pts).map(|p| p.1).chain([0.0]));
+    let mut ch = panel(&plot_area, "", "housing temperature (°C)", &format!("D / |D at {first} °C|"), x0..x1, y0..y1)?;
+    ch.draw_series(LineSeries::new([(x0, 0.0), (x1, 0.0)], BLACK.stroke_width(1)))?;
+    for (i, pts) in series.iter().enumerate() {
+        draw(&mut ch, pts, model(i))?;
     }
-    let paper_pt = (*temps.last().unwrap_or(&60.0), super::report::PAPER_DECAY_RATIO_60_22_HALF_HZ);
-    ch.draw_series(std::iter::once(TriangleMarker::new(paper_pt, 8, BLACK.filled())))?
-        .label("paper, 0.5 Hz: “nearly five times” (positive Decay)")
-        .legend(|(x, y)| TriangleMarker::new((x + 9, y), 6, BLACK.filled()));
-    ch.configure_series_labels()
-        .position(SeriesLabelPosition::UpperLeft)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
+    draw(&mut ch, &paper_pts, paper)?;
+    // which side of zero means what, at the right end of the zero line (the curves leave it there)
+    let ((_, _), (px1, _)) = plot_pixels(&ch);
+    let zero_y = ch.backend_coord(&(x0, 0.0)).1;
+    let side = |text: &str, dy: i32, v: VPos| -> R {
+        let style = TextStyle::from(("sans-serif", 13).into_font()).color(&GREY_).pos(Pos::new(HPos::Right, v));
+        root.draw_text(text, &style, (px1 - 6, zero_y + dy))?;
+        Ok(())
+    };
+    side("↑ D > 0: the link swings less than the motor", -4, VPos::Bottom)?;
+    side("↓ D < 0: the link overshoots the motor", 4, VPos::Top)?;
+
+    // the comparison in words, under the axes
+    let sign = |f: f64| {
+        let ds: Vec<f64> = r.conditions.iter().filter(|c| c.frequency_hz == f).map(|c| c.decay_rad).collect();
+        if ds.iter().all(|d| *d < 0.0) {
+            "negative"
+        } else if ds.iter().all(|d| *d > 0.0) {
+            "positive"
+        } else {
+            "of mixed sign"
+        }
+    };
+    // the paper's claim is at 0.5 Hz: quote the model there (or at its first frequency)
+    let fi = r.args.frequencies.iter().position(|&f| f == 0.5).unwrap_or(0);
+    let at_last = series.get(fi).and_then(|s| s.iter().find(|p| p.0 == last)).map(|p| p.1);
+    let note = if r.args.frequencies.iter().all(|&f| sign(f) == "negative") {
+        format!(
+            "The model's Decay is negative at every temperature (the link overshoots); the paper's is positive. \
+             Their ratios are not comparable: the model's D({last} °C) / D({first} °C) at {} Hz is {}, a ratio of two \
+             negative numbers; with its sign it is {} here. (The paper's text also says “30 % increase”.)",
+            r.args.frequencies[fi],
+            at_last.map_or("?".into(), |v| number(-v, 3)),
+            at_last.map_or("?".into(), |v| number(v, 3)),
+        )
+    } else {
+        let signs: Vec<String> = r.args.frequencies.iter().map(|&f| format!("{} at {f} Hz", sign(f))).collect();
+        format!(
+            "The model's Decay is {}; the paper's is positive. Only points on the same side of zero compare. \
+             (The paper's text also says “30 % increase”.)",
+            signs.join(", ")
+        )
+    };
+    let (nw, _) = note_area.dim_in_pixel();
+    for (k, line) in wrap(&note, nw - 40, 14).iter().enumerate() {
+        let style = TextStyle::from(("sans-serif", 14).into_font()).color(&BLACK).pos(Pos::new(HPos::Left, VPos::Top));
+        note_area.draw_text(line, &style, (20, 14 + 20 * k as i32))?;
+    }
     root.present()?;
     Ok(())
 }
 
 fn moduli(r: &SweepResult, path: &Path) -> R {
-    let root = SVGBackend::new(path, (1100, 480)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let panels = root.split_evenly((1, 2));
+    let root = SVGBackend::new(path, (1200, 560)).into_drawing_area();
+    // colour and dash by frequency, marker by source
+    let used_style =
+        |i: usize| Style::line(PALETTE[i % PALETTE.len()]).dash(if i == 0 { Dash::Solid } else { Dash::Dashed });
+    // the frequencies' estimates often coincide: concentric markers, the first frequency's largest
+    let size = |i: usize| 6 - 2 * (i as i32 % 2);
+    let closed_style = |i: usize| Style::points(PALETTE[i % PALETTE.len()], Marker::Circle).hollow().size(size(i));
+    let paper_style = |i: usize| Style::points(PALETTE[i % PALETTE.len()], Marker::Cross).size(size(i));
+    let legend: Vec<Vec<Entry>> = r
+        .args
+        .frequencies
+        .iter()
+        .enumerate()
+        .map(|(i, f)| {
+            vec![
+                (format!("used by the FMU, {f} Hz runs"), used_style(i)),
+                (format!("closed form, {f} Hz"), closed_style(i)),
+                (format!("paper Eq. 15–16, {f} Hz"), paper_style(i)),
+            ]
+        })
+        .collect();
+    let body =
+        figure_rows(&root, "PCL moduli used by the FMU vs estimated from the runs (cf. the paper's Fig. 4)", &legend)?;
+    let panels = body.split_evenly((1, 2));
     let (x0, x1) = range(r.args.temperatures.iter().cloned());
     for (k, name) in ["E' (storage)", "E'' (loss)"].iter().enumerate() {
         let used = |c: &super::Condition| if k == 0 { c.model_e_storage_kpa } else { c.model_e_loss_kpa };
@@ -154,120 +248,75 @@ fn moduli(r: &SweepResult, path: &Path) -> R {
         let paper = |c: &super::Condition| {
             c.paper_method.map(|p| if k == 0 { p.estimate.e_storage } else { p.estimate.e_loss } / 1e3)
         };
-        let all: Vec<f64> = r
-            .conditions
-            .iter()
-            .flat_map(|c| [Some(used(c)), Some(closed(c)), paper(c)])
-            .flatten()
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .collect();
-        let lo = all.iter().cloned().fold(f64::INFINITY, f64::min) / 2.0;
-        let hi = all.iter().cloned().fold(0.0, f64::max) * 2.0;
-        let (lo, hi) = if lo.is_finite() && hi > lo { (lo, hi) } else { (1.0, 1e4) };
-        let mut ch = ChartBuilder::on(&panels[k])
-            .caption(format!("{name}: used by the FMU vs estimated (cf. Fig. 4)"), ("sans-serif", 16))
-            .margin(10)
-            .x_label_area_size(36)
-            .y_label_area_size(60)
-            .build_cartesian_2d(x0..x1, (lo..hi).log_scale())?;
-        ch.configure_mesh().x_desc("housing temperature (°C)").y_desc("kPa").draw()?;
+        let (lo, hi) =
+            log_range(r.conditions.iter().flat_map(|c| [Some(used(c)), Some(closed(c)), paper(c)]).flatten());
+        let mut ch = panel(&panels[k], name, "housing temperature (°C)", "kPa", x0..x1, log_axis(lo, hi))?;
         for (i, &f) in r.args.frequencies.iter().enumerate() {
             let cs: Vec<_> = r.conditions.iter().filter(|c| c.frequency_hz == f).collect();
-            let col = PALETTE[i % PALETTE.len()];
-            ch.draw_series(LineSeries::new(cs.iter().map(|c| (c.temperature_c, used(c))), col.stroke_width(2)))?
-                .label(format!("used by the FMU, {f} Hz runs"))
-                .legend(legend(col));
-            ch.draw_series(
-                cs.iter()
-                    .filter(|c| closed(c) > 0.0)
-                    .map(|c| Circle::new((c.temperature_c, closed(c)), 5, col.stroke_width(2))),
-            )?
-            .label(format!("closed form, {f} Hz"))
-            .legend(move |(x, y)| Circle::new((x + 9, y), 4, col.stroke_width(2)));
-            ch.draw_series(
-                cs.iter()
-                    .filter_map(|c| Some((c.temperature_c, paper(c)?)))
-                    .filter(|p| p.1 > 0.0)
-                    .map(|p| Cross::new(p, 6, col.stroke_width(2))),
-            )?
-            .label(format!("paper Eq. 15–16, {f} Hz"))
-            .legend(move |(x, y)| Cross::new((x + 9, y), 5, col.stroke_width(2)));
+            let positive = |p: &(f64, f64)| p.1 > 0.0;
+            draw(&mut ch, &cs.iter().map(|c| (c.temperature_c, used(c))).collect::<Vec<_>>(), used_style(i))?;
+            let pts: Vec<_> = cs.iter().map(|c| (c.temperature_c, closed(c))).filter(positive).collect();
+            draw(&mut ch, &pts, closed_style(i))?;
+            let pts: Vec<_> = cs.iter().filter_map(|c| Some((c.temperature_c, paper(c)?))).filter(positive).collect();
+            draw(&mut ch, &pts, paper_style(i))?;
         }
-        ch.configure_series_labels()
-            .position(SeriesLabelPosition::LowerLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
     }
     root.present()?;
     Ok(())
 }
 
 fn warmup(r: &SweepResult, path: &Path) -> R {
-    let root = SVGBackend::new(path, (1000, 700)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (top, bottom) = root.split_vertically(430);
+    let root = SVGBackend::new(path, (1100, 780)).into_drawing_area();
+    // colour and marker by target; solid for the housing, dashed for the PCL
+    let targets: Vec<Entry> =
+        r.warmups.iter().enumerate().map(|(i, (w, _))| (format!("target {} °C", w.target_c), nth(i))).collect();
+    let kinds: Vec<Entry> = vec![
+        ("housing (the thermocouple)".into(), Style::line(BLACK_)),
+        ("PCL (the model's estimate, no sensor)".into(), Style::line(BLACK_).width(1).dash(Dash::Dashed)),
+    ];
+    let body = figure_rows(&root, "Warm-up to each target temperature", &[targets, kinds])?;
+    let (top, bottom) = body.split_vertically(body.dim_in_pixel().1 * 62 / 100);
     let t_end = r.warmups.iter().map(|(_, t)| *t.time.last().unwrap_or(&1.0)).fold(1.0, f64::max);
     let temps = r.warmups.iter().flat_map(|(_, t)| {
         t.column(rig::O_HOUSING).iter().chain(t.column(rig::O_PCL)).map(|v| v - ZERO_CELSIUS).collect::<Vec<_>>()
     });
     let (y0, y1) = range(temps);
-    let mut ch = ChartBuilder::on(&top)
-        .caption(
-            "Warm-up: housing (thick: the thermocouple) and PCL (thin: the model's estimate, no sensor)",
-            ("sans-serif", 16),
-        )
-        .margin(10)
-        .x_label_area_size(32)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..t_end, y0..y1)?;
-    ch.configure_mesh().x_desc("time (s)").y_desc("temperature (°C)").draw()?;
-    for (i, (w, t)) in r.warmups.iter().enumerate() {
-        let col = PALETTE[i % PALETTE.len()];
+    let mut ch = panel(&top, "Temperatures", "time (s)", "temperature (°C)", 0.0..t_end, y0..y1)?;
+    for (i, (_, t)) in r.warmups.iter().enumerate() {
         let c = |o: usize| t.column(o).iter().map(|v| v - ZERO_CELSIUS).collect::<Vec<_>>();
         let (h, p) = (c(rig::O_HOUSING), c(rig::O_PCL));
-        ch.draw_series(LineSeries::new(thin(&t.time, &h, 2000), col.stroke_width(2)))?
-            .label(format!("target {} °C: housing", w.target_c))
-            .legend(legend(col));
-        ch.draw_series(LineSeries::new(thin(&t.time, &p, 2000), col.stroke_width(1)))?
-            .label(format!("target {} °C: PCL", w.target_c))
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], col.stroke_width(1)));
+        draw(&mut ch, &thin(&t.time, &h, 2000).collect::<Vec<_>>(), nth(i))?;
+        draw(&mut ch, &thin(&t.time, &p, 2000).collect::<Vec<_>>(), nth(i).width(1).dash(Dash::Dashed).hollow())?;
     }
-    ch.configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.8))
-        .border_style(BLACK)
-        .draw()?;
     let (p0, p1) = range(r.warmups.iter().flat_map(|(_, t)| t.heater_power.clone()).chain([0.0]));
-    let mut ch = ChartBuilder::on(&bottom)
-        .caption("Heater power", ("sans-serif", 16))
-        .margin(10)
-        .x_label_area_size(32)
-        .y_label_area_size(50)
-        .build_cartesian_2d(0.0..t_end, p0..p1)?;
-    ch.configure_mesh().x_desc("time (s)").y_desc("W").draw()?;
+    let mut ch = panel(&bottom, "Heater power", "time (s)", "power (W)", 0.0..t_end, p0..p1)?;
     for (i, (_, t)) in r.warmups.iter().enumerate() {
-        let col = PALETTE[i % PALETTE.len()];
-        ch.draw_series(LineSeries::new(thin(&t.time, &t.heater_power, 2000), col.stroke_width(1)))?;
+        draw(&mut ch, &thin(&t.time, &t.heater_power, 2000).collect::<Vec<_>>(), nth(i).width(1))?;
     }
     root.present()?;
     Ok(())
 }
 
 /// The heating–cooling cycle: K_eff and crystallinity against time and against PCL temperature,
-/// crystallisation kinetics (thick) and the equilibrium law (thin).
+/// crystallisation kinetics and the equilibrium law.
 fn cooling_cycle(r: &SweepResult, path: &Path) -> R {
-    let root = SVGBackend::new(path, (1200, 820)).into_drawing_area();
-    root.fill(&WHITE)?;
-    let (title, body) = root.split_vertically(36);
-    title.draw(&Text::new(
-        format!(
-            "Heating–cooling cycle: {} W until the PCL reaches {} °C, then heater off (thick: Nakamura kinetics, thin: equilibrium law)",
+    let root = SVGBackend::new(path, (1200, 860)).into_drawing_area();
+    let law_style = |i: usize, law: &str| if law == "nakamura" { nth(i) } else { nth(i).dash(Dash::Dashed) };
+    let law_name = |law: &str| match law {
+        "nakamura" => "Nakamura crystallisation kinetics".to_string(),
+        "equilibrium" => "equilibrium law".to_string(),
+        other => other.to_string(),
+    };
+    let legend: Vec<Entry> =
+        r.cooling_cycles.iter().enumerate().map(|(i, c)| (law_name(c.law), law_style(i, c.law))).collect();
+    let body = figure(
+        &root,
+        &format!(
+            "Heating–cooling cycle: {} W until the PCL reaches {} °C, then heater off",
             r.cooling_cycles[0].power_w, r.cooling_cycles[0].target_c
         ),
-        (10, 10),
-        ("sans-serif", 16),
-    ))?;
+        &legend,
+    )?;
     let panels = body.split_evenly((2, 2));
     let t_end = r.cooling_cycles.iter().map(|c| *c.trace.time_s.last().unwrap_or(&1.0)).fold(1.0, f64::max);
     let (k0, k1) = range(r.cooling_cycles.iter().flat_map(|c| c.trace.k_eff.clone()));
@@ -288,27 +337,12 @@ fn cooling_cycle(r: &SweepResult, path: &Path) -> R {
             (x0, x1),
         ),
     ];
-    for (panel, (caption, xdesc, fx, fy, (xa, xb), (ya, yb))) in panels.iter().zip(specs) {
-        let mut ch = ChartBuilder::on(panel)
-            .caption(caption, ("sans-serif", 15))
-            .margin(8)
-            .x_label_area_size(30)
-            .y_label_area_size(56)
-            .build_cartesian_2d(xa..xb, ya..yb)?;
-        let ydesc = if caption.starts_with("K_eff") { "N·m/rad" } else { "X" };
-        ch.configure_mesh().x_desc(xdesc).y_desc(ydesc).draw()?;
+    for (area, (caption, xdesc, fx, fy, (xa, xb), (ya, yb))) in panels.iter().zip(specs) {
+        let ydesc = if caption.starts_with("K_eff") { "K_eff (N·m/rad)" } else { "crystallinity X" };
+        let mut ch = panel(area, caption, xdesc, ydesc, xa..xb, ya..yb)?;
         for (i, c) in r.cooling_cycles.iter().enumerate() {
-            let col = PALETTE[i % PALETTE.len()];
-            let width = if c.law == "nakamura" { 2 } else { 1 };
-            ch.draw_series(LineSeries::new(thin(fx(&c.trace), fy(&c.trace), 3000), col.stroke_width(width)))?
-                .label(c.law)
-                .legend(legend(col));
+            draw(&mut ch, &thin(fx(&c.trace), fy(&c.trace), 3000).collect::<Vec<_>>(), law_style(i, c.law))?;
         }
-        ch.configure_series_labels()
-            .position(SeriesLabelPosition::UpperRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()?;
     }
     root.present()?;
     Ok(())
