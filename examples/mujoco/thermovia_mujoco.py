@@ -1008,6 +1008,7 @@ def plot_run(out: pathlib.Path, rec: Record, touches: list, heat_on: float) -> s
 
 def plot_accuracy(out: pathlib.Path, study: dict) -> str:
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -1018,6 +1019,8 @@ def plot_accuracy(out: pathlib.Path, study: dict) -> str:
     ax.loglog(h, [r["cosim_max_angle_error_rad"] for r in rows], "o-", label="co-simulation (FMU joints)")
     ax.loglog(h, [r["plugin_max_angle_error_rad"] for r in rows], "x", ms=10, mew=2, label="plugin (thermovia.joint)")
     ax.loglog(h, [r["monolithic_same_step_max_angle_error_rad"] for r in rows], "s--", label="monolithic, same step")
+    ax.set_xticks(h, [f"{x:g}" for x in h])  # the steps themselves, not 6×10⁻¹ and 2×10⁰
+    ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
     ax.set_xlabel("coupling step (ms)")
     ax.set_ylabel("largest joint-angle error (rad)")
     ax.set_title(f"against the monolithic arm at {study['reference_step_s'] * 1e3:g} ms")
