@@ -147,9 +147,7 @@ def main(argv=None) -> int:
         d.qpos[cols] = plan.reference(0.0)
         mujoco.mj_forward(m, d)
         tm.PluginArm(m, d, cols, plan.reference(0.0), settings)
-        kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
-        x0 = np.empty(mujoco.mj_stateSize(m, kind))
-        mujoco.mj_getState(m, d, x0, kind)
+        x0 = tj.full_state(m, d)
         r["plugin_rollout"] = timed(args.repeats, lambda: rollout.rollout(m, d, x0, ctrl))
         for key in ("cosim_python", "plugin_python", "plugin_lean_loop", "plugin_rollout"):
             r[key]["steps_per_s"] = steps / r[key]["median_s"]
@@ -181,9 +179,7 @@ def main(argv=None) -> int:
     d = mujoco.MjData(m)
     d.qpos[:3] = p["above"]
     mujoco.mj_step(m, d, nstep=10)
-    kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    x0 = np.empty(mujoco.mj_stateSize(m, kind))
-    mujoco.mj_getState(m, d, x0, kind)
+    x0 = tj.full_state(m, d)
     rng = np.random.default_rng(0)
     copies, steps = 64, 500
     initial = np.tile(x0, (copies, 1))
@@ -194,17 +190,8 @@ def main(argv=None) -> int:
     two = timed(args.repeats, lambda: rollout.rollout([m] * copies, datas, initial, control))
     one = timed(args.repeats, lambda: rollout.rollout([m] * copies, datas[:1], initial, control))
     threaded, _ = rollout.rollout([m] * copies, datas, initial, control)
-    serial = np.empty_like(threaded)
-
-    def serial_run():
-        for c in range(copies):
-            mujoco.mj_setState(m, d, initial[c], kind)
-            for i in range(steps):
-                d.ctrl[:] = control[c, i]
-                mujoco.mj_step(m, d)
-                mujoco.mj_getState(m, d, serial[c, i], kind)
-
-    ser = timed(args.repeats, serial_run)
+    ser = timed(args.repeats, lambda: tj.step_serially(m, d, initial, control))
+    serial = tj.step_serially(m, d, initial, control)
     result["rollout_64"] = {
         "copies": copies, "steps": steps,
         "two_threads": two, "one_thread": one, "serial_python_mj_step": ser,

@@ -126,22 +126,13 @@ def test_rollout_on_two_threads_equals_serial_stepping():
     m = tj.model_from_xml(scene())
     d = mujoco.MjData(m)
     trajectory(m, d, 50)  # a warm, moving joint
-    kind = mujoco.mjtState.mjSTATE_FULLPHYSICS
-    start = np.empty(mujoco.mj_stateSize(m, kind))
-    mujoco.mj_getState(m, d, start, kind)
     rng = np.random.default_rng(3)
     copies, steps = 64, 100
-    initial = np.tile(start, (copies, 1))
+    initial = np.tile(tj.full_state(m, d), (copies, 1))
     initial[:, 1] += rng.uniform(-0.3, 0.3, copies)  # qpos (after time)
     control = np.stack([rng.uniform([-2, 0], [2, 20], (steps, 2)) for _ in range(copies)])
     state, _ = rollout.rollout([m] * copies, [mujoco.MjData(m) for _ in range(2)], initial, control)
-    serial = np.empty_like(state)
-    for c in range(copies):
-        mujoco.mj_setState(m, d, initial[c], kind)
-        for i in range(steps):
-            d.ctrl[:] = control[c, i]
-            mujoco.mj_step(m, d)
-            mujoco.mj_getState(m, d, serial[c, i], kind)
+    serial = tj.step_serially(m, d, initial, control)
     assert same_bits(state, serial)
     assert np.ptp(state[:, -1, 1]) > 0.1  # the copies went different ways
 

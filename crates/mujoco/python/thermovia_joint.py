@@ -23,6 +23,7 @@ import pathlib
 import re
 
 import mujoco
+import numpy as np
 
 PLUGIN = "thermovia.joint"
 _ROOT = pathlib.Path(__file__).resolve().parents[3]
@@ -122,3 +123,26 @@ def set_motor(m, d, actuator: str | int, angle: float, speed: float = 0.0) -> No
     state[names.index("motor_speed")] = speed
     state[names.index("motor_placed")] = 1.0
     d.plugin_state[s] = state
+
+
+FULL = mujoco.mjtState.mjSTATE_FULLPHYSICS
+
+
+def full_state(m, d):
+    """The state `mujoco.rollout` starts from (time, qpos, qvel, act, plugin_state)."""
+    x = np.empty(mujoco.mj_stateSize(m, FULL))
+    mujoco.mj_getState(m, d, x, FULL)
+    return x
+
+
+def step_serially(m, d, initial, control):
+    """What `mujoco.rollout(m, d, initial, control)` returns, by mj_step from Python: the state after
+    every step of every copy, (copies, steps, state size)."""
+    out = np.empty((len(initial), control.shape[1], len(initial[0])))
+    for c in range(len(initial)):
+        mujoco.mj_setState(m, d, initial[c], FULL)
+        for i in range(control.shape[1]):
+            d.ctrl[:] = control[c, i]
+            mujoco.mj_step(m, d)
+            mujoco.mj_getState(m, d, out[c, i], FULL)
+    return out

@@ -154,16 +154,17 @@ pub fn thin<'a>(x: &'a [f64], y: &'a [f64], max: usize) -> impl Iterator<Item = 
     x.iter().zip(y).step_by(k).map(|(a, b)| (*a, *b))
 }
 
+/// The smallest and largest finite value (None when there is none).
+fn finite_span(vals: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    vals.filter(|v| v.is_finite()).fold(None, |span, v| match span {
+        None => Some((v, v)),
+        Some((lo, hi)) => Some((v.min(lo), v.max(hi))),
+    })
+}
+
 /// The finite values' range padded by 8 % (never empty; (0, 1) when nothing is finite).
 pub fn range(vals: impl Iterator<Item = f64>) -> (f64, f64) {
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for v in vals.filter(|v| v.is_finite()) {
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    if !lo.is_finite() {
-        return (0.0, 1.0);
-    }
+    let Some((lo, hi)) = finite_span(vals) else { return (0.0, 1.0) };
     let pad = ((hi - lo) * 0.08).max(1e-9 * hi.abs().max(1.0));
     (lo - pad, hi + pad)
 }
@@ -668,14 +669,7 @@ fn bounds(series: &[Series], pick: impl Fn(&(f64, f64)) -> f64, log: bool) -> (f
     if log {
         return log_range(vals);
     }
-    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-    for v in vals.filter(|v| v.is_finite()) {
-        lo = lo.min(v);
-        hi = hi.max(v);
-    }
-    if !lo.is_finite() {
-        return (0.0, 1.0);
-    }
+    let Some((lo, hi)) = finite_span(vals) else { return (0.0, 1.0) };
     let d = if hi > lo { 0.05 * (hi - lo) } else { 0.5 * lo.abs().max(1.0) };
     (lo - d, hi + d)
 }
