@@ -7,6 +7,7 @@ use serde_json::{json, Map, Value};
 use super::data::Run;
 use super::diagnose::Signatures;
 use super::fit::{Effect, Fit, Problem};
+use super::quality::short;
 use super::search::Outcome;
 use crate::report::plot::{
     chart_svg, draw, figure, log_axis, log_range, panel, thin, Axes, Dash, Marker, Series, Style, BLUE_, GREY_, RED_,
@@ -233,6 +234,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "final": metrics(prob, &o.final_fit),
         "unexplained": o.unexplained,
         "pruned_effects": record["pruned_effects"],
+        "equivalent_forms": equivalent_forms(&added),
         "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
         "plausibility": prob.torque_scale().map(|t| json!({
@@ -451,6 +453,9 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
             ""
         };
         s += &format!("- **{}**: {}{limit}\n", e.name(), fmt_params(&o.final_fit, e));
+    }
+    for form in j["equivalent_forms"].as_array().into_iter().flatten() {
+        s += &format!("\n{}\n", form["note"].as_str().unwrap_or_default());
     }
     s += &identified_markdown(j);
     let resolved = baseline_bounds_resolved(j);
@@ -685,6 +690,45 @@ fn magnitude_key(effect: &str) -> Option<&'static str> {
     }
 }
 
+/// Effect sets the data cannot tell apart, for `added_effects` (interfaces.md `equivalent_forms`).
+/// Asymmetric Coulomb friction, levels F+ forward and F− backward, takes −F+ from a link moving
+/// forward and +F− from one moving back: that is symmetric friction (F+ + F−)/2 plus a constant load
+/// (F− − F+)/2, to the bit while the link moves; only at rest (stiction) could the two differ. Both
+/// forms are physical (the levels are never negative: friction that pushes is refused as a load), so
+/// the report gives both and names the one the search kept; the viscous asymmetry, if any, has no
+/// second form.
+pub fn equivalent_forms(added: &[Value]) -> Value {
+    let param = |e: &Value, name: &str| e["parameters"][name].as_f64();
+    let mut forms = Vec::new();
+    for e in added.iter().filter(|e| e["effect"] == "asymmetric_friction") {
+        let (Some(fp), Some(fm)) = (param(e, "coulomb_positive"), param(e, "coulomb_negative")) else { continue };
+        let load_now = added.iter().find(|x| x["effect"] == "constant_load").and_then(|x| param(x, "torque_nm"));
+        let (coulomb, load) = ((fp + fm) / 2.0, (fm - fp) / 2.0 + load_now.unwrap_or(0.0));
+        let viscous = match (param(e, "viscous_positive"), param(e, "viscous_negative")) {
+            (Some(bp), Some(bn)) if bp != bn => format!(
+                "; the viscous levels ({} forward, {} back, N.m.s/rad) stay direction-dependent",
+                short(bp),
+                short(bn)
+            ),
+            _ => String::new(),
+        };
+        let note = format!(
+            "Equivalent form: asymmetric Coulomb friction ({} N.m forward, {} N.m back) is, while the link moves,              symmetric Coulomb friction of {} N.m with a constant load of {} N.m on the link{}. The runs cannot tell              the two apart except at rest; the search kept the asymmetric form.",
+            short(fp),
+            short(fm),
+            short(coulomb),
+            short(load),
+            viscous
+        );
+        forms.push(json!({
+            "found": {"asymmetric_friction": {"coulomb_positive": fp, "coulomb_negative": fm}},
+            "equivalent": {"coulomb_friction": {"torque_nm": coulomb}, "constant_load": {"torque_nm": load}},
+            "note": note,
+        }));
+    }
+    Value::Array(forms)
+}
+
 /// `truth_comparison` of report.json: the truth's effects and transmission against what the device
 /// loop identified (`report` holds `added_effects` and `identified`). Two truths are read:
 /// `thermovia synth`'s (effects at the top level, the moduli as factors on the FMU's table) and
@@ -774,7 +818,6 @@ pub fn truth_comparison(file: &std::path::Path, truth: &Value, report: &Value) -
 
 /// report.md's section for `truth_comparison`.
 fn truth_markdown(t: &Value) -> String {
-    use super::quality::short;
     let num = |v: &Value| v.as_f64().map_or("—".to_string(), short);
     // two decimals of a percent, and an exponent below them (a fit to the noise is often closer)
     let rel = |v: &Value| {
@@ -829,6 +872,22 @@ fn truth_markdown(t: &Value) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn asymmetric_coulomb_friction_is_reported_with_its_load_form() {
+        let added = vec![
+            json!({"effect": "asymmetric_friction", "parameters": {"coulomb_positive": 0.05, "coulomb_negative": 0.03,
+                   "viscous_positive": 0.0, "viscous_negative": 0.0}}),
+            json!({"effect": "constant_load", "parameters": {"torque_nm": 0.002}}),
+        ];
+        let forms = equivalent_forms(&added);
+        let f = &forms[0];
+        // −F+ = −c + L and F− = c + L: c = 0.04, L = −0.01 (+ the load already there)
+        assert!((f["equivalent"]["coulomb_friction"]["torque_nm"].as_f64().unwrap() - 0.04).abs() < 1e-15);
+        assert!((f["equivalent"]["constant_load"]["torque_nm"].as_f64().unwrap() + 0.008).abs() < 1e-15);
+        assert!(f["note"].as_str().unwrap().contains("constant load of -0.008"), "{}", f["note"]);
+        assert_eq!(equivalent_forms(&added[1..]).as_array().unwrap().len(), 0);
+    }
+
     use super::*;
 
     /// A device report's parts that the warnings and the truth comparison read.
