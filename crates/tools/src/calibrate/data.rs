@@ -284,7 +284,6 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
                     e.message += &declared;
                 }
             }
-            e.message = super::quality::compact_numbers(&e.message);
             e
         })?;
     let (meta, last_line) = (table.meta, table.last_line);
@@ -480,11 +479,11 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
                 path,
                 text,
                 "controller_period_s",
-                super::quality::compact_numbers(&format!(
+                format!(
                     "controller_period_s={} but the samples are {mean_dt:.6} s apart (median): drive=reference \
                      replays one controller update per sample",
-                    controller.period
-                )),
+                    thermovia_importer::table::compact(controller.period)
+                ),
             ));
         }
         run.controller = Some(controller);
