@@ -77,7 +77,7 @@ pub extern "C" fn thermovia_mujoco_config_keys() -> *const c_char {
 /// Reads `n` values of an mjModel/mjData array from `start`.
 ///
 /// SAFETY: `p` must point to at least `start + n` values.
-unsafe fn read<T: Copy>(p: *const T, start: usize, n: usize) -> &'static [T] {
+unsafe fn read<'a, T: Copy>(p: *const T, start: usize, n: usize) -> &'a [T] {
     std::slice::from_raw_parts(p.add(start), n)
 }
 
