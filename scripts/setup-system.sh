@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Debian packages the tests need, installed only when missing:
-#   libclang-dev  the `fmi` crate's bindgen build (tests/second_importer.rs) dlopens libclang.so or
+#   libclang-dev  bindgen (the `fmi` crate for tests/second_importer.rs, and thermovia-mujoco) dlopens libclang.so or
 #                 libclang-<ver>.so. The image ships libclang-cpp.so.14, a different library that
 #                 bindgen cannot use, so the check looks for the very file bindgen loads.
 #   libtbb12      ecospy's native library links it (tests/python/test_importers.py).
