@@ -19,10 +19,18 @@ the transmission's K and C within 10 % at every temperature, the final RMSE ≤ 
 √(σ² + q²/12) and the residual is not flagged unexplained. A rig outside the library passes when it is
 flagged unexplained or explained to ≤ 1.2× the floor.
 
-Drive rigs (torque- or reference-driven servos, linear axes) are not drawn yet: the truth model is a
-device rig.
+Drive rigs come from a second independent truth model (tests/truth/drive_truth.py): a rigid servo or
+axis, rotary from 1e-5 to 1e-2 kg·m² or linear from 1 to 100 kg, torque-driven (open loop: torque steps
+or a multisine) or reference-driven (a PD controller with saturation on the measured position), viscous
+friction with a mechanical time constant M/Fv of 0.2–5 s, Coulomb friction 0.1–2× the viscous torque at
+peak speed, and 0–2 more library effects (Stribeck, asymmetric levels) and a constant load on half; the
+logger as above (200 Hz–5 kHz, 2–8 runs of 5–30 s and unequal lengths, jitter, dropouts). A drive rig
+passes with the truth's effect set, the inertia, the viscous and every friction level within 10 %, and
+not flagged unexplained; a reference-driven one also within 1.2× the measurement floor. (A torque-driven
+rig runs open loop: the logged torque's own noise integrates into the position, so its floor is not the
+encoder's, and it is judged on the parameters.)
 
-  .venv/bin/python tests/truth/campaign.py --rigs 300 --out out/campaign          # the benchmark
+  .venv/bin/python tests/truth/campaign.py --rigs 300 --drive-rigs 100 --out out/campaign   # the benchmark
   .venv/bin/python tests/truth/campaign.py --ci --out out/campaign-ci             # the CI subset
 """
 import argparse
@@ -37,6 +45,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+import drive_truth  # noqa: E402
 import truth_model  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -48,6 +57,7 @@ K_SHAPE = (1.0, 20 / 34, 12 / 34, 5 / 34)  # the stiffness's fall with temperatu
 RATES = (200, 250, 400, 500, 1000, 2000, 2500, 5000)  # divisors of the truth model's 1e-4 s step
 # sample budget of the CI subset: the first rigs whose runs add up to at most this many samples
 CI_RIGS, CI_SAMPLES = 30, 60_000
+CI_DRIVE_RIGS = 10
 
 
 def log_uniform(rng, lo, hi):
@@ -164,11 +174,99 @@ def draw(seed):
     }
 
 
+def draw_drive(seed):
+    """One drive rig: drive_truth's arguments, the expected effects and parameters."""
+    rng = np.random.default_rng(10_000_019 * seed + 7)  # apart from the device rigs' streams
+    linear = rng.uniform() < 0.3
+    m = log_uniform(rng, 1.0, 100.0) if linear else log_uniform(rng, 1e-5, 1e-2)
+    drive = str(rng.choice(["motor_torque", "reference"]))
+    excitation = str(rng.choice(["steps", "multisine"]))
+    speed = log_uniform(rng, 0.05, 2.0) if linear else log_uniform(rng, 5.0, 300.0)
+    fv = m / log_uniform(rng, 0.2, 5.0)
+    # a reference step's time scale: 0.05 s, longer where the drive's force would pass 2 kN (N or N·m)
+    smoothing = max(0.05, 1.5 * m * 2 * speed / 2000.0)
+    fc = fv * speed * log_uniform(rng, 0.1, 2.0)
+    quantum = log_uniform(rng, 1e-7, 1e-5) if linear else 2 * math.pi / log_uniform(rng, 1e3, 1e5)
+    noise = log_uniform(rng, 1e-7, 1e-5) if linear else log_uniform(rng, 1e-5, 1e-3)
+    rate = int(rng.choice(RATES))
+    n_runs = int(rng.integers(2, 9))
+    durations = [round(log_uniform(rng, 5.0, 30.0), 1) for _ in range(n_runs)]
+    jitter = rng.uniform(0.0, 0.2) if rng.uniform() < 0.5 else 0.0
+    dropout = rng.uniform(0.05, 0.5) if rng.uniform() < 1 / 3 else 0.0
+    args = ["--axis", "linear" if linear else "rotary", "--drive", drive, "--excitation", excitation,
+            "--inertia", repr(m), "--speed", repr(speed), "--amplitude", repr(2 * smoothing * speed),
+            "--reference-smoothing", repr(smoothing), "--runs", str(n_runs),
+            "--duration", *[repr(d) for d in durations], "--rate", str(rate), "--noise", repr(noise),
+            "--quantum", repr(quantum), "--jitter", repr(jitter), "--dropout", repr(dropout), "--seed", str(seed)]
+    expected = {"coulomb_friction": {"torque_nm": fc}}
+    params = {"inertia": m}
+    extra = str(rng.choice(["none", "none", "stribeck", "asymmetric"]))
+    if extra == "asymmetric":
+        split_c, split_v = rng.uniform(0.1, 0.5), rng.uniform(0.1, 0.5)
+        levels = [fc * (1 + split_c), fc * (1 - split_c), fv * (1 + split_v), fv * (1 - split_v)]
+        args += ["--viscous", repr(fv), "--asymmetric", *[repr(x) for x in levels]]
+        expected["asymmetric_friction"] = dict(zip(
+            ["coulomb_positive", "coulomb_negative", "viscous_positive", "viscous_negative"], levels))
+    else:
+        args += ["--viscous", repr(fv), "--coulomb", repr(fc)]
+        params["viscous_friction"] = fv
+        if extra == "stribeck":
+            fs, vst = fc * rng.uniform(0.5, 1.5), speed * rng.uniform(0.05, 0.2)
+            args += ["--stribeck", repr(fs), repr(vst)]
+            expected["stribeck_friction"] = {"torque_nm": fs, "velocity": vst}
+    if rng.uniform() < 0.5:
+        load = float(fc * rng.uniform(0.2, 1.0) * rng.choice([-1.0, 1.0]))
+        args += ["--load", repr(load)]
+        params["constant_load"] = load
+    klass = f"drive {'linear' if linear else 'rotary'}, {'torque' if drive == 'motor_torque' else 'reference'}"
+    if drive == "reference":
+        # the controller at 20 Hz bandwidth needs 10 samples per its period
+        rate = max(rate, 400)
+        args[args.index("--rate") + 1] = str(rate)
+    floor = math.sqrt(noise ** 2 + quantum ** 2 / 12)
+    samples = int(sum(durations) * rate)
+    return {"seed": seed, "class": klass, "kind": "drive", "truth_args": args, "expected": expected, "params": params,
+            "outside": False, "floor": floor, "samples": samples,
+            "rig": {"axis": "linear" if linear else "rotary", "drive": drive, "inertia": m, "viscous": fv,
+                    "coulomb": fc, "peak_speed": speed, "excitation": excitation, "rate_hz": rate,
+                    "durations_s": durations, "noise": noise, "quantum": quantum, "jitter": jitter,
+                    "dropout_s": dropout, "extra": extra}}
+
+
+def score_drive(rig, report):
+    """(passed, reasons) of one calibrated drive rig against its truth."""
+    why = []
+    found = {e["effect"]: e["parameters"] for e in report.get("added_effects", [])}
+    if set(found) != set(rig["expected"]):
+        why.append(f"effects {sorted(found)} ≠ truth {sorted(rig['expected'])}")
+    checks = [(f"{e}.{k}", v, found.get(e, {}).get(k)) for e, ps in rig["expected"].items() for k, v in ps.items()]
+    final = {p["name"]: p["value"] for p in report["parameters"]["final"]}
+    checks += [(k, v, final.get(k)) for k, v in rig["params"].items()]
+    for name, value, got in checks:
+        if got is None:
+            continue
+        # a constant load is judged against the friction it sits beside (it may be small)
+        scale = abs(value) if name != "constant_load" else rig["rig"]["coulomb"]
+        if abs(got - value) > 0.1 * scale:
+            why.append(f"{name} = {got:.4g}, truth {value:.4g}")
+    ratio = final_rmse(report) / rig["floor"]
+    if rig["rig"]["drive"] == "reference" and ratio > 1.2:
+        why.append(f"final {ratio:.2f}× the floor")
+    if report.get("unexplained"):
+        why.append("flagged unexplained")
+    return not why, why
+
+
+def final_rmse(report):
+    """The final position RMSE in the file's unit (device reports say rmse_rad, drive reports rmse)."""
+    return report["final"].get("rmse", report["final"].get("rmse_rad"))
+
+
 def score(rig, report):
     """(passed, reasons) of one calibrated rig against its truth."""
     why = []
     found = {e["effect"]: e["parameters"] for e in report.get("added_effects", [])}
-    ratio = report["final"]["rmse_rad"] / rig["floor"]
+    ratio = final_rmse(report) / rig["floor"]
     if rig["outside"]:
         ok = report.get("unexplained") is True or ratio <= 1.2
         return ok, [] if ok else [f"neither flagged unexplained nor at the floor ({ratio:.2f}×)"]
@@ -197,15 +295,22 @@ def score(rig, report):
 
 
 def run_rig(rig, out, budget):
-    folder = out / f"rig_{rig['seed']}"
+    drive = rig.get("kind") == "drive"
+    folder = out / (f"drive_{rig['seed']}" if drive else f"rig_{rig['seed']}")
     data, result = folder / "runs", folder / "calibration"
-    truth_model.main(["--out", str(data), *rig["truth_args"]])
+    (drive_truth if drive else truth_model).main(["--out", str(data), *rig["truth_args"]])
+    if drive:
+        return calibrate_and_score(rig, data, result, budget, score_drive)
     truth = json.loads((data / "truth.json").read_text())
     by_temp = {}
     for r in truth["runs"]:
         by_temp[r["temperature_c"]] = (r["stiffness"], r["damping"])
     rig["k"] = [by_temp[t][0] for t in rig["rig"]["temperatures"]]
     rig["c"] = [by_temp[t][1] for t in rig["rig"]["temperatures"]]
+    return calibrate_and_score(rig, data, result, budget, score)
+
+
+def calibrate_and_score(rig, data, result, budget, scorer):
     started = time.monotonic()
     run = subprocess.run([str(THERMOVIA), "calibrate", str(data), "--out", str(result), "--no-plots",
                           "--search-budget", str(budget)], capture_output=True, text=True)
@@ -214,9 +319,9 @@ def run_rig(rig, out, budget):
         return {"seed": rig["seed"], "class": rig["class"], "passed": False, "seconds": seconds,
                 "why": [f"calibrate failed: {run.stderr.strip()[-300:]}"], "rig": rig["rig"]}
     report = json.loads((result / "report.json").read_text())
-    passed, why = score(rig, report)
+    passed, why = scorer(rig, report)
     return {"seed": rig["seed"], "class": rig["class"], "passed": passed, "why": why, "seconds": seconds,
-            "ratio": report["final"]["rmse_rad"] / rig["floor"], "added": [e["effect"] for e in report["added_effects"]],
+            "ratio": final_rmse(report) / rig["floor"], "added": [e["effect"] for e in report["added_effects"]],
             "expected": sorted(rig["expected"]), "rig": rig["rig"]}
 
 
@@ -230,19 +335,36 @@ def ci_seeds():
     return seeds
 
 
+def ci_drive_seeds():
+    """The CI subset's drive rigs: the first CI_DRIVE_RIGS seeds of at most CI_SAMPLES samples."""
+    seeds, s = [], 1
+    while len(seeds) < CI_DRIVE_RIGS:
+        if draw_drive(s)["samples"] <= CI_SAMPLES:
+            seeds.append(s)
+        s += 1
+    return seeds
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/campaign"), help="folder for the rigs and campaign.json")
     ap.add_argument("--rigs", type=int, default=300, help="number of rigs (seeds first-seed …)")
+    ap.add_argument("--drive-rigs", type=int, default=100, help="number of drive rigs (seeds first-seed …)")
     ap.add_argument("--first-seed", type=int, default=1)
-    ap.add_argument("--ci", action="store_true", help=f"the CI subset: {CI_RIGS} fixed seeds of at most {CI_SAMPLES} samples")
+    ap.add_argument("--only", choices=["device", "drive"], help="run one kind of rig")
+    ap.add_argument("--ci", action="store_true",
+                    help=f"the CI subset: {CI_RIGS} device and {CI_DRIVE_RIGS} drive rigs, fixed seeds of at most {CI_SAMPLES} samples")
     ap.add_argument("--search-budget", type=float, default=120.0, help="thermovia calibrate --search-budget, s")
     a = ap.parse_args(argv)
-    seeds = ci_seeds() if a.ci else list(range(a.first_seed, a.first_seed + a.rigs))
+    device = ci_seeds() if a.ci else list(range(a.first_seed, a.first_seed + a.rigs))
+    drives = ci_drive_seeds() if a.ci else list(range(a.first_seed, a.first_seed + a.drive_rigs))
+    rigs = ([] if a.only == "drive" else [draw(s) for s in device]) + \
+        ([] if a.only == "device" else [draw_drive(s) for s in drives])
+    seeds = [r["seed"] for r in rigs]
     a.out.mkdir(parents=True, exist_ok=True)
     results = []
-    for i, s in enumerate(seeds):
-        rig = draw(s)
+    for i, rig in enumerate(rigs):
+        s = rig["seed"]
         r = run_rig(rig, a.out, a.search_budget)
         results.append(r)
         mark = "pass" if r["passed"] else "FAIL"
@@ -255,11 +377,14 @@ def main(argv=None):
         rs = [r for r in results if r["class"] == c]
         n = sum(r["passed"] for r in rs)
         print(f"{c:<18} {len(rs):>4}  {n:>6}  {100 * n / len(rs):5.1f} %")
-    inside = [r for r in results if r["class"] != "outside library"]
+    inside = [r for r in results if r["class"] != "outside library" and not r["class"].startswith("drive")]
     n = sum(r["passed"] for r in results)
     print(f"{'all':<18} {len(results):>4}  {n:>6}  {100 * n / len(results):5.1f} %")
     if inside:
-        print(f"inside the library: {100 * sum(r['passed'] for r in inside) / len(inside):.1f} %")
+        print(f"device rigs inside the library: {100 * sum(r['passed'] for r in inside) / len(inside):.1f} %")
+    drive_results = [r for r in results if r["class"].startswith("drive")]
+    if drive_results:
+        print(f"drive rigs: {100 * sum(r['passed'] for r in drive_results) / len(drive_results):.1f} %")
     secs = [r["seconds"] for r in results]
     print(f"calibration wall time: median {statistics.median(secs):.1f} s, max {max(secs):.1f} s")
     return results

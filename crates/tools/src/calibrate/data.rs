@@ -472,9 +472,13 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
             period: get("controller_period_s", "controller period, s")?,
         };
         // the controller acts once per sample: the log must be at its period (the median interval,
-        // which jitter and gaps do not move)
+        // which gaps do not move), to within 1e-3 or what a logger's jitter leaves of the median
+        // (three of its standard errors: 1.2533 × 1.4826 MAD / √n)
         let mean_dt = super::quality::median_period(&run.time);
-        if (mean_dt - controller.period).abs() > 1e-3 * controller.period {
+        let intervals: Vec<f64> = run.time.windows(2).map(|w| w[1] - w[0]).collect();
+        let mad = super::quality::median(intervals.iter().map(|d| (d - mean_dt).abs()).collect());
+        let jitter_tolerance = 3.0 * 1.2533 * 1.4826 * mad / (intervals.len().max(1) as f64).sqrt();
+        if (mean_dt - controller.period).abs() > (1e-3 * controller.period).max(jitter_tolerance) {
             return Err(meta_error(
                 path,
                 text,

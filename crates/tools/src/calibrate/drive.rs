@@ -397,6 +397,9 @@ pub struct DriveFit {
     /// Block-sandwich covariance (holds up under correlated residuals).
     pub covariance: DMatrix<f64>,
     pub iterations: usize,
+    /// The criterion of the model's effects when the simulation's BIC is not it: the equation
+    /// error's BIC, for models whose parameters the inverse model gave (see `calibrate`).
+    pub criterion: Option<f64>,
 }
 
 impl DriveFit {
@@ -404,6 +407,9 @@ impl DriveFit {
         self.residual.len()
     }
     pub fn bic(&self) -> f64 {
+        if let Some(c) = self.criterion {
+            return c;
+        }
         let n = self.n() as f64;
         n * (self.sse / n).ln() + self.p.len() as f64 * n.ln()
     }
@@ -514,6 +520,15 @@ impl<'a> DriveProblem<'a> {
         self.simulate_jobs(spec, &jobs).into_iter().collect::<Result<Vec<_>, _>>().ok()
     }
 
+    /// The first run's error when `p` does not simulate (the cause a failed start reports).
+    fn why_not_simulated(&self, spec: &[Param], p: &[f64]) -> Option<String> {
+        let jobs: Vec<_> = (0..self.inputs.len()).map(|r| (r, p.to_vec())).collect();
+        self.simulate_jobs(spec, &jobs)
+            .into_iter()
+            .zip(&self.inputs)
+            .find_map(|(res, inp)| res.err().map(|e| format!("{}: {e}", inp.name)))
+    }
+
     pub fn residual(&self, sims: &[Simulated]) -> Vec<f64> {
         self.inputs
             .iter()
@@ -578,6 +593,7 @@ impl<'a> DriveProblem<'a> {
                 }
             }
         };
+        let start = p0.clone();
         let m = super::fit::minimize(
             &super::fit::LeastSquares {
                 simulate: &|p| self.simulate_all(&spec, p),
@@ -590,10 +606,54 @@ impl<'a> DriveProblem<'a> {
             },
             p0,
             max_iter,
-        )?;
+        )
+        .map_err(|e| self.why_not_simulated(&spec, &start).map_or(e.clone(), |why| format!("{e}: {why}")))?;
         let (p, sims, r, cost, jac, iterations) = (m.p, m.simulated, m.residual, m.cost, m.jacobian, m.iterations);
         let covariance = self.sandwich(&jac, &r);
-        Ok(DriveFit { spec, effects, p, sims, residual: r, sse: cost, jacobian: jac, covariance, iterations })
+        Ok(DriveFit {
+            spec,
+            effects,
+            p,
+            sims,
+            residual: r,
+            sse: cost,
+            jacobian: jac,
+            covariance,
+            iterations,
+            criterion: None,
+        })
+    }
+
+    /// A model at given parameters, not fitted (the equation error's estimates): its simulation,
+    /// residual, Jacobian and block-sandwich covariance, as a fit reports them.
+    pub fn at(&self, spec: Vec<Param>, effects: Vec<DriveEffect>, ee: EquationError) -> Result<DriveFit, String> {
+        let p = ee.p.clone();
+        let sims = self.simulate_all(&spec, &p).ok_or_else(|| {
+            let why = self.why_not_simulated(&spec, &p).unwrap_or_default();
+            format!("the FMU could not simulate the inverse model's parameters: {why}")
+        })?;
+        let residual = self.residual(&sims);
+        let sse = residual.iter().map(|e| e * e).sum();
+        let jacobian = self.jacobian(&spec, &p, &sims).ok_or("the FMU could not simulate a Jacobian's step")?;
+        let covariance = self.sandwich(&jacobian, &residual);
+        Ok(DriveFit {
+            spec,
+            effects,
+            p,
+            sims,
+            residual,
+            sse,
+            jacobian,
+            covariance,
+            iterations: 0,
+            criterion: Some(ee.bic),
+        })
+    }
+
+    /// The declared inertia every run shares (None when any run leaves it to the fit).
+    pub fn declared_inertia(&self) -> Option<f64> {
+        let first = self.inputs.first()?.inertia_declared?;
+        self.inputs.iter().all(|i| i.inertia_declared == Some(first)).then_some(first)
     }
 
     /// (JᵀJ)⁻¹ (Σ_b s_b s_bᵀ) (JᵀJ)⁻¹ with s_b = Σ_{t∈b} J_tᵀ e_t over contiguous blocks of each
@@ -687,70 +747,384 @@ pub struct InverseModel {
     pub with_coulomb_load: f64,
     /// Direction-wise levels from the inverse model: (Fc+, Fc−, Fv+, Fv−).
     pub asymmetric: Option<(f64, f64, f64, f64)>,
+    /// The modulating windows' equations, and the position and torque noise variances that weight them.
+    windows: Vec<Window>,
+    q_var: f64,
+    tau_var: f64,
+    /// The Stribeck speeds whose columns the windows carry.
+    stribeck_grid: Vec<f64>,
+    /// How many windows share each sample (2 per scale).
+    sharing: f64,
 }
 
-pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
-    let (mut rows, mut rhs, mut signs) = (Vec::new(), Vec::new(), Vec::new());
-    for inp in inputs {
-        let tau = inp.applied_torque();
-        let (v, a) = derivatives(&inp.time, &inp.motor);
-        for k in 20..inp.time.len().saturating_sub(20) {
-            rows.push([a[k], v[k], -1.0, v[k].signum()]);
-            rhs.push(tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain));
-            signs.push(v[k]);
+/// The equation error's estimates for one model: parameters in the fit's coordinates, and the
+/// covariance of the linear coefficients (`cols`, the levels by value).
+pub struct EquationError {
+    pub p: Vec<f64>,
+    /// The equation error's BIC: the criterion of the model's effects in place of the simulation's.
+    pub bic: f64,
+    cols: Vec<Param>,
+    cov: DMatrix<f64>,
+    beta: Vec<f64>,
+}
+
+impl EquationError {
+    /// Wald statistic of an effect's levels (θᵀ Σ⁻¹ θ over the effect's linear parameters).
+    pub fn wald(&self, effect: DriveEffect) -> f64 {
+        let idx: Vec<usize> = effect.params().iter().filter_map(|q| self.cols.iter().position(|c| c == q)).collect();
+        if idx.is_empty() {
+            return 0.0;
         }
+        let th = DVector::from_iterator(idx.len(), idx.iter().map(|&i| self.beta[i]));
+        let s = DMatrix::from_fn(idx.len(), idx.len(), |a, b| self.cov[(idx[a], idx[b])]);
+        s.try_inverse().map_or(0.0, |inv| (th.transpose() * inv * &th)[(0, 0)])
     }
-    if rows.len() < 10 {
+}
+
+/// One modulating window's equation, every term divided by ∫φ dt (a window-mean torque):
+/// [M column ∫q φ'', Fv column −∫q φ', L column −1, Fc column ∫sign(q̇) φ, ∫q̇⁺ φ, ∫q̇⁻ φ,
+/// ∫[q̇>0] φ, −∫[q̇<0] φ] and the right side ∫(τ + load) φ.
+struct Window {
+    row: [f64; 8],
+    /// ∫ sign(q̇) exp(−(q̇/v_st)²) φ for each Stribeck speed of the grid.
+    stribeck: Vec<f64>,
+    rhs: f64,
+    /// Σ(φ'' Δt)² and Σ(φ Δt)², over (∫φ dt)²: how position and torque noise enter the equation.
+    q_noise: f64,
+    tau_noise: f64,
+}
+
+/// The modulating function φ(s) = (1 − s²)³ on s ∈ [−1, 1] with its first two derivatives in s:
+/// φ and φ' vanish at both ends, so ∫ q̈ φ dt = ∫ q φ'' dt and ∫ q̇ φ dt = −∫ q φ' dt (Shinbrot's
+/// method): the equation holds with the measured position itself, never differentiated.
+fn modulating(s: f64) -> (f64, f64, f64) {
+    let u = 1.0 - s * s;
+    (u * u * u, -6.0 * s * u * u, u * (30.0 * s * s - 6.0))
+}
+
+/// The windows of one run at half-widths from 8 sample periods to a quarter of the run, each scale
+/// a factor 2 apart, stepped by half a width: short windows carry the inertia (fast changes), long
+/// ones average the noise. Only sign q̇ and the direction-wise speeds use a differentiated position
+/// (smoothed over the shortest window).
+fn windows(inp: &DriveInput, stribeck_grid: &[f64]) -> Vec<Window> {
+    let (t, q) = (&inp.time, &inp.motor);
+    let n = t.len();
+    if n < 32 {
+        return Vec::new();
+    }
+    let tau = inp.applied_torque();
+    let load: Vec<f64> = (0..n).map(|k| tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain)).collect();
+    let period = super::quality::median_period(t);
+    let span = t[n - 1] - t[0];
+    let (v, _) = derivatives(t, q);
+    // a speed the position noise cannot fake over the smoothing (±10 samples): below it, the
+    // sign is unknown
+    let v_floor = 3.0 * super::signal::second_difference_noise(q) / (8.0 * period);
+    let mut out = Vec::new();
+    let mut h = 8.0 * period;
+    while h <= 0.25 * span {
+        let mut centre = t[0] + h;
+        let mut lo = 0;
+        while centre + h <= t[n - 1] {
+            while lo < n && t[lo] < centre - h {
+                lo += 1;
+            }
+            let mut hi = lo;
+            while hi + 1 < n && t[hi + 1] <= centre + h {
+                hi += 1;
+            }
+            if hi > lo + 8 {
+                let mut row = [0.0; 8];
+                let mut stribeck = vec![0.0; stribeck_grid.len()];
+                let (mut rhs, mut w_int, mut qn, mut tn) = (0.0, 0.0, 0.0, 0.0);
+                // the φ-weighted time the drive moves slower than its noise lets a sign be read:
+                // a window that rests there (stuck on friction) has no equation with sign q̇
+                let mut slow = 0.0;
+                // the continuous integrals of a constant against φ' and φ'', and of a line against
+                // φ'', vanish: taking them out of q keeps the sums free of the offset's rounding
+                // (a drive's position may be thousands of its own noise levels from zero)
+                let slope = (q[hi] - q[lo]) / (t[hi] - t[lo]);
+                let line = |k: usize| q[lo] + slope * (t[k] - t[lo]);
+                for k in lo..=hi {
+                    // trapezoid weights in the samples' own times (uneven grids included)
+                    let dt = 0.5 * (t[(k + 1).min(hi)] - t[k.saturating_sub(1).max(lo)]);
+                    let (p, dp, ddp) = modulating((t[k] - centre) / h);
+                    let (pos, neg) = (v[k] > 0.0, v[k] < 0.0);
+                    if v[k].abs() < v_floor {
+                        slow += p * dt;
+                    }
+                    row[0] += (q[k] - line(k)) * ddp / (h * h) * dt;
+                    row[1] -= (q[k] - q[lo]) * dp / h * dt;
+                    row[2] -= p * dt;
+                    row[3] += v[k].signum() * p * dt;
+                    row[4] += if pos { v[k] } else { 0.0 } * p * dt;
+                    row[6] += if pos { p * dt } else { 0.0 };
+                    for (x, vst) in stribeck.iter_mut().zip(stribeck_grid) {
+                        let r2 = (v[k] / vst).powi(2);
+                        if r2 < 40.0 {
+                            *x += v[k].signum() * (-r2).exp() * p * dt;
+                        }
+                    }
+                    row[7] -= if neg { p * dt } else { 0.0 };
+                    rhs += load[k] * p * dt;
+                    w_int += p * dt;
+                    qn += (ddp / (h * h) * dt).powi(2);
+                    tn += (p * dt).powi(2);
+                }
+                // the backward speeds' integral from the whole one (which needs no derivative)
+                row[5] = row[1] - row[4];
+                if w_int > 0.0 && slow <= 0.05 * w_int {
+                    for x in row.iter_mut().chain(stribeck.iter_mut()) {
+                        *x /= w_int;
+                    }
+                    out.push(Window {
+                        row,
+                        stribeck,
+                        rhs: rhs / w_int,
+                        q_noise: qn / (w_int * w_int),
+                        tau_noise: tn / (w_int * w_int),
+                    });
+                }
+            }
+            centre += h;
+        }
+        h *= 2.0;
+    }
+    out
+}
+
+/// Stribeck speeds the equation error tries (the level is linear; the speed is the grid's best, to
+/// ±4 %).
+const STRIBECK_GRID: usize = 48;
+
+pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
+    // Stribeck speeds from a fiftieth of the data's largest speed up to half of it, 8 % apart
+    let top = inputs
+        .iter()
+        .map(|inp| derivatives(&inp.time, &inp.motor).0.iter().fold(0.0f64, |m, v| m.max(v.abs())))
+        .fold(0.0f64, f64::max);
+    let stribeck_grid: Vec<f64> = (0..STRIBECK_GRID)
+        .map(|i| 0.5 * top * 0.02f64.powf(i as f64 / (STRIBECK_GRID - 1) as f64))
+        .filter(|v| *v > 0.0)
+        .collect();
+    let mut ws = Vec::new();
+    let (mut q_var, mut tau_var, mut count) = (0.0, 0.0, 0.0);
+    let mut scales = 1usize;
+    for inp in inputs {
+        let w = windows(inp, &stribeck_grid);
+        let span = inp.time.last().copied().unwrap_or(0.0) - inp.time.first().copied().unwrap_or(0.0);
+        let h_min = 8.0 * super::quality::median_period(&inp.time);
+        if h_min > 0.0 && span > 0.0 {
+            scales = scales.max((0.25 * span / h_min).log2().floor().max(0.0) as usize + 1);
+        }
+        let sigma_q = super::signal::second_difference_noise(&inp.motor);
+        // the torque's own noise: the median second difference (robust to the steps of a drive)
+        let tau = inp.applied_torque();
+        let mut d2: Vec<f64> = tau.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
+        d2.sort_by(f64::total_cmp);
+        let sigma_tau = d2.get(d2.len() / 2).copied().unwrap_or(0.0) * 1.4826 / 6f64.sqrt();
+        q_var += sigma_q * sigma_q * w.len() as f64;
+        tau_var += sigma_tau * sigma_tau * w.len() as f64;
+        count += w.len() as f64;
+        ws.extend(w);
+    }
+    if ws.len() < 10 {
         return None;
     }
-    let solve = |cols: usize| -> Option<(Vec<f64>, Vec<f64>)> {
-        let x = DMatrix::from_fn(rows.len(), cols, |i, j| rows[i][j]);
-        let y = DVector::from_column_slice(&rhs);
-        let beta = (x.transpose() * &x).try_inverse()? * (x.transpose() * &y);
-        let res = (&y - &x * &beta).iter().copied().collect();
-        Some((beta.iter().copied().collect(), res))
+    let (q_var, tau_var) = (q_var / count, tau_var / count);
+    let mut iv = InverseModel {
+        inertia: 0.0,
+        viscous: 0.0,
+        constant_load: 0.0,
+        coulomb: 0.0,
+        corr_sign: 0.0,
+        mean_positive: 0.0,
+        mean_negative: 0.0,
+        with_coulomb_viscous: 0.0,
+        with_coulomb_inertia: 0.0,
+        with_coulomb_load: 0.0,
+        asymmetric: None,
+        sharing: 2.0 * scales as f64,
+        windows: ws,
+        q_var,
+        tau_var,
+        stribeck_grid,
     };
-    let (b3, res3) = solve(3)?;
-    let (b4, _) = solve(4)?;
+    use Param::{ConstantLoad, Coulomb, LnInertia, Viscous};
+    let b3 = iv.solve_cols(&[LnInertia, Viscous, ConstantLoad], &[], 0)?.0;
+    let b4 = iv.solve_cols(&[LnInertia, Viscous, ConstantLoad, Coulomb], &[], 0)?.0;
+    let ws = &iv.windows;
     // direction-wise: τ + load = M q̈ + Fv± q̇ + Fc± sign q̇ − L, with L fixed at the Coulomb model's
     // (a constant load and the mean of Fc+ − Fc− are not separable from motion that splits evenly)
     let asymmetric = {
-        let x = DMatrix::from_fn(rows.len(), 5, |i, j| {
-            let v = rows[i][1];
-            let (pos, neg) = (if v > 0.0 { 1.0 } else { 0.0 }, if v < 0.0 { 1.0 } else { 0.0 });
-            match j {
-                0 => rows[i][0],
-                1 => v * pos,
-                2 => v * neg,
-                3 => pos,
-                _ => -neg,
-            }
-        });
-        let y = DVector::from_iterator(rhs.len(), rhs.iter().map(|r| r + b4[2]));
+        let x = DMatrix::from_fn(ws.len(), 5, |i, j| ws[i].row[[0, 4, 5, 6, 7][j]]);
+        let y = DVector::from_iterator(ws.len(), ws.iter().map(|w| w.rhs - b4[2] * w.row[2]));
         (x.transpose() * &x).try_inverse().map(|inv| {
             let b = inv * (x.transpose() * y);
             (b[3], b[4], b[1], b[2])
         })
     };
-    let sgn: Vec<f64> = signs.iter().map(|v| v.signum()).collect();
+    let res3: Vec<f64> = ws.iter().map(|w| w.rhs - (b3[0] * w.row[0] + b3[1] * w.row[1] + b3[2] * w.row[2])).collect();
+    let sgn: Vec<f64> = ws.iter().map(|w| w.row[3]).collect();
     let mean_where = |f: &dyn Fn(f64) -> bool| {
-        let (s, n) =
-            res3.iter().zip(&signs).filter(|(_, v)| f(**v)).fold((0.0, 0usize), |(s, n), (r, _)| (s + r, n + 1));
+        let (s, n) = res3.iter().zip(&sgn).filter(|(_, s)| f(**s)).fold((0.0, 0usize), |(s, n), (r, _)| (s + r, n + 1));
         s / n.max(1) as f64
     };
-    Some(InverseModel {
-        inertia: b3[0],
-        viscous: b3[1],
-        constant_load: b3[2],
-        coulomb: b4[3],
-        corr_sign: corr(&res3, &sgn),
-        mean_positive: mean_where(&|v| v > 0.0),
-        mean_negative: mean_where(&|v| v < 0.0),
-        with_coulomb_inertia: b4[0],
-        with_coulomb_viscous: b4[1],
-        with_coulomb_load: b4[2],
-        asymmetric,
-    })
+    iv.inertia = b3[0];
+    iv.viscous = b3[1];
+    iv.constant_load = b3[2];
+    iv.coulomb = b4[3];
+    iv.corr_sign = corr(&res3, &sgn);
+    iv.mean_positive = mean_where(&|s| s > 0.9);
+    iv.mean_negative = mean_where(&|s| s < -0.9);
+    iv.with_coulomb_inertia = b4[0];
+    iv.with_coulomb_viscous = b4[1];
+    iv.with_coulomb_load = b4[2];
+    iv.asymmetric = asymmetric;
+    Some(iv)
+}
+
+impl InverseModel {
+    /// Equations the least squares uses.
+    pub fn equations(&self) -> usize {
+        self.windows.len()
+    }
+
+    /// The window's column for a parameter (its coefficient is the parameter's value; ln-parameters
+    /// by their value): the inertia, the viscous level, the constant load, Coulomb, the half
+    /// differences by direction (|sign| and |q̇|), the Stribeck excess at grid speed `g`.
+    fn column(w: &Window, q: Param, g: usize) -> f64 {
+        match q {
+            Param::LnInertia => w.row[0],
+            Param::Viscous => w.row[1],
+            Param::ConstantLoad => w.row[2],
+            Param::Coulomb => w.row[3],
+            Param::AsymCoulomb => w.row[6] - w.row[7],
+            Param::AsymViscous => w.row[4] - w.row[5],
+            Param::Stribeck => w.stribeck.get(g).copied().unwrap_or(0.0),
+            Param::LnStribeckVelocity | Param::LnStorage(_) | Param::LnLoss(_) => 0.0,
+        }
+    }
+
+    /// Weighted least squares of the columns `cols` with `fixed` (param, value) moved to the right
+    /// side, reweighted twice by the inertia: (coefficients, weighted SSE, covariance). The
+    /// covariance counts each sample's noise as often as windows share it (two per scale, half
+    /// overlapping, at every scale): the windows' equations are not independent.
+    fn solve_cols(&self, cols: &[Param], fixed: &[(Param, f64)], g: usize) -> Option<(Vec<f64>, f64, DMatrix<f64>)> {
+        let ws = &self.windows;
+        let inertia_col = cols.iter().position(|&q| q == Param::LnInertia);
+        let mut inertia = 0.0;
+        let mut out = None;
+        for _ in 0..3 {
+            // 1/σ of each equation, relative to the best-known one (noise-free logs stay finite)
+            let sigma: Vec<f64> = ws
+                .iter()
+                .map(|w| (self.tau_var * w.tau_noise + inertia * inertia * self.q_var * w.q_noise).sqrt())
+                .collect();
+            let least = sigma.iter().copied().filter(|s| *s > 0.0).fold(f64::INFINITY, f64::min);
+            let weight: Vec<f64> =
+                sigma.iter().map(|s| if least.is_finite() { least / s.max(least) } else { 1.0 }).collect();
+            let x = DMatrix::from_fn(ws.len(), cols.len(), |i, j| Self::column(&ws[i], cols[j], g) * weight[i]);
+            let y = DVector::from_iterator(
+                ws.len(),
+                ws.iter()
+                    .zip(&weight)
+                    .map(|(w, gw)| (w.rhs - fixed.iter().map(|&(q, v)| v * Self::column(w, q, g)).sum::<f64>()) * gw),
+            );
+            let beta = (x.transpose() * &x).try_inverse()? * (x.transpose() * &y);
+            if !beta.iter().all(|b| b.is_finite()) {
+                return None;
+            }
+            let sse = (&y - &x * &beta).norm_squared();
+            inertia = inertia_col.map_or(0.0, |i| beta[i].abs());
+            let dof = ws.len().saturating_sub(cols.len()).max(1) as f64;
+            let cov = (x.transpose() * &x).try_inverse()? * (sse / dof * self.sharing);
+            out = Some((beta.iter().copied().collect(), sse, cov));
+        }
+        out
+    }
+
+    /// The equation error's parameters for a drive model's `spec` (None when the data do not give
+    /// a physical value: an inertia ≤ 0, or a friction level below zero). With the asymmetry in, the
+    /// constant load is held at the symmetric model's (the two are one column while the drive
+    /// moves: docs/interfaces.md's equivalent forms); the Stribeck speed is the grid's best.
+    pub fn parameters(&self, spec: &[Param], declared_inertia: Option<f64>) -> Option<EquationError> {
+        let has = |q: Param| spec.contains(&q);
+        let mut fixed = Vec::new();
+        if let (false, Some(j)) = (has(Param::LnInertia), declared_inertia) {
+            fixed.push((Param::LnInertia, j));
+        }
+        if has(Param::AsymCoulomb) && has(Param::ConstantLoad) {
+            let symmetric: Vec<Param> =
+                spec.iter().copied().filter(|q| !matches!(q, Param::AsymCoulomb | Param::AsymViscous)).collect();
+            let p = self.parameters(&symmetric, declared_inertia)?.p;
+            let i = symmetric.iter().position(|&q| q == Param::ConstantLoad)?;
+            fixed.push((Param::ConstantLoad, p[i]));
+        }
+        // friction never pushes: a level the free solve puts below zero is held at zero (the
+        // constrained least squares' active set, most negative first)
+        loop {
+            let cols: Vec<Param> = spec
+                .iter()
+                .copied()
+                .filter(|q| !matches!(q, Param::LnStribeckVelocity) && !fixed.iter().any(|f| f.0 == *q))
+                .collect();
+            let grid: Vec<usize> = if has(Param::Stribeck) { (0..self.stribeck_grid.len()).collect() } else { vec![0] };
+            // the Stribeck speed: the grid's best among the speeds whose excess comes out ≥ 0
+            let stribeck_col = cols.iter().position(|&q| q == Param::Stribeck);
+            let solved: Vec<_> = grid
+                .into_iter()
+                .filter_map(|g| self.solve_cols(&cols, &fixed, g).map(|(b, sse, cov)| (b, sse, cov, g)))
+                .collect();
+            let physical = |s: &(Vec<f64>, f64, DMatrix<f64>, usize)| stribeck_col.is_none_or(|i| s.0[i] >= 0.0);
+            let best = |only_physical: bool| {
+                solved.iter().filter(|s| !only_physical || physical(s)).min_by(|a, b| a.1.total_cmp(&b.1)).cloned()
+            };
+            let (beta, sse, cov, g) = best(true).or_else(|| best(false))?;
+            let value = |q: Param| -> f64 {
+                if let Some(&(_, v)) = fixed.iter().find(|f| f.0 == q) {
+                    return v;
+                }
+                cols.iter().position(|&c| c == q).map_or(0.0, |i| beta[i])
+            };
+            let negative = [Param::Viscous, Param::Coulomb, Param::Stribeck]
+                .into_iter()
+                .filter(|&q| cols.contains(&q) && value(q) < 0.0)
+                .min_by(|a, b| (value(*a) / self.scale(*a)).total_cmp(&(value(*b) / self.scale(*b))));
+            if let Some(q) = negative {
+                fixed.push((q, 0.0));
+                continue;
+            }
+            let mut p = Vec::with_capacity(spec.len());
+            for &q in spec {
+                let x = match q {
+                    Param::LnInertia if value(q) > 0.0 => value(q).ln(),
+                    Param::LnInertia => return None,
+                    Param::LnStribeckVelocity => self.stribeck_grid.get(g)?.ln(),
+                    _ => value(q),
+                };
+                p.push(x);
+            }
+            // each direction's level at least zero too
+            let (fc, fv, ac, av) =
+                (value(Param::Coulomb), value(Param::Viscous), value(Param::AsymCoulomb), value(Param::AsymViscous));
+            if fc < ac.abs() || fv < av.abs() {
+                return None;
+            }
+            // BIC of the weighted equation error, over the independent equations (the windows
+            // divided by how many share a sample)
+            let n = (self.windows.len() as f64 / self.sharing).max(2.0);
+            let k = p.len() as f64;
+            let bic = n * (sse / self.sharing / n).max(f64::MIN_POSITIVE).ln() + k * n.ln();
+            return Some(EquationError { p, cols, cov, beta, bic });
+        }
+    }
+
+    /// A level's typical size in the equations (to compare how negative two levels are).
+    fn scale(&self, q: Param) -> f64 {
+        let s: f64 = self.windows.iter().map(|w| Self::column(w, q, 0).powi(2)).sum::<f64>();
+        (s / self.windows.len().max(1) as f64).sqrt().max(f64::MIN_POSITIVE).recip()
+    }
 }
 
 /// One candidate's score test (the ranking every rig shares: `stepwise::Linearised`).
@@ -1030,6 +1404,9 @@ pub struct DriveRig<'p, 'a> {
     prob: &'p DriveProblem<'a>,
     held: Option<&'p DriveProblem<'a>>,
     inverse: &'p Option<InverseModel>,
+    /// Every model's parameters from the inverse model's equation error, simulated, not fitted by
+    /// output error (rigid drives on their logged torque: open loop, see `calibrate`).
+    equation_error: bool,
     /// Held-out relerr of the models scored so far, by BIC (a model is scored once).
     held_scores: std::cell::RefCell<Vec<(u64, Option<f64>)>>,
 }
@@ -1085,6 +1462,10 @@ impl Rig for DriveRig<'_, '_> {
             p.extend_from_slice(&c.start);
             effects.push(c.effect);
         }
+        if let (true, Some(iv)) = (self.equation_error, self.inverse) {
+            let ee = iv.parameters(&spec, prob.declared_inertia())?;
+            return prob.at(spec, effects, ee).ok();
+        }
         // for Coulomb friction alone also the inverse model's (M, Fv, L, Fc): the baseline's viscous
         // friction has absorbed the Coulomb level and, through a saturating controller, the score
         // test's start can lie in another valley
@@ -1114,7 +1495,19 @@ impl Rig for DriveRig<'_, '_> {
     }
     fn judge(&self, m: &DriveFit, refit: &DriveFit) -> Verdict<DriveDetail> {
         let added: Vec<DriveEffect> = refit.effects.iter().copied().filter(|e| !m.effects.contains(e)).collect();
-        let walds: Vec<(f64, usize)> = added.iter().map(|&e| (wald(refit, e), e.params().len())).collect();
+        // the equation error's own covariance where its estimates are the model's (the output
+        // error's sandwich at a point it did not fit measures the drift, not the estimate)
+        let equation_error = match (self.equation_error, self.inverse) {
+            (true, Some(iv)) => iv.parameters(&refit.spec, self.prob.declared_inertia()),
+            _ => None,
+        };
+        let walds: Vec<(f64, usize)> = added
+            .iter()
+            .map(|&e| {
+                let w = equation_error.as_ref().map_or_else(|| wald(refit, e), |ee| ee.wald(e));
+                (w, e.params().iter().filter(|q| **q != Param::LnStribeckVelocity || equation_error.is_none()).count())
+            })
+            .collect();
         let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof));
         Verdict {
             keep,
@@ -1134,6 +1527,10 @@ impl Rig for DriveRig<'_, '_> {
         m
     }
     fn removal_delta_bic(&self, m: &DriveFit, e: DriveEffect) -> f64 {
+        if let (Some(c), Some(iv)) = (m.criterion, self.inverse) {
+            let spec: Vec<Param> = m.spec.iter().copied().filter(|q| !e.params().contains(q)).collect();
+            return iv.parameters(&spec, self.prob.declared_inertia()).map_or(f64::INFINITY, |ee| ee.bic - c);
+        }
         let idx: Vec<usize> = e.params().iter().filter_map(|q| m.spec.iter().position(|x| x == q)).collect();
         super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx)
     }
@@ -1143,9 +1540,13 @@ impl Rig for DriveRig<'_, '_> {
             return None;
         }
         let keep: Vec<usize> = (0..m.spec.len()).filter(|&i| !e.params().contains(&m.spec[i])).collect();
-        let spec = keep.iter().map(|&i| m.spec[i]).collect();
+        let spec: Vec<Param> = keep.iter().map(|&i| m.spec[i]).collect();
         let p = keep.iter().map(|&i| m.p[i]).collect();
         let effects = m.effects.iter().copied().filter(|&x| x != e).collect();
+        if let (true, Some(iv)) = (self.equation_error, self.inverse) {
+            let ee = iv.parameters(&spec, self.prob.declared_inertia())?;
+            return self.prob.at(spec, effects, ee).ok();
+        }
         self.prob.fit(spec, effects, p, MAX_ITERATIONS).ok()
     }
     fn polish(&self, m: DriveFit) -> Option<DriveFit> {
@@ -1180,13 +1581,28 @@ pub fn calibrate(
             p0.extend([0.0, 0.0]);
         }
     }
-    let baseline = prob.fit(spec, vec![], p0, MAX_ITERATIONS)?;
+    // A rigid drive on its logged torque runs open loop: the simulated position integrates every
+    // error of the torque log and of the model twice, so output error over a whole run is dominated by
+    // drift (its optimum wanders to the inertia's bound). The inverse model's equation error has no
+    // such drift: its estimates are the models' parameters, and the simulation judges them (BIC).
+    let equation_error_start = match &inverse {
+        Some(iv) if prob.inputs.iter().all(|i| i.rigid && i.drive == DriveKind::MotorTorque) => {
+            iv.parameters(&spec, prob.declared_inertia())
+        }
+        _ => None,
+    };
+    let equation_error = equation_error_start.is_some();
+    let baseline = match equation_error_start {
+        Some(ee) => prob.at(spec, vec![], ee)?,
+        None => prob.fit(spec, vec![], p0, MAX_ITERATIONS)?,
+    };
     let held = held.map(|h| {
         h.inertia_start = prob.inertia_start;
         &*h
     });
     let mut load_column = held.and_then(|h| diagnose_load_column(h, &baseline));
-    let rig = DriveRig { prob, held, inverse: &inverse, held_scores: std::cell::RefCell::new(Vec::new()) };
+    let rig =
+        DriveRig { prob, held, inverse: &inverse, equation_error, held_scores: std::cell::RefCell::new(Vec::new()) };
     let found = super::stepwise::search(&rig, baseline.clone(), budget);
     let current = found.model;
     let mut validation_sims = None;

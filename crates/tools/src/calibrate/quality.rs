@@ -120,7 +120,7 @@ pub fn check_range(
 }
 
 /// Median of a copy of `v` (0 when empty).
-fn median(mut v: Vec<f64>) -> f64 {
+pub fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
