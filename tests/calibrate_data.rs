@@ -77,6 +77,21 @@ fn huge_values_are_echoed_short() {
 }
 
 #[test]
+fn metadata_beyond_what_a_rig_or_its_log_can_be_is_refused_at_its_line() {
+    // a frequency the log cannot carry: above half its sample rate (1 kHz here)
+    let e = err(&GOOD.replace("# frequency_hz=0.5", "# frequency_hz=1e300"));
+    assert_eq!(e.line, Some(3), "{e}");
+    assert!(e.to_string().contains("above half the sample rate (500 Hz)"), "{e}");
+    assert!(err(&GOOD.replace("# frequency_hz=0.5", "# frequency_hz=501"))
+        .to_string()
+        .contains("half the sample rate"));
+    parse_run(Path::new("ok.csv"), &GOOD.replace("# frequency_hz=0.5", "# frequency_hz=499")).unwrap();
+    let e = err(&GOOD.replace("# source=test", "# link_inertia_kgm2=1e300"));
+    assert_eq!(e.line, Some(2), "{e}");
+    assert!(e.to_string().contains("link_inertia_kgm2=1e300 is above 1e6"), "{e}");
+}
+
+#[test]
 fn text_in_a_number_column_names_line_and_column() {
     let e = err(&GOOD.replace("0.002,0.002,0.0011", "0.002,abc,0.0011"));
     assert_eq!(e.line, Some(7));

@@ -61,3 +61,32 @@ def test_rigs_that_pass_keep_passing(tmp_path, seed):
     result = campaign.run_rig(campaign.draw(seed), tmp_path, 120.0)
     assert result["passed"], result["why"]
     assert math.isfinite(result["seconds"])
+
+
+DRIVE_DRAWS = [campaign.draw_drive(s) for s in range(1, 201)]
+
+
+def test_the_drive_draws_cover_servos_to_linear_axes():
+    rotary = [d["rig"]["inertia"] for d in DRIVE_DRAWS if d["rig"]["axis"] == "rotary"]
+    linear = [d["rig"]["inertia"] for d in DRIVE_DRAWS if d["rig"]["axis"] == "linear"]
+    assert min(rotary) < 3e-5 and max(rotary) > 3e-3 and all(1e-5 <= j <= 1e-2 for j in rotary)
+    assert min(linear) < 3 and max(linear) > 30 and all(1 <= m <= 100 for m in linear)
+    assert {d["rig"]["drive"] for d in DRIVE_DRAWS} == {"motor_torque", "reference"}
+    assert {d["rig"]["extra"] for d in DRIVE_DRAWS} == {"none", "stribeck", "asymmetric"}
+    for d in DRIVE_DRAWS:
+        r = d["rig"]
+        assert r["rate_hz"] in campaign.RATES and 2 <= len(r["durations_s"]) <= 8
+        assert all(5.0 <= t <= 30.0 for t in r["durations_s"])
+        assert 0.0 <= r["jitter"] <= 0.2 and 0.0 <= r["dropout_s"] <= 0.5
+        assert "coulomb_friction" in d["expected"]
+
+
+# Drive rigs that pass with today's loop (measured 2026-11-26): a rotary servo and a linear axis on their
+# logged torque, and a servo with Stribeck friction.
+PASSING_DRIVES = [8, 14, 20]
+
+
+@pytest.mark.parametrize("seed", PASSING_DRIVES)
+def test_drive_rigs_that_pass_keep_passing(tmp_path, seed):
+    result = campaign.run_rig(campaign.draw_drive(seed), tmp_path, 120.0)
+    assert result["passed"], result["why"]

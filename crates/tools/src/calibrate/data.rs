@@ -409,10 +409,31 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         Axis::Rotary => "link_inertia_kgm2",
         Axis::Linear => "inertia_kg",
     };
-    for key in ["frequency_hz", inertia_key, "link_mass_kg", "link_length_m", "motor_amplitude_rad"] {
+    // positive, and physical: an inertia, mass or length within the FMU's input ranges' ±1e6, an
+    // amplitude within the positions', a frequency below half the sample rate (the log cannot carry more)
+    let nyquist = 0.5 / super::quality::median_period(&run.time).max(f64::MIN_POSITIVE);
+    let half_rate = format!("half the sample rate ({} Hz)", thermovia_importer::table::compact(nyquist));
+    for (key, most, what) in [
+        ("frequency_hz", nyquist, half_rate.as_str()),
+        (inertia_key, 1e6, "1e6"),
+        ("link_mass_kg", 1e6, "1e6"),
+        ("link_length_m", 1e6, "1e6"),
+        ("motor_amplitude_rad", 1e6, "1e6"),
+    ] {
         if let Some(v) = run.meta.get(key) {
             match v.parse::<f64>() {
-                Ok(x) if x.is_finite() && x > 0.0 => {}
+                Ok(x) if x.is_finite() && x > 0.0 && x <= most => {}
+                Ok(x) if x.is_finite() && x > 0.0 => {
+                    return Err(meta_error(
+                        path,
+                        text,
+                        key,
+                        format!(
+                            "metadata {key}={} is above {what}: a typo or a unit slip, not this rig",
+                            thermovia_importer::table::compact(x)
+                        ),
+                    ))
+                }
                 _ => return Err(meta_error(path, text, key, format!("metadata {key}={v:?} is not a positive number"))),
             }
         }

@@ -1158,6 +1158,9 @@ pub fn wald_limit(dof: usize) -> f64 {
 }
 
 pub struct DriveOutcome {
+    /// The models' parameters are the inverse model's equation error (rigid drives on their logged
+    /// torque), not an output-error fit.
+    pub equation_error: bool,
     pub baseline: DriveFit,
     pub final_fit: DriveFit,
     pub inverse: Option<InverseModel>,
@@ -1619,6 +1622,7 @@ pub fn calibrate(
     let residual_corr = residual_corr_sign(prob, &baseline);
     let final_corr = residual_corr_sign(prob, &current);
     Ok(DriveOutcome {
+        equation_error,
         baseline,
         final_fit: current,
         inverse,
@@ -1845,7 +1849,13 @@ pub fn report_json(
     }
     if let Some(iv) = &o.inverse {
         j["inverse_model"] = json!({
-            "note": "IDIM-LS on the measured motion (Savitzky–Golay-smoothed position, central differences): the start of the output-error fit and evidence for the diagnosis",
+            "note": if o.equation_error {
+                "IDIM-LS on the measured motion by modulating functions (the equation multiplied by φ = (1 − s²)³ over windows of 8 sample periods to a quarter run and integrated by parts: the measured position is never differentiated; windows weighted by the noise they carry): rigid drives on their logged torque run open loop, so these are the models' parameters, the simulation reports their position error, and the equation error's BIC and Wald test choose the effects"
+            } else {
+                "IDIM-LS on the measured motion by modulating functions (the equation multiplied by φ = (1 − s²)³ over windows of 8 sample periods to a quarter run and integrated by parts: the measured position is never differentiated): the start of the output-error fit and evidence for the diagnosis"
+            },
+            "method": if o.equation_error { "equation error" } else { "output error from the inverse model's start" },
+            "equations": iv.equations(),
             "without_coulomb": {"inertia": iv.inertia, "viscous": iv.viscous, "constant_load": iv.constant_load},
             "with_coulomb": {"inertia": iv.with_coulomb_inertia, "viscous": iv.with_coulomb_viscous, "constant_load": iv.with_coulomb_load, "coulomb": iv.coulomb},
             "residual_corr_sign_speed": iv.corr_sign,

@@ -278,7 +278,8 @@ pub struct Problem<'a> {
     /// table's shape in temperature).
     pub tables: Vec<TransmissionTable>,
     /// Savitzky–Golay-smoothed (link, motor) angles per run for the equation error, computed once.
-    smoothed: std::sync::OnceLock<Vec<(Vec<f64>, Vec<f64>)>>,
+    /// Per run: the smoothed link and motor angles and the smoothing's half window.
+    smoothed: std::sync::OnceLock<Vec<(Vec<f64>, Vec<f64>, usize)>>,
     /// What the runs show of torques on the link, computed once (`Problem::torque_scale`).
     torque_scale: std::sync::OnceLock<Option<TorqueScale>>,
     /// Whether each run's motor angle is one sinusoid, computed once.
@@ -620,8 +621,11 @@ impl<'a> Problem<'a> {
     /// Backlash widths worth trying: log-spaced from 2 % to 90 % of twice the largest |θm − θl| of
     /// the smoothed runs (a play wider than the relative motion would never engage).
     pub fn backlash_width_grid(&self) -> Vec<f64> {
-        let reach =
-            self.smoothed().iter().flat_map(|(l, m)| l.iter().zip(m).map(|(a, b)| (b - a).abs())).fold(0.0, f64::max);
+        let reach = self
+            .smoothed()
+            .iter()
+            .flat_map(|(l, m, _)| l.iter().zip(m).map(|(a, b)| (b - a).abs()))
+            .fold(0.0, f64::max);
         let (lo, hi) = (0.04 * reach, 1.8 * reach);
         let n = BACKLASH_GRID_POINTS;
         (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
@@ -727,8 +731,8 @@ impl<'a> Problem<'a> {
                 DampingLaw::Hysteretic if self.sinusoidal()[r] => self.tables[g].frequency_hz / inp.frequency_hz,
                 _ => 1.0,
             };
-            let half = (n / 100).max(5);
-            let (l, m) = &self.smoothed()[r];
+            let (l, m, half) = &self.smoothed()[r];
+            let half = *half;
             let t = &inp.time;
             let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
             let range = half + 2..n - half - 2;
@@ -804,14 +808,14 @@ impl<'a> Problem<'a> {
 
     /// The equation error's smoothed (link, motor) angles of every run: a window of 2 % of the run,
     /// at least 5 samples each side (against encoder steps).
-    fn smoothed(&self) -> &[(Vec<f64>, Vec<f64>)] {
+    fn smoothed(&self) -> &[(Vec<f64>, Vec<f64>, usize)] {
         self.smoothed.get_or_init(|| {
             self.inputs
                 .iter()
                 .zip(&self.measured)
                 .map(|(inp, y)| {
-                    let half = (y.len() / 100).max(5);
-                    (smooth(&inp.time, y, half), smooth(&inp.time, &inp.motor, half))
+                    let (half, link) = super::signal::smooth_to_noise(&inp.time, y, (y.len() / 100).max(5));
+                    (link, smooth(&inp.time, &inp.motor, half), half)
                 })
                 .collect()
         })

@@ -84,6 +84,27 @@ pub fn smooth(t: &[f64], x: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The widest quintic smoothing, up to `cap` samples each side, that takes out no more than the
+/// signal's noise (the discrepancy principle): half windows from 5 up by factors of 2 while the rms
+/// of x − smooth(x) stays within 1.25× the noise of its second differences; a window that takes
+/// more has started to flatten the signal (a link ringing at its natural frequency, a step's edge).
+/// Returns (half window, smoothed signal).
+pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>) {
+    let noise = second_difference_noise(x);
+    let mut half = 5.min(cap);
+    let mut best = smooth(t, x, half);
+    while half < cap {
+        let next = (2 * half).min(cap);
+        let s = smooth(t, x, next);
+        let rms = (x.iter().zip(&s).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / x.len().max(1) as f64).sqrt();
+        if rms > 1.25 * noise {
+            break;
+        }
+        (half, best) = (next, s);
+    }
+    (half, best)
+}
+
 /// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
 /// var(Δ²x) = 6σ²; a smooth signal sampled fast contributes almost nothing).
 pub fn second_difference_noise(x: &[f64]) -> f64 {
