@@ -264,6 +264,9 @@ impl SpringBank {
     }
 }
 
+/// A run's smoothed link and motor angles and the smoothing's half window (samples).
+type Smoothed = (Vec<f64>, Vec<f64>, usize);
+
 /// The data as the fit sees it.
 pub struct Problem<'a> {
     pub sim: &'a Simulator,
@@ -279,7 +282,7 @@ pub struct Problem<'a> {
     pub tables: Vec<TransmissionTable>,
     /// Savitzky–Golay-smoothed (link, motor) angles per run for the equation error, computed once.
     /// Per run: the smoothed link and motor angles and the smoothing's half window.
-    smoothed: std::sync::OnceLock<Vec<(Vec<f64>, Vec<f64>, usize)>>,
+    smoothed: std::sync::OnceLock<Vec<Smoothed>>,
     /// What the runs show of torques on the link, computed once (`Problem::torque_scale`).
     torque_scale: std::sync::OnceLock<Option<TorqueScale>>,
     /// Whether each run's motor angle is one sinusoid, computed once.
@@ -808,7 +811,7 @@ impl<'a> Problem<'a> {
 
     /// The equation error's smoothed (link, motor) angles of every run: a window of 2 % of the run,
     /// at least 5 samples each side (against encoder steps).
-    fn smoothed(&self) -> &[(Vec<f64>, Vec<f64>, usize)] {
+    fn smoothed(&self) -> &[Smoothed] {
         self.smoothed.get_or_init(|| {
             self.inputs
                 .iter()
