@@ -190,7 +190,12 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
         next += regressor_columns(e);
     }
     let bit = |e: Effect| 1u32 << all.iter().position(|&x| x == e).expect("in the list");
-    let valid = |mask: u32| mask & bit(Effect::AsymmetricFriction) == 0 || mask & bit(Effect::CoulombFriction) != 0;
+    // asymmetric friction only over Coulomb friction, and never beside a constant load (one column
+    // while the link moves: the equivalent forms)
+    let valid = |mask: u32| {
+        mask & bit(Effect::AsymmetricFriction) == 0
+            || (mask & bit(Effect::CoulombFriction) != 0 && mask & bit(Effect::ConstantLoad) == 0)
+    };
     let bic: Vec<Option<f64>> = (0..1u32 << all.len())
         .map(|mask| {
             if !valid(mask) {
@@ -737,7 +742,21 @@ impl Rig for DeviceRig<'_, '_> {
     fn refit_with(&self, m: &Judged, added: &[&Ranked<Effect>]) -> Option<Judged> {
         let mut spec = m.fit.spec.clone();
         spec.effects.extend(added.iter().map(|c| c.effect));
-        let starts = candidate_starts(self.prob, &m.fit, added, spec.law);
+        let mut starts = candidate_starts(self.prob, &m.fit, added, spec.law);
+        // asymmetric friction takes a constant load's place: while the link moves, its Coulomb
+        // half-difference is that constant torque (the equivalent forms), and both in at once
+        // are one column twice
+        if added.iter().any(|c| c.effect == Effect::AsymmetricFriction) {
+            if let Some(&(o, e)) =
+                m.fit.spec.offsets(self.prob.n_groups).iter().find(|(_, e)| *e == Effect::ConstantLoad)
+            {
+                let k = e.params().len();
+                spec.effects.retain(|&x| x != Effect::ConstantLoad);
+                for q in &mut starts {
+                    q.drain(o..o + k);
+                }
+            }
+        }
         self.with_screen(m, |sprob, _, _| {
             let t = std::time::Instant::now();
             let refit = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
