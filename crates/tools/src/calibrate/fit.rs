@@ -1121,7 +1121,13 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
     for it in 0..max_iter {
         iterations = it + 1;
         if !fresh && (jac.ncols() == 0 || !ls.broyden || broyden_run >= MAX_BROYDEN_UPDATES) {
-            jac = (ls.jacobian)(&p, &simulated).ok_or("the FMU could not simulate a difference step")?;
+            match (ls.jacobian)(&p, &simulated) {
+                Some(j) => jac = j,
+                // out of time (or a difference step the FMU refuses) after some progress: the best
+                // point so far stands, with the last Jacobian it had
+                None if jac.ncols() == p.len() => break,
+                None => return Err("the FMU could not simulate a difference step".into()),
+            }
             fresh = true;
             broyden_run = 0;
         }
@@ -1175,7 +1181,11 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
         }
     }
     if !fresh {
-        jac = (ls.jacobian)(&p, &simulated).ok_or("the FMU could not simulate a difference step")?;
+        match (ls.jacobian)(&p, &simulated) {
+            Some(j) => jac = j,
+            None if jac.ncols() == p.len() => {}
+            None => return Err("the FMU could not simulate a difference step".into()),
+        }
     }
     Ok(Minimum { p, simulated, residual: r, cost, jacobian: jac, iterations })
 }
