@@ -339,24 +339,24 @@ def calibrate_and_score(rig, data, result, budget, scorer):
             "expected": sorted(rig["expected"]), "rig": rig["rig"]}
 
 
-def ci_seeds():
-    """The CI subset: the first CI_RIGS seeds whose rigs hold at most CI_SAMPLES samples (fixed)."""
+def first_small_seeds(drawer, count):
+    """The first `count` seeds whose rigs (from `drawer`) hold at most CI_SAMPLES samples (fixed)."""
     seeds, s = [], 1
-    while len(seeds) < CI_RIGS:
-        if draw(s)["samples"] <= CI_SAMPLES:
+    while len(seeds) < count:
+        if drawer(s)["samples"] <= CI_SAMPLES:
             seeds.append(s)
         s += 1
     return seeds
+
+
+def ci_seeds():
+    """The CI subset's device rigs."""
+    return first_small_seeds(draw, CI_RIGS)
 
 
 def ci_drive_seeds():
-    """The CI subset's drive rigs: the first CI_DRIVE_RIGS seeds of at most CI_SAMPLES samples."""
-    seeds, s = [], 1
-    while len(seeds) < CI_DRIVE_RIGS:
-        if draw_drive(s)["samples"] <= CI_SAMPLES:
-            seeds.append(s)
-        s += 1
-    return seeds
+    """The CI subset's drive rigs."""
+    return first_small_seeds(draw_drive, CI_DRIVE_RIGS)
 
 
 def main(argv=None):

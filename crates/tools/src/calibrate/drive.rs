@@ -46,32 +46,21 @@ pub enum Param {
     LnStribeckVelocity,
 }
 
-/// Effects the drive loop can add.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DriveEffect {
-    CoulombFriction,
-    /// Different Coulomb and viscous levels in each direction (needs Coulomb friction in).
-    AsymmetricFriction,
-    /// Stribeck excess over Coulomb friction at low speed (needs Coulomb friction in).
-    StribeckFriction,
-}
+/// The effects the drive loop can add are the library's friction effects: one table of names and
+/// meanings (`fit::Effect`) for both rigs, each rig mapping an effect onto its own parameters.
+pub type DriveEffect = super::fit::Effect;
 
-impl DriveEffect {
-    pub const ALL: [DriveEffect; 3] =
-        [DriveEffect::CoulombFriction, DriveEffect::AsymmetricFriction, DriveEffect::StribeckFriction];
-    pub fn name(self) -> &'static str {
-        match self {
-            DriveEffect::CoulombFriction => "coulomb_friction",
-            DriveEffect::AsymmetricFriction => "asymmetric_friction",
-            DriveEffect::StribeckFriction => "stribeck_friction",
-        }
-    }
-    pub fn params(self) -> &'static [Param] {
-        match self {
-            DriveEffect::CoulombFriction => &[Param::Coulomb],
-            DriveEffect::AsymmetricFriction => &[Param::AsymCoulomb, Param::AsymViscous],
-            DriveEffect::StribeckFriction => &[Param::Stribeck, Param::LnStribeckVelocity],
-        }
+/// The library's effects a drive can carry (friction between the body and ground).
+pub const DRIVE_EFFECTS: [DriveEffect; 3] =
+    [DriveEffect::CoulombFriction, DriveEffect::AsymmetricFriction, DriveEffect::StribeckFriction];
+
+/// A library effect's parameters on a drive (none for an effect a drive does not carry).
+pub fn drive_params(e: DriveEffect) -> &'static [Param] {
+    match e {
+        DriveEffect::CoulombFriction => &[Param::Coulomb],
+        DriveEffect::AsymmetricFriction => &[Param::AsymCoulomb, Param::AsymViscous],
+        DriveEffect::StribeckFriction => &[Param::Stribeck, Param::LnStribeckVelocity],
+        _ => &[],
     }
 }
 
@@ -771,7 +760,8 @@ pub struct EquationError {
 impl EquationError {
     /// Wald statistic of an effect's levels (θᵀ Σ⁻¹ θ over the effect's linear parameters).
     pub fn wald(&self, effect: DriveEffect) -> f64 {
-        let idx: Vec<usize> = effect.params().iter().filter_map(|q| self.cols.iter().position(|c| c == q)).collect();
+        let idx: Vec<usize> =
+            drive_params(effect).iter().filter_map(|q| self.cols.iter().position(|c| c == q)).collect();
         if idx.is_empty() {
             return 0.0;
         }
@@ -1141,7 +1131,7 @@ pub struct DriveDetail {
 
 /// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
 pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
-    let idx: Vec<usize> = effect.params().iter().filter_map(|q| fit.spec.iter().position(|x| x == q)).collect();
+    let idx: Vec<usize> = drive_params(effect).iter().filter_map(|q| fit.spec.iter().position(|x| x == q)).collect();
     let k = idx.len();
     let theta = DVector::from_iterator(k, idx.iter().map(|&i| fit.p[i]));
     let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(idx[a], idx[b])]);
@@ -1194,7 +1184,7 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
     let lin = super::stepwise::Linearised::new(&fit.jacobian, &fit.residual);
     let sse_now = lin.sse;
     let mut out = Vec::new();
-    for effect in DriveEffect::ALL {
+    for effect in DRIVE_EFFECTS {
         if fit.effects.contains(&effect) {
             continue;
         }
@@ -1203,18 +1193,18 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
         }
         let base = fit.p.len();
         let mut spec = fit.spec.clone();
-        spec.extend_from_slice(effect.params());
+        spec.extend_from_slice(drive_params(effect));
         // the effect "off" (level 0) with its shape parameters at a start: the Stribeck speed at a
         // tenth of the data's RMS speed; the levels are probed by secants
-        let init: Vec<f64> = effect
-            .params()
+        let init: Vec<f64> = drive_params(effect)
             .iter()
             .map(|q| if *q == Param::LnStribeckVelocity { (0.1 * prob.speed_scale).ln() } else { 0.0 })
             .collect();
-        let probed: Vec<usize> = (0..init.len()).filter(|&i| effect.params()[i] != Param::LnStribeckVelocity).collect();
+        let probed: Vec<usize> =
+            (0..init.len()).filter(|&i| drive_params(effect)[i] != Param::LnStribeckVelocity).collect();
         let mut cols = Vec::new();
         for &i in &probed {
-            let h = 0.05 * prob.typical(effect.params()[i]);
+            let h = 0.05 * prob.typical(drive_params(effect)[i]);
             let mut x = fit.p.clone();
             x.extend_from_slice(&init);
             x[base + i] = h;
@@ -1242,8 +1232,12 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
             start[i] += beta[base + c];
         }
         let score = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
-        let predicted_delta_bic =
-            super::stepwise::predicted_delta_bic(fit.n(), sse_now, (sse_now - sse_aug).max(0.0), effect.params().len());
+        let predicted_delta_bic = super::stepwise::predicted_delta_bic(
+            fit.n(),
+            sse_now,
+            (sse_now - sse_aug).max(0.0),
+            drive_params(effect).len(),
+        );
         let evidence = match (effect, inverse) {
             (DriveEffect::CoulombFriction, Some(iv)) => format!(
                 "explains {:.1} % of the position residual (FMU sensitivity projected on it; linearised level {:.4}); \
@@ -1284,6 +1278,8 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
                     ""
                 }
             ),
+            // DRIVE_EFFECTS holds friction only
+            (other, _) => format!("explains {:.1} % of the position residual ({})", 100.0 * score, other.name()),
         };
         out.push(DriveCandidate { effect, score, predicted_delta_bic, start, evidence });
     }
@@ -1461,7 +1457,7 @@ impl Rig for DriveRig<'_, '_> {
         let mut p = m.p.clone();
         let mut effects = m.effects.clone();
         for c in added {
-            spec.extend_from_slice(c.effect.params());
+            spec.extend_from_slice(drive_params(c.effect));
             p.extend_from_slice(&c.start);
             effects.push(c.effect);
         }
@@ -1508,7 +1504,13 @@ impl Rig for DriveRig<'_, '_> {
             .iter()
             .map(|&e| {
                 let w = equation_error.as_ref().map_or_else(|| wald(refit, e), |ee| ee.wald(e));
-                (w, e.params().iter().filter(|q| **q != Param::LnStribeckVelocity || equation_error.is_none()).count())
+                (
+                    w,
+                    drive_params(e)
+                        .iter()
+                        .filter(|q| **q != Param::LnStribeckVelocity || equation_error.is_none())
+                        .count(),
+                )
             })
             .collect();
         let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof));
@@ -1531,10 +1533,10 @@ impl Rig for DriveRig<'_, '_> {
     }
     fn removal_delta_bic(&self, m: &DriveFit, e: DriveEffect) -> f64 {
         if let (Some(c), Some(iv)) = (m.criterion, self.inverse) {
-            let spec: Vec<Param> = m.spec.iter().copied().filter(|q| !e.params().contains(q)).collect();
+            let spec: Vec<Param> = m.spec.iter().copied().filter(|q| !drive_params(e).contains(q)).collect();
             return iv.parameters(&spec, self.prob.declared_inertia()).map_or(f64::INFINITY, |ee| ee.bic - c);
         }
-        let idx: Vec<usize> = e.params().iter().filter_map(|q| m.spec.iter().position(|x| x == q)).collect();
+        let idx: Vec<usize> = drive_params(e).iter().filter_map(|q| m.spec.iter().position(|x| x == q)).collect();
         super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx)
     }
     fn without(&self, m: &DriveFit, e: DriveEffect) -> Option<DriveFit> {
@@ -1542,7 +1544,7 @@ impl Rig for DriveRig<'_, '_> {
         if e == DriveEffect::CoulombFriction && m.effects.len() > 1 {
             return None;
         }
-        let keep: Vec<usize> = (0..m.spec.len()).filter(|&i| !e.params().contains(&m.spec[i])).collect();
+        let keep: Vec<usize> = (0..m.spec.len()).filter(|&i| !drive_params(e).contains(&m.spec[i])).collect();
         let spec: Vec<Param> = keep.iter().map(|&i| m.spec[i]).collect();
         let p = keep.iter().map(|&i| m.p[i]).collect();
         let effects = m.effects.iter().copied().filter(|&x| x != e).collect();
@@ -1681,6 +1683,7 @@ pub fn effect_parameters(fit: &DriveFit, effect: DriveEffect) -> Vec<(&'static s
                 ("viscous_negative", b.0 - av.0, se(b.1, av.1)),
             ]
         }
+        _ => vec![],
     }
 }
 
