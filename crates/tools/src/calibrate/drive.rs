@@ -386,9 +386,9 @@ pub struct DriveFit {
     /// Block-sandwich covariance (holds up under correlated residuals).
     pub covariance: DMatrix<f64>,
     pub iterations: usize,
-    /// The criterion of the model's effects when the simulation's BIC is not it: the equation
-    /// error's BIC, for models whose parameters the inverse model gave (see `calibrate`).
-    pub criterion: Option<f64>,
+    /// The inverse model's estimates when they are this model's parameters (see `calibrate`): their
+    /// BIC is then the criterion of the model's effects, their covariance the Wald test's.
+    pub equation_error: Option<EquationError>,
 }
 
 impl DriveFit {
@@ -396,8 +396,8 @@ impl DriveFit {
         self.residual.len()
     }
     pub fn bic(&self) -> f64 {
-        if let Some(c) = self.criterion {
-            return c;
+        if let Some(ee) = &self.equation_error {
+            return ee.bic;
         }
         let n = self.n() as f64;
         n * (self.sse / n).ln() + self.p.len() as f64 * n.ln()
@@ -609,7 +609,7 @@ impl<'a> DriveProblem<'a> {
             jacobian: jac,
             covariance,
             iterations,
-            criterion: None,
+            equation_error: None,
         })
     }
 
@@ -635,7 +635,7 @@ impl<'a> DriveProblem<'a> {
             jacobian,
             covariance,
             iterations: 0,
-            criterion: Some(ee.bic),
+            equation_error: Some(ee),
         })
     }
 
@@ -748,6 +748,7 @@ pub struct InverseModel {
 
 /// The equation error's estimates for one model: parameters in the fit's coordinates, and the
 /// covariance of the linear coefficients (`cols`, the levels by value).
+#[derive(Clone, Debug)]
 pub struct EquationError {
     pub p: Vec<f64>,
     /// The equation error's BIC: the criterion of the model's effects in place of the simulation's.
@@ -794,25 +795,25 @@ fn modulating(s: f64) -> (f64, f64, f64) {
 
 /// The windows of one run at half-widths from 8 sample periods to a quarter of the run, each scale
 /// a factor 2 apart, stepped by half a width: short windows carry the inertia (fast changes), long
-/// ones average the noise. Only sign q̇ and the direction-wise speeds use a differentiated position
-/// (smoothed over the shortest window).
-fn windows(inp: &DriveInput, stribeck_grid: &[f64]) -> Vec<Window> {
+/// ones average the noise. Only sign q̇ and the direction-wise speeds use a differentiated position:
+/// `v`, the run's speed from `signal::derivatives`; `tau`, its applied torque. Returns the windows
+/// and how many scales they span.
+fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], stribeck_grid: &[f64]) -> (Vec<Window>, usize) {
     let (t, q) = (&inp.time, &inp.motor);
     let n = t.len();
     if n < 32 {
-        return Vec::new();
+        return (Vec::new(), 0);
     }
-    let tau = inp.applied_torque();
     let load: Vec<f64> = (0..n).map(|k| tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain)).collect();
     let period = super::quality::median_period(t);
     let span = t[n - 1] - t[0];
-    let (v, _) = derivatives(t, q);
     // a speed the position noise cannot fake over the smoothing (±10 samples): below it, the
     // sign is unknown
     let v_floor = 3.0 * super::signal::second_difference_noise(q) / (8.0 * period);
-    let mut out = Vec::new();
+    let (mut out, mut scales) = (Vec::new(), 0);
     let mut h = 8.0 * period;
     while h <= 0.25 * span {
+        scales += 1;
         let mut centre = t[0] + h;
         let mut lo = 0;
         while centre + h <= t[n - 1] {
@@ -880,7 +881,7 @@ fn windows(inp: &DriveInput, stribeck_grid: &[f64]) -> Vec<Window> {
         }
         h *= 2.0;
     }
-    out
+    (out, scales)
 }
 
 /// Stribeck speeds the equation error tries (the level is linear; the speed is the grid's best, to
@@ -889,10 +890,8 @@ const STRIBECK_GRID: usize = 48;
 
 pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     // Stribeck speeds from a fiftieth of the data's largest speed up to half of it, 8 % apart
-    let top = inputs
-        .iter()
-        .map(|inp| derivatives(&inp.time, &inp.motor).0.iter().fold(0.0f64, |m, v| m.max(v.abs())))
-        .fold(0.0f64, f64::max);
+    let speeds: Vec<Vec<f64>> = inputs.iter().map(|inp| derivatives(&inp.time, &inp.motor).0).collect();
+    let top = speeds.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     let stribeck_grid: Vec<f64> = (0..STRIBECK_GRID)
         .map(|i| 0.5 * top * 0.02f64.powf(i as f64 / (STRIBECK_GRID - 1) as f64))
         .filter(|v| *v > 0.0)
@@ -900,16 +899,12 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     let mut ws = Vec::new();
     let (mut q_var, mut tau_var, mut count) = (0.0, 0.0, 0.0);
     let mut scales = 1usize;
-    for inp in inputs {
-        let w = windows(inp, &stribeck_grid);
-        let span = inp.time.last().copied().unwrap_or(0.0) - inp.time.first().copied().unwrap_or(0.0);
-        let h_min = 8.0 * super::quality::median_period(&inp.time);
-        if h_min > 0.0 && span > 0.0 {
-            scales = scales.max((0.25 * span / h_min).log2().floor().max(0.0) as usize + 1);
-        }
+    for (inp, v) in inputs.iter().zip(&speeds) {
+        let tau = inp.applied_torque();
+        let (w, run_scales) = windows(inp, &tau, v, &stribeck_grid);
+        scales = scales.max(run_scales);
         let sigma_q = super::signal::second_difference_noise(&inp.motor);
         // the torque's own noise: the median second difference (robust to the steps of a drive)
-        let tau = inp.applied_torque();
         let mut d2: Vec<f64> = tau.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
         d2.sort_by(f64::total_cmp);
         let sigma_tau = d2.get(d2.len() / 2).copied().unwrap_or(0.0) * 1.4826 / 6f64.sqrt();
@@ -1496,14 +1491,11 @@ impl Rig for DriveRig<'_, '_> {
         let added: Vec<DriveEffect> = refit.effects.iter().copied().filter(|e| !m.effects.contains(e)).collect();
         // the equation error's own covariance where its estimates are the model's (the output
         // error's sandwich at a point it did not fit measures the drift, not the estimate)
-        let equation_error = match (self.equation_error, self.inverse) {
-            (true, Some(iv)) => iv.parameters(&refit.spec, self.prob.declared_inertia()),
-            _ => None,
-        };
+        let equation_error = refit.equation_error.as_ref();
         let walds: Vec<(f64, usize)> = added
             .iter()
             .map(|&e| {
-                let w = equation_error.as_ref().map_or_else(|| wald(refit, e), |ee| ee.wald(e));
+                let w = equation_error.map_or_else(|| wald(refit, e), |ee| ee.wald(e));
                 (
                     w,
                     drive_params(e)
@@ -1532,9 +1524,11 @@ impl Rig for DriveRig<'_, '_> {
         m
     }
     fn removal_delta_bic(&self, m: &DriveFit, e: DriveEffect) -> f64 {
-        if let (Some(c), Some(iv)) = (m.criterion, self.inverse) {
+        if let (Some(ee), Some(iv)) = (&m.equation_error, self.inverse) {
             let spec: Vec<Param> = m.spec.iter().copied().filter(|q| !drive_params(e).contains(q)).collect();
-            return iv.parameters(&spec, self.prob.declared_inertia()).map_or(f64::INFINITY, |ee| ee.bic - c);
+            return iv
+                .parameters(&spec, self.prob.declared_inertia())
+                .map_or(f64::INFINITY, |without| without.bic - ee.bic);
         }
         let idx: Vec<usize> = drive_params(e).iter().filter_map(|q| m.spec.iter().position(|x| x == q)).collect();
         super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx)

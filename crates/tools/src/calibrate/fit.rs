@@ -809,8 +809,9 @@ impl<'a> Problem<'a> {
             .collect()
     }
 
-    /// The equation error's smoothed (link, motor) angles of every run: a window of 2 % of the run,
-    /// at least 5 samples each side (against encoder steps).
+    /// The equation error's smoothed (link, motor) angles of every run and their half window: the
+    /// widest that takes out no more than the link angle's noise (`signal::smooth_to_noise`), at
+    /// most 1 % of the run each side, at least 5 samples (against encoder steps).
     fn smoothed(&self) -> &[Smoothed] {
         self.smoothed.get_or_init(|| {
             self.inputs

@@ -445,7 +445,7 @@ const REFERENCE_MARGIN: f64 = 1.1;
 /// A final rms error this many times the data's noise floor, with a residual that is not white, is
 /// unexplained whatever the references say (the campaign's pass line is 1.2×; between the two the
 /// references decide).
-pub const FAR_ABOVE_NOISE: f64 = 2.0;
+const FAR_ABOVE_NOISE: f64 = 2.0;
 
 /// The drive loop (drive.rs) on runs driven by torque or by a reference, rigid or linear.
 fn calibrate_drive(
