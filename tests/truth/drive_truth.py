@@ -17,6 +17,10 @@ Drives (`--drive`):
 - `reference`: u = sat(kp (r − q̂) − kd q̂'), computed every controller period from the *measured*
   position q̂ (noise and encoder included, as a real controller sees it), q̂' from the two-sample mean
   difference the interface documents; r is smoothed steps or a multisine. u is logged too.
+  Beside it runs the truth's own replay: the same rig and reference with the controller reading the
+  simulated position instead (what a calibration that replays the controller can simulate). The
+  measurement's rms against it, `replay_rms` in truth.json, is the floor a replay can reach: the
+  dither the measured noise drives through the controller is the noise's, no model's.
 
 Integration: RK4 with a fine step (at most 1/4 of the sample period and half the friction's
 smoothing time constant), the drive held over
@@ -189,6 +193,8 @@ def main(argv=None):
         meas = np.empty(n + 1)
         us = np.empty(n + 1)
         prev_qf, prev_q = None, None
+        q2, v2, prev2 = 0.0, 0.0, (None, None)  # the replay (controller on the simulated position)
+        replay = np.empty(n + 1)
         for k, t in enumerate(ts):
             qm = q + rng.normal(0.0, a.noise)
             qm = a.quantum * round(qm / a.quantum) if a.quantum > 0 else qm
@@ -200,6 +206,12 @@ def main(argv=None):
                 dq = 0.0 if prev_qf is None else (qf - prev_qf) / period
                 prev_q, prev_qf = qm, qf
                 u = max(-sat, min(sat, kp * (ref(t) - qm) - kd * dq))
+                replay[k] = q2
+                qf2 = q2 if prev2[0] is None else 0.5 * (q2 + prev2[0])
+                dq2 = 0.0 if prev2[1] is None else (qf2 - prev2[1]) / period
+                prev2 = (q2, qf2)
+                u2 = max(-sat, min(sat, kp * (ref(t) - q2) - kd * dq2))
+                q2, v2 = rk4_hold(q2, v2, u2, p, h, sub)
             us[k] = u
             q, v = rk4_hold(q, v, u, p, h, sub)
         logged_u = us * (1.0 + a.torque_noise * rng.normal(size=us.size))
@@ -219,9 +231,15 @@ def main(argv=None):
             columns = {"time_s": tm[keep], pos: meas[keep],
                        ("reference_position_m" if lin else "reference_angle_rad"): [ref(t) for t in ts[keep]],
                        force: logged_u[keep]}
+        if ref is not None:
+            run["replay_sse"] = float(np.sum((meas[keep] - replay[keep]) ** 2))
+            run["samples"] = int(keep.sum())
         write_run(a.out / run["file"], meta, columns)
         truth["runs"].append(run)
     truth["controller"] = {"kp": kp, "kd": kd, "saturation": sat} if a.drive == "reference" else None
+    if a.drive == "reference":
+        truth["replay_rms"] = math.sqrt(sum(r["replay_sse"] for r in truth["runs"]) /
+                                        sum(r["samples"] for r in truth["runs"]))
     (a.out / "truth.json").write_text(json.dumps(truth, indent=1) + "\n")
 
 

@@ -44,6 +44,15 @@ pub enum Param {
     /// Static friction above Coulomb, fading with speed (`stribeck_friction`), and ln of its speed scale.
     Stribeck,
     LnStribeckVelocity,
+    /// ln of the speed over which the friction's sign turns (tanh(v/v_s)), fitted with the first
+    /// friction level of an output-error fit: a contact's friction near rest, and what a controller's
+    /// noise-driven dither leaves of it on average, is not a hard sign (see `smoothing_start`).
+    LnFrictionSmoothing,
+}
+
+/// The parameters that carry the friction's sign (and so its smoothing speed).
+fn signs_friction(q: Param) -> bool {
+    matches!(q, Param::Coulomb | Param::AsymCoulomb | Param::Stribeck)
 }
 
 /// The effects the drive loop can add are the library's friction effects: one table of names and
@@ -95,13 +104,14 @@ pub struct DriveInput {
     pub link: Option<Vec<f64>>,
     pub reference: Option<Vec<f64>>,
     pub controller: Option<super::data::Controller>,
+
     /// Measured motor torque (force).
     pub torque: Option<Vec<f64>>,
     pub load: Option<Vec<f64>>,
     pub housing_k: Vec<f64>,
     pub frequency_hz: f64,
     pub inertia_declared: Option<f64>,
-    /// Initial speed estimated from the first samples (quadratic fit over 10 ms).
+    /// Initial speed estimated from the first samples (`initial_speed`).
     pub speed0: f64,
     pub link_speed0: f64,
     /// Multiplies the load column (1: as recorded), and where that number comes from (`load_gain`).
@@ -164,9 +174,9 @@ pub fn load_gain(declared: Option<f64>, force_log: Option<f64>) -> (f64, LoadGai
     }
 }
 
-/// Speed at the first sample: slope at t0 of a least-squares quadratic over the first 11 samples.
+/// Speed at the first sample: the start's quadratic over up to 11 samples (`signal::start_speed`).
 fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
-    super::signal::start_slope(t, x, t.len().min(11)).map_or(0.0, |(v, _)| v)
+    super::signal::start_speed(t, x, 11).map_or(0.0, |(v, _)| v)
 }
 
 impl DriveInput {
@@ -441,7 +451,11 @@ impl<'a> DriveProblem<'a> {
 
     pub fn typical(&self, p: Param) -> f64 {
         match p {
-            Param::LnInertia | Param::LnStorage(_) | Param::LnLoss(_) | Param::LnStribeckVelocity => 1.0,
+            Param::LnInertia
+            | Param::LnStorage(_)
+            | Param::LnLoss(_)
+            | Param::LnStribeckVelocity
+            | Param::LnFrictionSmoothing => 1.0,
             Param::Stribeck => self.force_scale,
             Param::Viscous | Param::AsymViscous => self.force_scale / self.speed_scale,
             Param::ConstantLoad | Param::Coulomb | Param::AsymCoulomb => self.force_scale,
@@ -480,6 +494,7 @@ impl<'a> DriveProblem<'a> {
                 Param::AsymViscous => m.asym_viscous = v,
                 Param::Stribeck => m.stribeck = v,
                 Param::LnStribeckVelocity => m.stribeck_velocity = v.exp(),
+                Param::LnFrictionSmoothing => m.friction_smoothing_velocity = Some(v.exp()),
             }
         }
         m
@@ -575,10 +590,14 @@ impl<'a> DriveProblem<'a> {
         max_iter: usize,
     ) -> Result<DriveFit, String> {
         let lower = |q: Param| matches!(q, Param::Viscous | Param::Coulomb | Param::Stribeck);
+        let smoothing = self.smoothing_range();
         let clamp = |p: &mut [f64]| {
             for (x, &q) in p.iter_mut().zip(&spec) {
                 if lower(q) {
                     *x = x.max(0.0);
+                }
+                if q == Param::LnFrictionSmoothing {
+                    *x = x.clamp(smoothing.0.ln(), smoothing.1.ln());
                 }
             }
         };
@@ -637,6 +656,67 @@ impl<'a> DriveProblem<'a> {
             iterations: 0,
             equation_error: Some(ee),
         })
+    }
+
+    /// The friction sign's smoothing speeds a fit may take: from a hard sign (a millionth of the
+    /// data's speed) to a third of the data's speed (past it, the law is viscous friction).
+    fn smoothing_range(&self) -> (f64, f64) {
+        (1e-6 * self.speed_scale, 0.3 * self.speed_scale)
+    }
+
+    /// The smoothing speed a friction law starts from: the best of a decade grid over
+    /// `smoothing_range` at `p` (the output error is not convex in it: a sign that is too hard
+    /// makes the closed loop stick where the data slide).
+    pub fn smoothing_start(&self, spec: &[Param], p: &[f64]) -> f64 {
+        let (lo, hi) = self.smoothing_range();
+        let mut spec = spec.to_vec();
+        spec.push(Param::LnFrictionSmoothing);
+        let decades = (hi / lo).log10().floor() as i32;
+        let grid: Vec<f64> = (0..=decades).map(|k| (hi * 10f64.powi(-k)).ln()).collect();
+        let costs: Vec<(f64, f64)> = grid
+            .iter()
+            .map(|&ln_vs| {
+                let mut x = p.to_vec();
+                x.push(ln_vs);
+                let cost = self
+                    .simulate_all(&spec, &x)
+                    .map_or(f64::INFINITY, |sims| self.residual(&sims).iter().map(|e| e * e).sum::<f64>());
+                (ln_vs, cost)
+            })
+            .collect();
+        costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map_or(grid[grid.len() / 2], |c| c.0)
+    }
+
+    /// The position noise of the measurements: the rms over runs of each run's robust noise
+    /// (`signal::robust_noise`, its resolution included).
+    pub fn position_noise(&self) -> f64 {
+        let (mut s, mut n) = (0.0, 0usize);
+        for inp in &self.inputs {
+            let y = inp.measured();
+            s += super::signal::robust_noise(&y).powi(2) * y.len() as f64;
+            n += y.len();
+        }
+        (s / n.max(1) as f64).sqrt()
+    }
+
+    /// Whether an effect of `fit` moves the simulated positions by more than the noise can hide:
+    /// the rms of its linearised share J_e·p_e (its levels; a Stribeck speed only shapes one) above
+    /// the position noise. An effect below it can still lower the BIC over many samples (a tenth of
+    /// the noise, correlated with a controller's dither), but no sample shows it.
+    pub fn visible(&self, fit: &DriveFit, effect: DriveEffect) -> bool {
+        let cols: Vec<usize> = drive_params(effect)
+            .iter()
+            .filter(|q| **q != Param::LnStribeckVelocity)
+            .filter_map(|q| fit.spec.iter().position(|x| x == q))
+            .collect();
+        let rows = fit.jacobian.nrows();
+        if cols.is_empty() || rows == 0 {
+            return true;
+        }
+        let share: f64 =
+            (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum::<f64>().powi(2)).sum::<f64>()
+                / rows as f64;
+        share.sqrt() > self.position_noise()
     }
 
     /// The declared inertia every run shares (None when any run leaves it to the fit).
@@ -987,7 +1067,7 @@ impl InverseModel {
             Param::AsymCoulomb => w.row[6] - w.row[7],
             Param::AsymViscous => w.row[4] - w.row[5],
             Param::Stribeck => w.stribeck.get(g).copied().unwrap_or(0.0),
-            Param::LnStribeckVelocity | Param::LnStorage(_) | Param::LnLoss(_) => 0.0,
+            Param::LnStribeckVelocity | Param::LnFrictionSmoothing | Param::LnStorage(_) | Param::LnLoss(_) => 0.0,
         }
     }
 
@@ -1052,7 +1132,10 @@ impl InverseModel {
             let cols: Vec<Param> = spec
                 .iter()
                 .copied()
-                .filter(|q| !matches!(q, Param::LnStribeckVelocity) && !fixed.iter().any(|f| f.0 == *q))
+                .filter(|q| {
+                    !matches!(q, Param::LnStribeckVelocity | Param::LnFrictionSmoothing)
+                        && !fixed.iter().any(|f| f.0 == *q)
+                })
                 .collect();
             let grid: Vec<usize> = if has(Param::Stribeck) { (0..self.stribeck_grid.len()).collect() } else { vec![0] };
             // the Stribeck speed: the grid's best among the speeds whose excess comes out ≥ 0
@@ -1086,6 +1169,8 @@ impl InverseModel {
                     Param::LnInertia if value(q) > 0.0 => value(q).ln(),
                     Param::LnInertia => return None,
                     Param::LnStribeckVelocity => self.stribeck_grid.get(g)?.ln(),
+                    // the equation error's sign is hard: it has no smoothing to estimate
+                    Param::LnFrictionSmoothing => return None,
                     _ => value(q),
                 };
                 p.push(x);
@@ -1485,6 +1570,11 @@ impl Rig for DriveRig<'_, '_> {
                 }
             }
         }
+        if spec.iter().any(|&q| signs_friction(q)) && !spec.contains(&Param::LnFrictionSmoothing) {
+            let start = prob.smoothing_start(&spec, &p);
+            spec.push(Param::LnFrictionSmoothing);
+            p.push(start);
+        }
         prob.fit(spec, effects, p, MAX_ITERATIONS).ok()
     }
     fn judge(&self, m: &DriveFit, refit: &DriveFit) -> Verdict<DriveDetail> {
@@ -1505,7 +1595,8 @@ impl Rig for DriveRig<'_, '_> {
                 )
             })
             .collect();
-        let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof));
+        let visible = added.iter().all(|&e| self.prob.visible(refit, e));
+        let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof)) && visible;
         Verdict {
             keep,
             bic_before: m.bic(),
@@ -1538,7 +1629,11 @@ impl Rig for DriveRig<'_, '_> {
         if e == DriveEffect::CoulombFriction && m.effects.len() > 1 {
             return None;
         }
-        let keep: Vec<usize> = (0..m.spec.len()).filter(|&i| !drive_params(e).contains(&m.spec[i])).collect();
+        let gone = |q: Param| drive_params(e).contains(&q);
+        let signs_left = m.spec.iter().any(|&q| signs_friction(q) && !gone(q));
+        let keep: Vec<usize> = (0..m.spec.len())
+            .filter(|&i| !gone(m.spec[i]) && (signs_left || m.spec[i] != Param::LnFrictionSmoothing))
+            .collect();
         let spec: Vec<Param> = keep.iter().map(|&i| m.spec[i]).collect();
         let p = keep.iter().map(|&i| m.p[i]).collect();
         let effects = m.effects.iter().copied().filter(|&x| x != e).collect();
@@ -1698,6 +1793,9 @@ pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(
             Param::AsymViscous => ("viscous_asymmetry".into(), x, s, vu.into()),
             Param::Stribeck => ("stribeck_friction".into(), x, s, tu.into()),
             Param::LnStribeckVelocity => ("stribeck_velocity".into(), x.exp(), x.exp() * s, axis.units().1.into()),
+            Param::LnFrictionSmoothing => {
+                ("friction_smoothing_velocity".into(), x.exp(), x.exp() * s, axis.units().1.into())
+            }
         };
         out.push(row);
     }

@@ -196,8 +196,8 @@ pub fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
 }
 
 /// Slope at t[0] of a least-squares quadratic over the first `n` samples, with its standard error
-/// from the fit's residual; None with fewer than 4 samples.
-pub fn start_slope(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64)> {
+/// and the fit's residual rms; None with fewer than 4 samples.
+fn start_quadratic(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64, f64)> {
     if n < 4 || n > t.len() {
         return None;
     }
@@ -206,5 +206,34 @@ pub fn start_slope(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64)> {
     let ainv = spd_inverse(&(a.transpose() * &a));
     let beta = &ainv * (a.transpose() * &y);
     let sigma2 = (&y - &a * &beta).norm_squared() / (n - 3).max(1) as f64;
-    Some((beta[1], (sigma2 * ainv[(1, 1)]).max(0.0).sqrt()))
+    Some((beta[1], (sigma2 * ainv[(1, 1)]).max(0.0).sqrt(), sigma2.sqrt()))
+}
+
+/// Speed at t[0], with its standard error: the slope of a least-squares quadratic over the longest
+/// start, from `most` samples down to 4, that the quadratic follows to within twice the signal's
+/// noise. A fixed window fails where the motion is not quadratic over it: a servo that starts
+/// saturated reverses its acceleration within a few samples, and 11 samples read that as speed
+/// (3.5 rad/s on a drive starting at rest, measured). None with fewer than 4 samples.
+pub fn start_speed(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64)> {
+    let noise = robust_noise(x);
+    let mut n = x.len().min(most);
+    while n > 4 {
+        match start_quadratic(t, x, n) {
+            Some((v, se, rms)) if rms <= 2.0 * noise => return Some((v, se)),
+            _ => n -= 1,
+        }
+    }
+    start_quadratic(t, x, 4).map(|(v, se, _)| (v, se))
+}
+
+/// Noise of a sampled signal robust to its fast moves: 1.4826 × median|Δ²x| / √6 (white noise of σ
+/// gives var(Δ²x) = 6σ²), and at least what its resolution (the smallest step it takes) leaves, q/√12.
+pub fn robust_noise(x: &[f64]) -> f64 {
+    if x.len() < 3 {
+        return 0.0;
+    }
+    let d2: Vec<f64> = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
+    let resolution = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
+    let quantum = if resolution.is_finite() { resolution / 12f64.sqrt() } else { 0.0 };
+    (1.4826 * super::quality::median(d2) / 6f64.sqrt()).max(quantum)
 }
