@@ -889,12 +889,14 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     // missing an effect (gravity, say), may have preferred a resting start for a run that does
     // start moving (a segment after a gap always does).
     // (Without effects the final model is the baseline's, whose choice stands.)
-    let zeroed = !current.spec.effects.is_empty()
+    // (Each step below is a refit or two: past the budget they are left out, the search's model stands.)
+    let zeroed = !budget.spent()
+        && !current.spec.effects.is_empty()
         && prob.inputs.iter().zip(&estimated_speeds).any(|(i, &v)| v != 0.0 && i.initial_link_speed == 0.0);
     if zeroed {
         current = restart_moving_runs(prob, current, &estimated_speeds);
     }
-    if prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
+    if !budget.spent() && prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
         current = resolve_initial_speeds(prob, current);
         if current.sse != before || zeroed {
@@ -905,14 +907,15 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     // Then the structure is re-chosen with the final effects and starts: an effect found by a combination pass
     // (gravity at the baseline, say) never passed through a round's re-choice, and a law chosen
     // while an effect was missing may only have been standing in for it.
-    if laws.allowed.len() > 1 && !current.spec.effects.is_empty() {
+    if !budget.spent() && laws.allowed.len() > 1 && !current.spec.effects.is_empty() {
         let before = (current.spec.law, current.spec.springs);
         current = best_law(prob, None, current, &laws.allowed, "final effects", &mut rows);
         if (current.spec.law, current.spec.springs) != before {
             sig = signatures(prob, &current);
         }
     }
-    let (current, sig, backlash_laws) = choose_backlash_law(prob, current, sig);
+    let (current, sig, backlash_laws) =
+        if budget.spent() { (current, sig, None) } else { choose_backlash_law(prob, current, sig) };
     let unexplained = !sig.white();
     Ok(Outcome {
         record,

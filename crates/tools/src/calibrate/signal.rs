@@ -237,3 +237,83 @@ pub fn robust_noise(x: &[f64]) -> f64 {
     let quantum = if resolution.is_finite() { resolution / 12f64.sqrt() } else { 0.0 };
     (1.4826 * super::quality::median(d2) / 6f64.sqrt()).max(quantum)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A servo's move: from rest, accelerates at `a` for `k_turn` samples, brakes at −a as long,
+    /// then holds (most of the record, as a positioning servo's is).
+    fn bang_bang(a: f64, dt: f64, k_turn: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let t1 = k_turn as f64 * dt;
+        let x = t
+            .iter()
+            .map(|&t| {
+                let s = t.min(2.0 * t1);
+                if s <= t1 {
+                    0.5 * a * s * s
+                } else {
+                    0.5 * a * t1 * t1 + a * t1 * (s - t1) - 0.5 * a * (s - t1).powi(2)
+                }
+            })
+            .collect();
+        (t, x)
+    }
+
+    /// Deterministic standard normals (Box–Muller on a 64-bit LCG).
+    fn normals(seed: u64, n: usize) -> Vec<f64> {
+        let mut state = seed;
+        let mut u = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        };
+        (0..n).map(|_| (-2.0 * u().ln()).sqrt() * (2.0 * std::f64::consts::PI * u()).cos()).collect()
+    }
+
+    #[test]
+    fn a_start_that_reverses_its_acceleration_reads_as_rest_not_as_speed() {
+        // (acceleration, sample period, samples to the turn, noise, encoder step)
+        for (i, &(a, dt, k_turn, sigma, q)) in
+            [(2500.0, 2.5e-3, 6, 2.4e-4, 9.3e-5), (40.0, 1e-3, 5, 1e-6, 1e-6), (1e4, 2e-4, 8, 1e-5, 6e-5)]
+                .iter()
+                .enumerate()
+        {
+            let (t, x) = bang_bang(a, dt, k_turn, 60);
+            let x: Vec<f64> =
+                x.iter().zip(normals(i as u64 + 1, 60)).map(|(x, e)| (q * ((x + sigma * e) / q).round())).collect();
+            let (v, se) = start_speed(&t, &x, 11).unwrap();
+            // a fixed 11-sample quadratic reads the reversal as speed at t0
+            let fixed = start_quadratic(&t, &x, 11).unwrap().0;
+            let scale = a * k_turn as f64 * dt; // the speed at the turn
+            assert!(v.abs() < 4.0 * se && v.abs() < 0.02 * scale, "start speed {v} ± {se} (fixed window {fixed})");
+            assert!(fixed.abs() > 0.05 * scale, "the case must defeat a fixed window: {fixed}");
+        }
+    }
+
+    #[test]
+    fn a_start_that_moves_is_read_through_its_noise() {
+        let n = 30;
+        let (dt, v0, sigma) = (1e-3, 3.0, 1e-4);
+        let noise = normals(7, n);
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let x: Vec<f64> = t.iter().zip(&noise).map(|(&t, e)| v0 * t + 20.0 * t * t + sigma * e).collect();
+        let (v, se) = start_speed(&t, &x, 11).unwrap();
+        assert!((v - v0).abs() < 4.0 * se && se < 0.1 * v0, "speed {v} ± {se}, truth {v0}");
+    }
+
+    #[test]
+    fn robust_noise_ignores_fast_moves_and_keeps_the_resolution() {
+        // a servo's moves with white noise: the moves' curvature is not noise
+        let sigma = 1e-5;
+        let (_, x) = bang_bang(2500.0, 2.5e-3, 6, 400);
+        let x: Vec<f64> = x.iter().zip(normals(3, 400)).map(|(x, e)| x + sigma * e).collect();
+        let robust = robust_noise(&x);
+        assert!((robust / sigma - 1.0).abs() < 0.2, "robust {robust}, truth {sigma}");
+        assert!(second_difference_noise(&x) > 10.0 * sigma, "the plain estimate takes the moves for noise");
+        // a held encoder with a few steps and no noise: only the resolution remains
+        let q = 1e-3;
+        let x: Vec<f64> = (0..1000).map(|k| (k / 100) as f64 * q).collect();
+        assert!((robust_noise(&x) - q / 12f64.sqrt()).abs() < 1e-12, "{}", robust_noise(&x));
+    }
+}

@@ -48,28 +48,53 @@ pub fn debug(what: std::fmt::Arguments) {
     }
 }
 
-/// The time the effect search may take. Checked between refits: a refit under way finishes.
+/// The time the effect search may take. Checked before every refit: a refit under way finishes,
+/// so a refit is not started when the longest one so far would end past the search's share.
 pub struct Budget {
     pub start: std::time::Instant,
     pub seconds: f64,
     /// Set when the search stopped because the budget ran out: what it was about to do.
     pub exhausted: std::cell::Cell<Option<&'static str>>,
+    /// The longest refit so far, s (the next one's likely length).
+    longest: std::cell::Cell<f64>,
 }
+
+/// The share of the budget the search leaves to what follows it (the final model's starts and law,
+/// the held-out fold: each a refit or two).
+pub const FINISH_SHARE: f64 = 0.2;
 
 impl Budget {
     pub fn seconds(seconds: f64) -> Budget {
-        Budget { start: std::time::Instant::now(), seconds, exhausted: std::cell::Cell::new(None) }
+        Budget {
+            start: std::time::Instant::now(),
+            seconds,
+            exhausted: std::cell::Cell::new(None),
+            longest: std::cell::Cell::new(0.0),
+        }
     }
-    /// Whether the search may go on to `next`; records the first refusal.
+    /// Whether the search may go on to `next`: the longest refit so far must still end within the
+    /// search's share of the budget. Records the first refusal.
     pub fn allows(&self, next: &'static str) -> bool {
         if self.exhausted.get().is_some() {
             return false;
         }
-        if self.start.elapsed().as_secs_f64() > self.seconds {
+        if self.start.elapsed().as_secs_f64() + self.longest.get() > (1.0 - FINISH_SHARE) * self.seconds {
             self.exhausted.set(Some(next));
             return false;
         }
         true
+    }
+    /// Runs one refit, timing it.
+    pub fn timed<T>(&self, refit: impl FnOnce() -> T) -> T {
+        let t = std::time::Instant::now();
+        let out = refit();
+        self.longest.set(self.longest.get().max(t.elapsed().as_secs_f64()));
+        out
+    }
+    /// Whether a step as long as the longest refit so far would end past the whole budget (what
+    /// follows the search checks this before each of its steps).
+    pub fn spent(&self) -> bool {
+        self.start.elapsed().as_secs_f64() + self.longest.get() > self.seconds
     }
 }
 
@@ -255,7 +280,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
     // absorbed the others (and a greedy first step can take a wrong effect that mimics two, such as
     // gravity at an offset for asymmetric friction, and never leave it).
     if rig.structure_left(&current) && budget.allows("the combination at the baseline") {
-        if let Some((attempt, accepted)) = rig.combination(&current, "baseline") {
+        if let Some((attempt, accepted)) = budget.timed(|| rig.combination(&current, "baseline")) {
             combinations.push(attempt);
             if let Some(m) = accepted {
                 current = m;
@@ -284,7 +309,10 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 .filter(|c| c.predicted_delta_bic < -BIC_MARGIN && c.score >= SHORTLIST_SHARE * best_score)
                 .take(shortlist)
             {
-                let Some(refit) = rig.refit_with(&current, &[c]) else { continue };
+                if !budget.allows("the rest of a round's refits") {
+                    break;
+                }
+                let Some(refit) = budget.timed(|| rig.refit_with(&current, &[c])) else { continue };
                 let verdict = rig.judge(&current, &refit);
                 let keep = verdict.keep;
                 round.attempts.push(Attempt { stage: "round", effects: vec![c.effect], verdict });
@@ -305,7 +333,10 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 let first_pair = combinations.len();
                 for (i, a) in pool.iter().enumerate() {
                     for b in &pool[i + 1..] {
-                        let Some(refit) = rig.refit_with(&current, &[a, b]) else { continue };
+                        if !budget.allows("the rest of the pairs") {
+                            break;
+                        }
+                        let Some(refit) = budget.timed(|| rig.refit_with(&current, &[a, b])) else { continue };
                         let verdict = rig.judge(&current, &refit);
                         let keep = verdict.keep;
                         debug(format_args!("pair {:?} + {:?}: kept {keep}", a.effect, b.effect));
@@ -329,7 +360,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             }
             let round_number = rounds.len() + 1;
             if let Some(f) = accepted.take() {
-                accepted = rig.converge(&current, f, round_number);
+                accepted = budget.timed(|| rig.converge(&current, f, round_number));
                 if accepted.is_none() {
                     if let Some(a) = round.attempts.iter_mut().find(|a| a.verdict.keep) {
                         a.verdict.keep = false;
@@ -355,7 +386,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         {
             break;
         }
-        match rig.combination(&current, "after the rounds") {
+        match budget.timed(|| rig.combination(&current, "after the rounds")) {
             Some((attempt, Some(m))) => {
                 combinations.push(attempt);
                 current = m;
@@ -381,11 +412,14 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             if rig.removal_delta_bic(&current, e) > PRUNE_SKIP * BIC_MARGIN {
                 continue;
             }
-            let Some(screen) = rig.without(&current, e) else { continue };
+            if !budget.allows("the rest of the backward check") {
+                break;
+            }
+            let Some(screen) = budget.timed(|| rig.without(&current, e)) else { continue };
             if rig.bic(&screen) >= rig.bic(&current) + BIC_MARGIN {
                 continue;
             }
-            let Some(refit) = rig.polish(screen) else { continue };
+            let Some(refit) = budget.timed(|| rig.polish(screen)) else { continue };
             if rig.bic(&refit) < rig.bic(&current) + BIC_MARGIN {
                 pruned.push((e, rig.bic(&current), rig.bic(&refit)));
                 current = refit;
@@ -709,5 +743,18 @@ mod tests {
         assert_eq!(s.record.budget_exhausted, Some((0.0, "the combination at the baseline")));
         let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
         assert_eq!(j["search_budget"]["skipped"], "the combination at the baseline");
+    }
+
+    #[test]
+    fn a_refit_is_not_started_when_the_longest_so_far_would_end_past_the_search_share() {
+        let budget = Budget::seconds(100.0);
+        assert!(budget.allows("a first refit"));
+        // a refit as long as the search's whole share: the next would end in the finishing share
+        budget.longest.set((1.0 - FINISH_SHARE) * 100.0 + 1.0);
+        assert!(!budget.allows("a second refit"));
+        assert_eq!(budget.exhausted.get(), Some("a second refit"));
+        assert!(!budget.spent(), "what follows the search still has its share");
+        budget.longest.set(100.0 + 1.0);
+        assert!(budget.spent(), "a step as long as the whole budget would overrun it");
     }
 }
