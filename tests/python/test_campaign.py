@@ -82,8 +82,9 @@ def test_the_drive_draws_cover_servos_to_linear_axes():
 
 
 # Drive rigs that pass with today's loop (measured 2026-11-26): a rotary servo and a linear axis on their
-# logged torque, and a servo with Stribeck friction.
-PASSING_DRIVES = [8, 14, 20]
+# logged torque, a servo with Stribeck friction, and two position servos replayed through their controller
+# (one with a constant load).
+PASSING_DRIVES = [8, 14, 20, 2, 19]
 
 
 @pytest.mark.parametrize("seed", PASSING_DRIVES)
