@@ -281,7 +281,7 @@ mod tests {
         {
             let (t, x) = bang_bang(a, dt, k_turn, 60);
             let x: Vec<f64> =
-                x.iter().zip(normals(i as u64 + 1, 60)).map(|(x, e)| (q * ((x + sigma * e) / q).round())).collect();
+                x.iter().zip(normals(i as u64 + 1, 60)).map(|(x, e)| q * ((x + sigma * e) / q).round()).collect();
             let (v, se) = start_speed(&t, &x, 11).unwrap();
             // a fixed 11-sample quadratic reads the reversal as speed at t0
             let fixed = start_quadratic(&t, &x, 11).unwrap().0;
