@@ -104,7 +104,6 @@ pub struct DriveInput {
     pub link: Option<Vec<f64>>,
     pub reference: Option<Vec<f64>>,
     pub controller: Option<super::data::Controller>,
-
     /// Measured motor torque (force).
     pub torque: Option<Vec<f64>>,
     pub load: Option<Vec<f64>>,

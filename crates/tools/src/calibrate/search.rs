@@ -894,11 +894,11 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         && !current.spec.effects.is_empty()
         && prob.inputs.iter().zip(&estimated_speeds).any(|(i, &v)| v != 0.0 && i.initial_link_speed == 0.0);
     if zeroed {
-        current = restart_moving_runs(prob, current, &estimated_speeds);
+        current = budget.timed(|| restart_moving_runs(prob, current, &estimated_speeds));
     }
     if !budget.spent() && prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
         let before = current.sse;
-        current = resolve_initial_speeds(prob, current);
+        current = budget.timed(|| resolve_initial_speeds(prob, current));
         if current.sse != before || zeroed {
             sig = signatures(prob, &current);
         }
@@ -907,15 +907,17 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     // Then the structure is re-chosen with the final effects and starts: an effect found by a combination pass
     // (gravity at the baseline, say) never passed through a round's re-choice, and a law chosen
     // while an effect was missing may only have been standing in for it.
-    if !budget.spent() && laws.allowed.len() > 1 && !current.spec.effects.is_empty() {
+    // (two starts for each other structure)
+    let law_fits = 2.0 * (laws.allowed.len() as f64 - 1.0);
+    if budget.affords(law_fits) && laws.allowed.len() > 1 && !current.spec.effects.is_empty() {
         let before = (current.spec.law, current.spec.springs);
-        current = best_law(prob, None, current, &laws.allowed, "final effects", &mut rows);
+        current = budget.timed(|| best_law(prob, None, current, &laws.allowed, "final effects", &mut rows));
         if (current.spec.law, current.spec.springs) != before {
             sig = signatures(prob, &current);
         }
     }
     let (current, sig, backlash_laws) =
-        if budget.spent() { (current, sig, None) } else { choose_backlash_law(prob, current, sig) };
+        if budget.spent() { (current, sig, None) } else { budget.timed(|| choose_backlash_law(prob, current, sig)) };
     let unexplained = !sig.white();
     Ok(Outcome {
         record,

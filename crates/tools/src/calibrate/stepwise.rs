@@ -91,10 +91,14 @@ impl Budget {
         self.longest.set(self.longest.get().max(t.elapsed().as_secs_f64()));
         out
     }
-    /// Whether a step as long as the longest refit so far would end past the whole budget (what
-    /// follows the search checks this before each of its steps).
+    /// Whether a step as long as the longest refit so far would end past the whole budget.
     pub fn spent(&self) -> bool {
-        self.start.elapsed().as_secs_f64() + self.longest.get() > self.seconds
+        !self.affords(1.0)
+    }
+    /// Whether `refits` steps as long as the longest refit so far still end within the whole budget
+    /// (what follows the search checks this before each of its steps, counting its fits).
+    pub fn affords(&self, refits: f64) -> bool {
+        self.start.elapsed().as_secs_f64() + refits * self.longest.get() <= self.seconds
     }
 }
 
