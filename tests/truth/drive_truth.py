@@ -86,6 +86,21 @@ def excitation(kind, level, duration, rng, floor=0.0):
     return lambda t: float(np.sum(amps * np.sin(2 * math.pi * freqs * t + phases)))
 
 
+def pd_controller(kp, kd, sat, period):
+    """The rig's controller as a function of (reference, position read) -> u, with its own state:
+    u = sat(kp (r − q) − kd q'), q' from qf(k) = (q(k) + q(k−1))/2, q'(k) = (qf(k) − qf(k−1))/T
+    (0 on the first call)."""
+    prev_q, prev_qf = None, None
+
+    def step(r, q):
+        nonlocal prev_q, prev_qf
+        qf = q if prev_q is None else 0.5 * (q + prev_q)
+        dq = 0.0 if prev_qf is None else (qf - prev_qf) / period
+        prev_q, prev_qf = q, qf
+        return max(-sat, min(sat, kp * (r - q) - kd * dq))
+    return step
+
+
 def smooth_reference(kind, amplitude, duration, rng, smoothing):
     """Reference of a position servo: steps smoothed by tanh over `smoothing` s, or a multisine."""
     if kind == "multisine":
@@ -192,8 +207,9 @@ def main(argv=None):
         ts = np.arange(n + 1) * period
         meas = np.empty(n + 1)
         us = np.empty(n + 1)
-        prev_qf, prev_q = None, None
-        q2, v2, prev2 = 0.0, 0.0, (None, None)  # the replay (controller on the simulated position)
+        control = pd_controller(kp, kd, sat, period)
+        replay_control = pd_controller(kp, kd, sat, period)  # the replay: on the simulated position
+        q2, v2 = 0.0, 0.0
         replay = np.empty(n + 1)
         for k, t in enumerate(ts):
             qm = q + rng.normal(0.0, a.noise)
@@ -202,16 +218,10 @@ def main(argv=None):
             if ref is None:
                 u = u_of_t(t)
             else:
-                qf = qm if prev_q is None else 0.5 * (qm + prev_q)
-                dq = 0.0 if prev_qf is None else (qf - prev_qf) / period
-                prev_q, prev_qf = qm, qf
-                u = max(-sat, min(sat, kp * (ref(t) - qm) - kd * dq))
+                r_t = ref(t)
+                u = control(r_t, qm)
                 replay[k] = q2
-                qf2 = q2 if prev2[0] is None else 0.5 * (q2 + prev2[0])
-                dq2 = 0.0 if prev2[1] is None else (qf2 - prev2[1]) / period
-                prev2 = (q2, qf2)
-                u2 = max(-sat, min(sat, kp * (ref(t) - q2) - kd * dq2))
-                q2, v2 = rk4_hold(q2, v2, u2, p, h, sub)
+                q2, v2 = rk4_hold(q2, v2, replay_control(r_t, q2), p, h, sub)
             us[k] = u
             q, v = rk4_hold(q, v, u, p, h, sub)
         logged_u = us * (1.0 + a.torque_noise * rng.normal(size=us.size))

@@ -378,6 +378,9 @@ pub struct DriveProblem<'a> {
     pub speed_scale: f64,
     /// Start of the inertia when undeclared.
     pub inertia_start: f64,
+    /// The measurements' position noise: the rms over runs of each run's robust noise
+    /// (`signal::robust_noise`, its resolution included).
+    pub position_noise: f64,
     /// The friction sign's smoothing velocity the runs are simulated with; None: the FMU's default.
     pub friction_smoothing_velocity: Option<f64>,
 }
@@ -436,6 +439,12 @@ impl<'a> DriveProblem<'a> {
         }
         let force_scale = (fs / nf.max(1) as f64).sqrt().max(1e-12);
         let speed_scale = (vs / nf.max(1) as f64).sqrt().max(1e-12);
+        let (mut noise_sq, mut ny) = (0.0, 0usize);
+        for inp in &inputs {
+            let y = inp.measured();
+            noise_sq += super::signal::robust_noise(&y).powi(2) * y.len() as f64;
+            ny += y.len();
+        }
         DriveProblem {
             sim,
             inputs,
@@ -444,6 +453,7 @@ impl<'a> DriveProblem<'a> {
             force_scale,
             speed_scale,
             inertia_start: 1.0,
+            position_noise: (noise_sq / ny.max(1) as f64).sqrt(),
             friction_smoothing_velocity: None,
         }
     }
@@ -686,18 +696,6 @@ impl<'a> DriveProblem<'a> {
         costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map_or(grid[grid.len() / 2], |c| c.0)
     }
 
-    /// The position noise of the measurements: the rms over runs of each run's robust noise
-    /// (`signal::robust_noise`, its resolution included).
-    pub fn position_noise(&self) -> f64 {
-        let (mut s, mut n) = (0.0, 0usize);
-        for inp in &self.inputs {
-            let y = inp.measured();
-            s += super::signal::robust_noise(&y).powi(2) * y.len() as f64;
-            n += y.len();
-        }
-        (s / n.max(1) as f64).sqrt()
-    }
-
     /// Whether an effect of `fit` moves the simulated positions by more than the noise can hide:
     /// the rms of its linearised share J_e·p_e (its levels; a Stribeck speed only shapes one) above
     /// the position noise. An effect below it can still lower the BIC over many samples (a tenth of
@@ -715,7 +713,7 @@ impl<'a> DriveProblem<'a> {
         let share: f64 =
             (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum::<f64>().powi(2)).sum::<f64>()
                 / rows as f64;
-        share.sqrt() > self.position_noise()
+        share.sqrt() > self.position_noise
     }
 
     /// The declared inertia every run shares (None when any run leaves it to the fit).
@@ -984,9 +982,7 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
         scales = scales.max(run_scales);
         let sigma_q = super::signal::second_difference_noise(&inp.motor);
         // the torque's own noise: the median second difference (robust to the steps of a drive)
-        let mut d2: Vec<f64> = tau.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
-        d2.sort_by(f64::total_cmp);
-        let sigma_tau = d2.get(d2.len() / 2).copied().unwrap_or(0.0) * 1.4826 / 6f64.sqrt();
+        let sigma_tau = super::signal::median_second_difference_noise(&tau);
         q_var += sigma_q * sigma_q * w.len() as f64;
         tau_var += sigma_tau * sigma_tau * w.len() as f64;
         count += w.len() as f64;

@@ -232,10 +232,16 @@ pub fn robust_noise(x: &[f64]) -> f64 {
     if x.len() < 3 {
         return 0.0;
     }
-    let d2: Vec<f64> = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
     let resolution = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
     let quantum = if resolution.is_finite() { resolution / 12f64.sqrt() } else { 0.0 };
-    (1.4826 * super::quality::median(d2) / 6f64.sqrt()).max(quantum)
+    median_second_difference_noise(x).max(quantum)
+}
+
+/// 1.4826 × median|Δ²x| / √6: white noise's σ from its second differences, robust to the steps
+/// and fast moves a mean square would count as noise (0 with fewer than 3 samples).
+pub fn median_second_difference_noise(x: &[f64]) -> f64 {
+    let d2: Vec<f64> = x.windows(3).map(|w| (w[2] - 2.0 * w[1] + w[0]).abs()).collect();
+    1.4826 * super::quality::median(d2) / 6f64.sqrt()
 }
 
 #[cfg(test)]
