@@ -257,9 +257,8 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
             // an asymmetry shows only on top of friction the model already has
             Effect::AsymmetricFriction
                 if !fit.spec.effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::LinkDamping)) => {}
-            // while the link moves, the asymmetry's Coulomb half-difference is a constant torque:
-            // the two are one column (docs/interfaces.md, equivalent forms), never both in
-            Effect::ConstantLoad if fit.spec.effects.contains(&Effect::AsymmetricFriction) => {}
+            // never beside the effect that took its place (`Effect::takes_place_of`)
+            e if fit.spec.effects.iter().any(|x| x.takes_place_of() == Some(e)) => {}
             Effect::Gravity
             | Effect::LinkDamping
             | Effect::ThermalLag

@@ -156,6 +156,17 @@ impl Effect {
         Effect::ALL.into_iter().find(|e| e.name() == s)
     }
 
+    /// The effect this one stands in for, never beside it: while the link moves, asymmetric
+    /// friction's Coulomb half-difference is a constant torque, so it and a constant load are one
+    /// column (docs/interfaces.md, the equivalent forms); asymmetric friction, the physical form,
+    /// takes the load's place.
+    pub fn takes_place_of(self) -> Option<Effect> {
+        match self {
+            Effect::AsymmetricFriction => Some(Effect::ConstantLoad),
+            _ => None,
+        }
+    }
+
     /// Internal parameters: (name, typical size used for difference steps, lower bound).
     /// Gravity is (a, b) = m g d (cos, sin) of the offset; the Maxwell time is fitted as ln λ.
     pub fn params(self) -> &'static [(&'static str, f64, Option<f64>)] {

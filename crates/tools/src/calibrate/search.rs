@@ -190,11 +190,12 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
         next += regressor_columns(e);
     }
     let bit = |e: Effect| 1u32 << all.iter().position(|&x| x == e).expect("in the list");
-    // asymmetric friction only over Coulomb friction, and never beside a constant load (one column
-    // while the link moves: the equivalent forms)
+    // asymmetric friction only over Coulomb friction, and no effect beside the one it takes the
+    // place of (`Effect::takes_place_of`)
+    let beside = |mask: u32, e: Effect| mask & bit(e) != 0 && e.takes_place_of().is_some_and(|d| mask & bit(d) != 0);
     let valid = |mask: u32| {
-        mask & bit(Effect::AsymmetricFriction) == 0
-            || (mask & bit(Effect::CoulombFriction) != 0 && mask & bit(Effect::ConstantLoad) == 0)
+        (mask & bit(Effect::AsymmetricFriction) == 0 || mask & bit(Effect::CoulombFriction) != 0)
+            && !all.iter().any(|&e| beside(mask, e))
     };
     let bic: Vec<Option<f64>> = (0..1u32 << all.len())
         .map(|mask| {
@@ -743,18 +744,14 @@ impl Rig for DeviceRig<'_, '_> {
         let mut spec = m.fit.spec.clone();
         spec.effects.extend(added.iter().map(|c| c.effect));
         let mut starts = candidate_starts(self.prob, &m.fit, added, spec.law);
-        // asymmetric friction takes a constant load's place: while the link moves, its Coulomb
-        // half-difference is that constant torque (the equivalent forms), and both in at once
-        // are one column twice
-        if added.iter().any(|c| c.effect == Effect::AsymmetricFriction) {
-            if let Some(&(o, e)) =
-                m.fit.spec.offsets(self.prob.n_groups).iter().find(|(_, e)| *e == Effect::ConstantLoad)
-            {
-                let k = e.params().len();
-                spec.effects.retain(|&x| x != Effect::ConstantLoad);
-                for q in &mut starts {
-                    q.drain(o..o + k);
-                }
+        // an added effect takes the place of the one it stands in for (`Effect::takes_place_of`):
+        // both in at once would be one column twice
+        let displaced: Vec<Effect> = added.iter().filter_map(|c| c.effect.takes_place_of()).collect();
+        // the last offsets first, so each drain leaves the earlier ones where they are
+        for &(o, e) in m.fit.spec.offsets(self.prob.n_groups).iter().rev().filter(|(_, e)| displaced.contains(e)) {
+            spec.effects.retain(|&x| x != e);
+            for q in &mut starts {
+                q.drain(o..o + e.params().len());
             }
         }
         self.with_screen(m, |sprob, _, _| {
