@@ -27,7 +27,7 @@ def test_linear_steady_state_matches_the_transfer_function():
     k, c, j, amp, f = 20.0, 0.3, 0.018, 0.3, 1.0
     w = 2 * math.pi * f
     p = {"stiffness": k, "damping": c, "inertia": j}
-    t, x = tm.simulate(p, 12.0, 1e-4, lambda t: (amp * math.sin(w * t), amp * w * math.cos(w * t)))
+    t, x, _ = tm.simulate(p, 12.0, 1e-4, lambda t: (amp * math.sin(w * t), amp * w * math.cos(w * t)))
     h = complex(k, w * c) / complex(k - j * w * w, w * c)
     got, phase = steady_amplitude(t, x, w, 8.0)  # 4 whole cycles after the transient (τ = 2J/C ≈ 0.12 s)
     assert abs(got - amp * abs(h)) < 1e-6 * amp, (got, amp * abs(h))
@@ -37,8 +37,8 @@ def test_linear_steady_state_matches_the_transfer_function():
 def test_rk4_converges_at_the_default_step_for_a_stiff_transmission():
     p = {"stiffness": 680.0, "damping": 0.1, "inertia": 0.018, "backlash": 0.0}
     m = lambda t: (0.3 * math.sin(2 * math.pi * t), 0.3 * 2 * math.pi * math.cos(2 * math.pi * t))  # noqa: E731
-    _, coarse = tm.simulate(dict(p), 2.0, 1e-4, m)
-    _, fine = tm.simulate(dict(p), 2.0, 5e-5, m)
+    _, coarse, _ = tm.simulate(dict(p), 2.0, 1e-4, m)
+    _, fine, _ = tm.simulate(dict(p), 2.0, 5e-5, m)
     assert np.max(np.abs(coarse - fine[::2])) < 1e-8
 
 
@@ -94,7 +94,7 @@ def test_asymmetric_friction_decelerates_each_direction_by_its_own_levels():
     still = lambda t: (0.0, 0.0)  # noqa: E731
     end = {}
     for v0, f, b in ((1.0, fp, bp), (-1.0, fn, bn)):
-        t, x = tm.simulate(dict(p, initial_link_speed=v0), 0.2, 1e-4, still)
+        t, x, _ = tm.simulate(dict(p, initial_link_speed=v0), 0.2, 1e-4, still)
         # J v' = −(F sgn v + B v) while v keeps its sign: v(t) = (v0 ± F/B) e^{−Bt/J} ∓ F/B
         s = math.copysign(1.0, v0)
         exact = (v0 + s * f / b) * (j / b) * (1 - np.exp(-b * t / j)) - s * f / b * t
@@ -109,7 +109,7 @@ def test_hardening_spring_constant_load_and_effect_names():
     assert math.isclose(tm.link_torque(0.1, 0.0, 0.0, dict(p)), 20.0 * 0.1 * (1 + 100.0 * 0.01))
     assert math.isclose(tm.link_torque(-0.11, 0.0, 0.0, dict(p, backlash=0.02)), -20.0 * 0.1 * (1 + 100.0 * 0.01))
     # a constant load settles the link at τ0/K against the transmission
-    t, x = tm.simulate({"stiffness": 20.0, "damping": 0.3, "inertia": 0.018, "constant_load": 0.1}, 3.0, 1e-4,
+    t, x, _ = tm.simulate({"stiffness": 20.0, "damping": 0.3, "inertia": 0.018, "constant_load": 0.1}, 3.0, 1e-4,
                        lambda t: (0.0, 0.0))
     assert abs(x[-1] - 0.1 / 20.0) < 1e-8
     flat = tm.parse_effects(["coulomb_friction=0.02", "stribeck=0.03,0.05", "asymmetric_friction=0.06,0.03,0.02,0.01",
@@ -159,3 +159,29 @@ def test_a_moving_start_and_timestamp_jitter(tmp_path):
     # the samples sit on the uniform grid, not at the jittered times: the motor column is exactly the sine there
     assert np.max(np.abs(motor - 0.3 * np.sin(2 * math.pi * grid + math.pi / 4))) < 1e-12
     assert abs((link[1] - link[0]) * rate - 0.5) < 0.02  # the link starts at 0.5 rad/s
+
+
+def replay_rms(tmp_path, *args):
+    out = tmp_path / "replay"
+    tm.main(["--out", str(out), "--temperatures", "22", "--stiffness", "34", "--damping", "0.4", "--frequencies", "1",
+             "--duration", "3", "--effect", "backlash=0.02", "--replay", *args])
+    truth = json.loads((out / "truth.json").read_text())
+    floor = math.sqrt(truth["noise"] ** 2 + truth["quantum"] ** 2 / 12)
+    return truth["replay_rms"], floor
+
+
+def test_replay_of_a_clean_log_is_the_truth(tmp_path):
+    # a log without noise, counts, jitter or gaps: the replay differs only by the straight line
+    # between samples of the motor angle (1 kHz, a 1 Hz sine of 0.3 rad: about 1e-6 rad)
+    rms, _ = replay_rms(tmp_path, "--noise", "0", "--quantum", "0")
+    assert rms < 1e-5
+
+
+def test_replay_counts_the_motor_encoder_and_the_jitter(tmp_path):
+    # coarse counts on steps: the motor's reading is off by up to half a count while it holds, the
+    # link's again; jitter moves every sample in time. Each puts the replay above the link sensor's floor.
+    rms, floor = replay_rms(tmp_path, "--noise", "1e-5", "--quantum", "0.003", "--excitation", "steps",
+                            "--duration", "8")
+    assert rms > 1.1 * floor
+    rms, floor = replay_rms(tmp_path, "--noise", "1e-5", "--quantum", "0", "--jitter", "0.2")
+    assert rms > 3 * floor

@@ -95,11 +95,11 @@ def link_torque(phi, dphi, v, p):
 
 def simulate(p, t_end, dt, motor):
     """RK4 of θl, θl' with the motor angle motor(t) -> (angle, speed). Returns the fine time grid
-    and the link angle on it. Plain floats: numpy per step would cost more than the arithmetic."""
+    and the link angle and speed on it. Plain floats: numpy per step would cost more than the arithmetic."""
     n = int(round(t_end / dt))
     th, v = p.get("initial_link_angle", 0.0), p.get("initial_link_speed", 0.0)
-    out = np.empty(n + 1)
-    out[0] = th
+    out, speed = np.empty(n + 1), np.empty(n + 1)
+    out[0], speed[0] = th, v
     j = p["inertia"]
 
     def acc(t, th, v):
@@ -114,8 +114,49 @@ def simulate(p, t_end, dt, motor):
         a3 = acc(t + dt / 2, th + dt / 2 * (v + dt / 2 * a1), v + dt / 2 * a2)
         a4 = acc(t + dt, th + dt * (v + dt / 2 * a2), v + dt * a3)
         th, v = th + dt / 6 * (v + 2 * (v + dt / 2 * a1) + 2 * (v + dt / 2 * a2) + (v + dt * a3)), v + dt / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
-        out[i + 1] = th
-    return np.arange(n + 1) * dt, out
+        out[i + 1], speed[i + 1] = th, v
+    return np.arange(n + 1) * dt, out, speed
+
+
+def replay(p, t_log, m_log, vm_true, starts, dt):
+    """The truth's own link driven by the logged motor angle, as a calibration's model must be: the
+    motor angle between two logged samples is the straight line through them, on the logged
+    (jittered) times, in RK4 substeps of at most dt. The motor's speed is the truth's own
+    (`vm_true` at each sample, interpolated likewise): a calibration smooths the logged angle for
+    its speed, and the raw line's slope, jumping by a count per sample, would drive the damper with
+    spikes the smoothing removes (a never-pulling backlash contact rectifies them into a bias). The
+    link starts each stretch from the truth's own state (`starts`: sample index -> (angle, speed),
+    the first sample and the first after each dropout), which no calibration knows better. So the
+    replay errs only by what the log cannot tell: the motor encoder's offset (up to half a count
+    while the motor holds), its noise and the timestamps' jitter. Returns the link angle at every
+    logged sample."""
+    out = np.empty(len(t_log))
+    j = p["inertia"]
+    th = v = 0.0
+    for i in range(len(t_log)):
+        if i in starts:
+            th, v = starts[i]
+        out[i] = th
+        if i + 1 == len(t_log):
+            break
+        t0, span = t_log[i], t_log[i + 1] - t_log[i]
+        slope = (m_log[i + 1] - m_log[i]) / span
+        dv = (vm_true[i + 1] - vm_true[i]) / span
+        steps = max(1, math.ceil(span / dt - 1e-9))
+        h = span / steps
+
+        def acc(t, th, v):
+            p["theta_l"] = th
+            return link_torque(m_log[i] + slope * (t - t0) - th, vm_true[i] + dv * (t - t0) - v, v, p) / j
+
+        for s in range(steps):
+            t = t0 + s * h
+            a1 = acc(t, th, v)
+            a2 = acc(t + h / 2, th + h / 2 * v, v + h / 2 * a1)
+            a3 = acc(t + h / 2, th + h / 2 * (v + h / 2 * a1), v + h / 2 * a2)
+            a4 = acc(t + h, th + h * (v + h / 2 * a2), v + h * a3)
+            th, v = th + h / 6 * (v + 2 * (v + h / 2 * a1) + 2 * (v + h / 2 * a2) + (v + h * a3)), v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+    return out
 
 
 def write_run(path, meta, columns):
@@ -271,6 +312,10 @@ def main(argv=None):
                          "stribeck=FS,VST, asymmetric_friction=FCP,FCN,BVP,BVN, gravity_mgl=MGL, gravity_offset=RAD, "
                          "link_damping=B, constant_load=TAU, hardening=ALPHA (spring K φ(1 + α φ²), outside the "
                          "calibration's library), friction_smoothing=VS (repeatable)")
+    ap.add_argument("--replay", action="store_true",
+                    help="also replay the truth driven by the logged motor angle (`replay`) and write the "
+                         "measured link's rms against it, replay_rms, in truth.json: the floor a calibration "
+                         "driven by that log can reach (quantisation and noise of the motor's encoder, jitter)")
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args(argv)
     temps = [float(x) for x in a.temperatures.split(",")]
@@ -297,9 +342,9 @@ def main(argv=None):
             motor, described = excitation(a.excitation, a.amplitude, f, a.duration, rng, moving)
             p = {"stiffness": k, "damping": c, "inertia": a.inertia, **effects,
                  "initial_link_angle": motor(0.0)[0], "initial_link_speed": a.initial_speed or 0.0}
-            t, link = simulate(p, a.duration, a.dt, motor)
-            ts, ls = t[::stride], link[::stride]
-            ms = np.array([motor(x)[0] for x in ts])
+            t, link, speed = simulate(p, a.duration, a.dt, motor)
+            ts, ls, vs = t[::stride], link[::stride], speed[::stride]
+            ms, vms = np.array([motor(x) for x in ts]).T
 
             def measure(x):
                 y = x + rng.normal(0.0, a.noise, x.shape) if a.noise > 0 else x.copy()
@@ -314,14 +359,24 @@ def main(argv=None):
             meta = {"temperature_c": temp, "source": "tests/truth/truth_model.py"}
             if a.declare_inertia:
                 meta["link_inertia_kgm2"] = a.inertia
-            write_run(a.out / name, meta, {"time_s": tm[keep], "motor_angle_rad": measure(ms)[keep],
-                                           "link_angle_rad": measure(ls)[keep]})
+            motor_log, link_log = measure(ms)[keep], measure(ls)[keep]
+            write_run(a.out / name, meta, {"time_s": tm[keep], "motor_angle_rad": motor_log,
+                                           "link_angle_rad": link_log})
             run = {"file": name, "temperature_c": temp, "stiffness": k, "damping": c, "excitation": described}
+            if a.replay:
+                kept = np.flatnonzero(keep)
+                starts = {i: (ls[j], vs[j]) for i, j in enumerate(kept) if i == 0 or j != kept[i - 1] + 1}
+                replayed = replay(p, tm[keep], motor_log, vms[keep], starts, a.dt)
+                run["replay_sse"] = float(np.sum((link_log - replayed) ** 2))
+                run["samples"] = int(keep.sum())
             if a.dropout > 0:
                 run["dropout_s"] = [float(start), float(start + a.dropout)]
             if a.excitation == "sine":
                 run["frequency_hz"] = f
             truth["runs"].append(run)
+    if a.replay:
+        truth["replay_rms"] = math.sqrt(sum(r["replay_sse"] for r in truth["runs"]) /
+                                        sum(r["samples"] for r in truth["runs"]))
     (a.out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
 
 

@@ -214,8 +214,7 @@ fn noise_scales(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
     let n = x.len();
     let e: Vec<f64> = (0..n).map(|k| if k == 0 || k == n - 1 { 0.0 } else { deviation(t, x, k) }).collect();
     let floor = 1.4826 * median(e[1..n - 1].iter().map(|v| v.abs()).collect());
-    let resolution = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
-    let resolution = if resolution.is_finite() { resolution } else { 0.0 };
+    let resolution = super::signal::resolution(x);
     let scale = (0..n)
         .map(|k| {
             let around: Vec<f64> = [k.wrapping_sub(4), k.wrapping_sub(3), k.wrapping_sub(2), k + 2, k + 3, k + 4]

@@ -232,9 +232,18 @@ pub fn robust_noise(x: &[f64]) -> f64 {
     if x.len() < 3 {
         return 0.0;
     }
-    let resolution = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
-    let quantum = if resolution.is_finite() { resolution / 12f64.sqrt() } else { 0.0 };
-    median_second_difference_noise(x).max(quantum)
+    median_second_difference_noise(x).max(resolution(x) / 12f64.sqrt())
+}
+
+/// The resolution of a sampled signal: the smallest step it takes between neighbours (an encoder's
+/// count, a logger's last digit; 0 for a constant signal).
+pub fn resolution(x: &[f64]) -> f64 {
+    let step = x.windows(2).map(|w| (w[1] - w[0]).abs()).filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
+    if step.is_finite() {
+        step
+    } else {
+        0.0
+    }
 }
 
 /// 1.4826 × median|Δ²x| / √6: white noise's σ from its second differences, robust to the steps
