@@ -70,6 +70,7 @@ pub fn summarise(sim: &Simulator, effects: EffectValues, temps: &[f64], freqs: &
                 link_inertia: None,
                 link0: 0.0,
                 com_distance: 0.14,
+                after_gap: false,
             });
             keys.push((tc, f));
         }

@@ -24,6 +24,9 @@ pub struct SimInput {
     pub com_distance: f64,
     /// θl' at the first sample (a run need not start at rest), rad/s.
     pub initial_link_speed: f64,
+    /// The run is a segment after a gap in its file: the link is moving at its first sample, at a
+    /// speed the calibration fits (`search::fit_initial_speeds`).
+    pub after_gap: bool,
 }
 
 /// Values of the effect library, in the FMU's own terms except gravity, which is held as

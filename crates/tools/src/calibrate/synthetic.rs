@@ -215,6 +215,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
                 link_inertia: Some(args.link_inertia),
                 link0: 0.0,
                 com_distance: 0.14,
+                after_gap: false,
             };
             let link = simulate(&mut inst, &input, &model)?;
             let mut text = String::new();
