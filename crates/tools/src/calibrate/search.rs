@@ -32,6 +32,25 @@ fn earns_its_place(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Sig
         && excess(refit_sig.structure_ratio) <= (1.0 - STRUCTURE_DROP) * excess(sig.structure_ratio)
 }
 
+/// A screening refit (at most `SCREEN_ITERATIONS`) with its signatures, run on to convergence when
+/// the cap cut it off while its BIC already beat `current`'s by the margin but its structure did not
+/// yet earn its place: the cap is for speed, not a verdict. Campaign rig 36's Stribeck excess (1.8×
+/// its Coulomb level) was rejected after 4 iterations at a BIC 105 000 below the current model's;
+/// converged in 12, every parameter within 1 % and 1.02× the floor.
+fn unless_cut_off(prob: &Problem, current: &Fit, current_sig: &Signatures, screened: Fit) -> (Fit, Signatures) {
+    let sig = signatures(prob, &screened);
+    let promising = screened.iterations >= SCREEN_ITERATIONS
+        && screened.bic() < current.bic() - BIC_MARGIN
+        && !earns_its_place(current, current_sig, &screened, &sig);
+    if promising {
+        if let Ok(f) = levenberg_marquardt(prob, screened.spec.clone(), screened.p.clone(), MAX_ITERATIONS) {
+            let s = signatures(prob, &f);
+            return (f, s);
+        }
+    }
+    (screened, sig)
+}
+
 /// `refit` against `current` (same data): BIC and the structure ratios.
 fn verdict(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Signatures) -> Verdict<(f64, f64)> {
     Verdict {
@@ -358,8 +377,8 @@ fn try_combination(
             }
         }
     }
+    let (screened, screened_sig) = unless_cut_off(sprob, scurrent, ssig, screened);
     let effects = screened.spec.effects.clone();
-    let screened_sig = signatures(sprob, &screened);
     let mut attempt = CombinationAttempt { stage, effects, verdict: verdict(scurrent, ssig, &screened, &screened_sig) };
     debug(format_args!(
         "combination {:?} screened in {:?}: kept {}",
@@ -955,16 +974,26 @@ impl Rig for DeviceRig<'_, '_> {
                 q.drain(o..o + e.params().len());
             }
         }
-        self.with_screen(m, |sprob, _, _| {
+        self.with_screen(m, |sprob, current, current_sig| {
             let t = std::time::Instant::now();
-            let refit = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
+            let screened = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
+            // (a pair is a fallback for effects that show only together: run on, two effects find
+            // a valley of their own more often than the truth's; measured on campaign rig 23)
+            let (refit, sig) = if added.len() == 1 {
+                unless_cut_off(sprob, current, current_sig, screened)
+            } else {
+                let sig = signatures(sprob, &screened);
+                (screened, sig)
+            };
             debug(format_args!(
-                "refit {:?} took {:?}, {} iterations",
+                "refit {:?} took {:?}, {} iterations, BIC {:.1} against {:.1}",
                 refit.spec.effects,
                 t.elapsed(),
-                refit.iterations
+                refit.iterations,
+                refit.bic(),
+                current.bic()
             ));
-            Some(self.judged(sprob, refit))
+            Some(Judged { fit: refit, sig })
         })
     }
     fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<(f64, f64)> {
