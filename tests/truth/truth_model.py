@@ -159,6 +159,29 @@ def replay(p, t_log, m_log, vm_true, starts, dt):
     return out
 
 
+def replay_rms(folder):
+    """The rms of the logged link against the truth's replay (`replay`) over every run of a folder made
+    with --replay, computed once and kept in its truth.json as `replay_rms`; None without --replay."""
+    folder = Path(folder)
+    truth = json.loads((folder / "truth.json").read_text())
+    if "replay_rms" in truth:
+        return truth["replay_rms"]
+    if not truth["runs"] or any("replay_inputs" not in r for r in truth["runs"]):
+        return None
+    sse, samples = 0.0, 0
+    for run in truth["runs"]:
+        d = np.load(folder / run["replay_inputs"])
+        p = {"stiffness": run["stiffness"], "damping": run["damping"], "inertia": truth["inertia"],
+             **parse_effects(truth["effect_options"])}
+        starts = {int(i): (float(a), float(v)) for i, a, v in zip(d["starts"], d["start_angles"], d["start_speeds"])}
+        replayed = replay(p, d["time"], d["motor"], d["motor_speed"], starts, truth["dt"])
+        sse += float(np.sum((d["link"] - replayed) ** 2))
+        samples += len(replayed)
+    truth["replay_rms"] = math.sqrt(sse / samples)
+    (folder / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
+    return truth["replay_rms"]
+
+
 def write_run(path, meta, columns):
     names = list(columns)
     with open(path, "w", encoding="utf-8") as fh:
@@ -313,9 +336,10 @@ def main(argv=None):
                          "link_damping=B, constant_load=TAU, hardening=ALPHA (spring K φ(1 + α φ²), outside the "
                          "calibration's library), friction_smoothing=VS (repeatable)")
     ap.add_argument("--replay", action="store_true",
-                    help="also replay the truth driven by the logged motor angle (`replay`) and write the "
-                         "measured link's rms against it, replay_rms, in truth.json: the floor a calibration "
-                         "driven by that log can reach (quantisation and noise of the motor's encoder, jitter)")
+                    help="keep what the truth's replay driven by the logged motor angle needs (`replay`), one "
+                         "RUN.replay.npz beside each run; `replay_rms(folder)` then gives the measured link's rms "
+                         "against it: the floor a calibration driven by that log can reach (quantisation and "
+                         "noise of the motor's encoder, jitter)")
     ap.add_argument("--seed", type=int, default=1)
     a = ap.parse_args(argv)
     temps = [float(x) for x in a.temperatures.split(",")]
@@ -364,19 +388,19 @@ def main(argv=None):
                                            "link_angle_rad": link_log})
             run = {"file": name, "temperature_c": temp, "stiffness": k, "damping": c, "excitation": described}
             if a.replay:
+                # what the replay needs, kept beside the run (replayed on demand: `replay_rms`)
                 kept = np.flatnonzero(keep)
-                starts = {i: (ls[j], vs[j]) for i, j in enumerate(kept) if i == 0 or j != kept[i - 1] + 1}
-                replayed = replay(p, tm[keep], motor_log, vms[keep], starts, a.dt)
-                run["replay_sse"] = float(np.sum((link_log - replayed) ** 2))
-                run["samples"] = int(keep.sum())
+                first = [i for i, j in enumerate(kept) if i == 0 or j != kept[i - 1] + 1]
+                np.savez(a.out / (Path(name).stem + ".replay.npz"), time=tm[keep], motor=motor_log, link=link_log,
+                         motor_speed=vms[keep], starts=np.array(first),
+                         start_angles=ls[kept[first]], start_speeds=vs[kept[first]])
+                run["replay_inputs"] = Path(name).stem + ".replay.npz"
             if a.dropout > 0:
                 run["dropout_s"] = [float(start), float(start + a.dropout)]
             if a.excitation == "sine":
                 run["frequency_hz"] = f
             truth["runs"].append(run)
-    if a.replay:
-        truth["replay_rms"] = math.sqrt(sum(r["replay_sse"] for r in truth["runs"]) /
-                                        sum(r["samples"] for r in truth["runs"]))
+    truth["dt"] = a.dt
     (a.out / "truth.json").write_text(json.dumps(truth, indent=2) + "\n")
 
 
