@@ -93,6 +93,15 @@ def link_torque(phi, dphi, v, p):
     return tau
 
 
+def rk4_step(acc, t, th, v, h):
+    """One classical RK4 step of θ'' = acc(t, θ, θ') from (θ, θ') at t: the new (θ, θ')."""
+    a1 = acc(t, th, v)
+    a2 = acc(t + h / 2, th + h / 2 * v, v + h / 2 * a1)
+    a3 = acc(t + h / 2, th + h / 2 * (v + h / 2 * a1), v + h / 2 * a2)
+    a4 = acc(t + h, th + h * (v + h / 2 * a2), v + h * a3)
+    return th + h / 6 * (v + 2 * (v + h / 2 * a1) + 2 * (v + h / 2 * a2) + (v + h * a3)), v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+
+
 def simulate(p, t_end, dt, motor):
     """RK4 of θl, θl' with the motor angle motor(t) -> (angle, speed). Returns the fine time grid
     and the link angle and speed on it. Plain floats: numpy per step would cost more than the arithmetic."""
@@ -108,12 +117,7 @@ def simulate(p, t_end, dt, motor):
         return link_torque(m - th, dm - v, v, p) / j
 
     for i in range(n):
-        t = i * dt
-        a1 = acc(t, th, v)
-        a2 = acc(t + dt / 2, th + dt / 2 * v, v + dt / 2 * a1)
-        a3 = acc(t + dt / 2, th + dt / 2 * (v + dt / 2 * a1), v + dt / 2 * a2)
-        a4 = acc(t + dt, th + dt * (v + dt / 2 * a2), v + dt * a3)
-        th, v = th + dt / 6 * (v + 2 * (v + dt / 2 * a1) + 2 * (v + dt / 2 * a2) + (v + dt * a3)), v + dt / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+        th, v = rk4_step(acc, i * dt, th, v, dt)
         out[i + 1], speed[i + 1] = th, v
     return np.arange(n + 1) * dt, out, speed
 
@@ -150,12 +154,7 @@ def replay(p, t_log, m_log, vm_true, starts, dt):
             return link_torque(m_log[i] + slope * (t - t0) - th, vm_true[i] + dv * (t - t0) - v, v, p) / j
 
         for s in range(steps):
-            t = t0 + s * h
-            a1 = acc(t, th, v)
-            a2 = acc(t + h / 2, th + h / 2 * v, v + h / 2 * a1)
-            a3 = acc(t + h / 2, th + h / 2 * (v + h / 2 * a1), v + h / 2 * a2)
-            a4 = acc(t + h, th + h * (v + h / 2 * a2), v + h * a3)
-            th, v = th + h / 6 * (v + 2 * (v + h / 2 * a1) + 2 * (v + h / 2 * a2) + (v + h * a3)), v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
+            th, v = rk4_step(acc, t0 + s * h, th, v, h)
     return out
 
 

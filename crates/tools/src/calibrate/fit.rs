@@ -861,6 +861,29 @@ impl<'a> Problem<'a> {
         self.measured.iter().map(Vec::len).collect()
     }
 
+    /// Each run's sum of squares of a flattened residual (runs in order).
+    pub fn run_sse(&self, residual: &[f64]) -> Vec<f64> {
+        let mut offset = 0;
+        self.measured
+            .iter()
+            .map(|m| {
+                let s = residual[offset..offset + m.len()].iter().map(|e| e * e).sum();
+                offset += m.len();
+                s
+            })
+            .collect()
+    }
+
+    /// Every run's initial link speed, in order.
+    pub fn initial_speeds(&self) -> Vec<f64> {
+        self.inputs.iter().map(|i| i.initial_link_speed).collect()
+    }
+
+    /// Sets every run's initial link speed.
+    pub fn set_initial_speeds(&mut self, speeds: &[f64]) {
+        self.inputs.iter_mut().zip(speeds).for_each(|(i, &v)| i.initial_link_speed = v);
+    }
+
     pub fn n_samples(&self) -> usize {
         self.measured.iter().map(|m| m.len()).sum()
     }

@@ -546,29 +546,34 @@ pub struct LawRow {
     pub bic: f64,
 }
 
+/// Whether a run's moving start earns its one more number: the run's BIC, from its sums of squares at
+/// rest and moving over `n` samples, falls by more than `BIC_MARGIN`.
+fn moving_start_earns(n: usize, sse_at_rest: f64, sse_moving: f64) -> bool {
+    let n = n as f64;
+    n * (sse_at_rest / sse_moving).ln() > n.ln() + BIC_MARGIN
+}
+
 /// The runs started at rest whose estimated initial speed the final model prefers, each judged on
 /// its own at the model's parameters (its BIC must fall by `BIC_MARGIN`), then one refit if any
 /// run changed. No refit comes first, so the comparison does not lean towards the moving starts.
 fn restart_moving_runs(prob: &mut Problem, current: Fit, estimated: &[f64]) -> Fit {
-    let before: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    let before = prob.initial_speeds();
     let candidates: Vec<usize> = (0..estimated.len()).filter(|&r| estimated[r] != 0.0 && before[r] == 0.0).collect();
-    prob.inputs.iter_mut().zip(estimated).for_each(|(i, &v)| i.initial_link_speed = v);
+    prob.set_initial_speeds(estimated);
     let moving = prob.outputs(&current.spec, &current.p).map(|o| prob.residual(&o));
-    prob.inputs.iter_mut().zip(&before).for_each(|(i, &v)| i.initial_link_speed = v);
+    prob.set_initial_speeds(&before);
     let Some(moving) = moving else { return current };
     let lengths = prob.lengths();
-    let starts: Vec<usize> = lengths.iter().scan(0, |o, &n| Some(std::mem::replace(o, *o + n))).collect();
-    let sse = |r: &[f64], run: usize| r[starts[run]..starts[run] + lengths[run]].iter().map(|e| e * e).sum::<f64>();
+    let (at_rest, moving) = (prob.run_sse(&current.residual), prob.run_sse(&moving));
     let mut changed = false;
     for &r in &candidates {
-        let n = lengths[r] as f64;
-        debug(format_args!("run {r}: at rest SSE {:.4e}, moving {:.4e}", sse(&current.residual, r), sse(&moving, r)));
-        if n * (sse(&current.residual, r) / sse(&moving, r)).ln() > n.ln() + BIC_MARGIN {
+        debug(format_args!("run {r}: at rest SSE {:.4e}, moving {:.4e}", at_rest[r], moving[r]));
+        if moving_start_earns(lengths[r], at_rest[r], moving[r]) {
             prob.inputs[r].initial_link_speed = estimated[r];
             changed = true;
         }
     }
-    debug(format_args!("restarted moving: {:?}", prob.inputs.iter().map(|i| i.initial_link_speed).collect::<Vec<_>>()));
+    debug(format_args!("restarted moving: {:?}", prob.initial_speeds()));
     if !changed {
         return current;
     }
@@ -582,32 +587,20 @@ fn restart_moving_runs(prob: &mut Problem, current: Fit, estimated: &[f64]) -> F
 /// so the model decides: once with the baseline, and again with the final model for the runs
 /// still moving. Returns the fit refitted with the chosen starts.
 pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
-    let speeds: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    let speeds = prob.initial_speeds();
     if speeds.iter().all(|&v| v == 0.0) {
         return moving;
     }
-    prob.inputs.iter_mut().for_each(|i| i.initial_link_speed = 0.0);
+    prob.set_initial_speeds(&vec![0.0; speeds.len()]);
     let Ok(resting) = levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS) else {
-        prob.inputs.iter_mut().zip(&speeds).for_each(|(i, v)| i.initial_link_speed = *v);
+        prob.set_initial_speeds(&speeds);
         return moving;
     };
     let lengths = prob.lengths();
-    let per_run = |f: &Fit| -> Vec<f64> {
-        let mut offset = 0;
-        lengths
-            .iter()
-            .map(|&n| {
-                let s = f.residual[offset..offset + n].iter().map(|e| e * e).sum();
-                offset += n;
-                s
-            })
-            .collect()
-    };
-    let (sm, sr) = (per_run(&moving), per_run(&resting));
+    let (sm, sr) = (prob.run_sse(&moving.residual), prob.run_sse(&resting.residual));
     let mut kept = 0;
     for (r, inp) in prob.inputs.iter_mut().enumerate() {
-        let n = lengths[r] as f64;
-        if speeds[r] != 0.0 && n * (sr[r] / sm[r]).ln() > n.ln() + BIC_MARGIN {
+        if speeds[r] != 0.0 && moving_start_earns(lengths[r], sr[r], sm[r]) {
             inp.initial_link_speed = speeds[r];
             kept += 1;
         }
@@ -661,14 +654,11 @@ pub fn fit_initial_speeds(prob: &mut Problem, mut fit: Fit) -> Fit {
 fn initial_speeds_pass(prob: &mut Problem, fit: Fit) -> Fit {
     let lengths = prob.lengths();
     let offsets: Vec<usize> = lengths.iter().scan(0, |o, &n| Some(std::mem::replace(o, *o + n))).collect();
-    let per_run = |residual: &[f64]| -> Vec<f64> {
-        offsets.iter().zip(&lengths).map(|(&o, &n)| residual[o..o + n].iter().map(|e| e * e).sum()).collect()
-    };
     let residual_at = |prob: &mut Problem, p: &[f64], speeds: &[f64]| -> Option<Vec<f64>> {
-        prob.inputs.iter_mut().zip(speeds).for_each(|(i, &v)| i.initial_link_speed = v);
+        prob.set_initial_speeds(speeds);
         prob.outputs(&fit.spec, p).map(|o| prob.residual(&o))
     };
-    let before: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    let before = prob.initial_speeds();
     // a step the size of the run's mean speed over its swing, at least
     let scale: Vec<f64> = prob
         .measured
@@ -702,10 +692,10 @@ fn initial_speeds_pass(prob: &mut Problem, fit: Fit) -> Fit {
         let Some(moved) = residual_at(prob, &p, &probe) else { break };
         let trial: Vec<f64> = (0..lengths.len())
             .map(|r| {
-                let (o, n, h) = (offsets[r], lengths[r], probe[r] - speeds[r]);
                 if !free[r] {
                     return speeds[r];
                 }
+                let (o, n, h) = (offsets[r], lengths[r], probe[r] - speeds[r]);
                 let (mut gg, mut gr) = (0.0, 0.0);
                 for k in o..o + n {
                     let g = (moved[k] - residual[k]) / h;
@@ -720,7 +710,7 @@ fn initial_speeds_pass(prob: &mut Problem, fit: Fit) -> Fit {
             })
             .collect();
         let Some(tried) = residual_at(prob, &p, &trial) else { break };
-        let (now, then) = (per_run(&residual), per_run(&tried));
+        let (now, then) = (prob.run_sse(&residual), prob.run_sse(&tried));
         let better: Vec<bool> = now.iter().zip(&then).map(|(a, b)| b < a).collect();
         if !better.iter().any(|&b| b) {
             break;
@@ -735,21 +725,21 @@ fn initial_speeds_pass(prob: &mut Problem, fit: Fit) -> Fit {
     }
     let rest_speeds: Vec<f64> = (0..lengths.len()).map(|r| if free[r] { 0.0 } else { speeds[r] }).collect();
     let Some(resting) = residual_at(prob, &p, &rest_speeds) else {
-        prob.inputs.iter_mut().zip(&before).for_each(|(i, &v)| i.initial_link_speed = v);
+        prob.set_initial_speeds(&before);
         return fit;
     };
-    let (fitted, rest) = (per_run(&residual), per_run(&resting));
-    let chosen: Vec<f64> = (0..lengths.len())
-        .map(|r| {
-            let n = lengths[r] as f64;
-            if !free[r] || n * (rest[r] / fitted[r].max(1e-300)).ln() > n.ln() + BIC_MARGIN {
-                speeds[r]
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    prob.inputs.iter_mut().zip(&chosen).for_each(|(i, &v)| i.initial_link_speed = v);
+    let (fitted, rest) = (prob.run_sse(&residual), prob.run_sse(&resting));
+    let chosen: Vec<f64> =
+        (0..lengths.len())
+            .map(|r| {
+                if !free[r] || moving_start_earns(lengths[r], rest[r], fitted[r].max(1e-300)) {
+                    speeds[r]
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+    prob.set_initial_speeds(&chosen);
     debug(format_args!("fitted initial speeds: {before:?} → {chosen:?}"));
     if chosen == before {
         return fit;
@@ -757,7 +747,7 @@ fn initial_speeds_pass(prob: &mut Problem, fit: Fit) -> Fit {
     match levenberg_marquardt(prob, fit.spec.clone(), p, MAX_ITERATIONS) {
         Ok(f) if f.sse < fit.sse => f,
         _ => {
-            prob.inputs.iter_mut().zip(&before).for_each(|(i, &v)| i.initial_link_speed = v);
+            prob.set_initial_speeds(&before);
             fit
         }
     }
@@ -1090,7 +1080,7 @@ impl Rig for DeviceRig<'_, '_> {
 pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Result<Outcome, String> {
     let mut rows = Vec::new();
     let t = std::time::Instant::now();
-    let estimated_speeds: Vec<f64> = prob.inputs.iter().map(|i| i.initial_link_speed).collect();
+    let estimated_speeds = prob.initial_speeds();
     let first = baseline(prob, laws.allowed[0])?;
     debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
     let share = screening_share_fits(prob).then(|| prob.truncated(SCREEN_SHARE));
