@@ -1121,7 +1121,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
             sig = signatures(prob, &current);
         }
     }
-    if budget.affords(1.0) && !current.spec.effects.is_empty() {
+    if !budget.spent() && !current.spec.effects.is_empty() {
         let before = current.sse;
         current = budget.timed(|| fit_initial_speeds(prob, current));
         if current.sse != before {
