@@ -68,15 +68,16 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
     ((seconds / dt).round() as usize).min(n / 4)
 }
 
-/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`)
-/// because it sets the commanded speed of every step: encoder steps of 2π/10000 at 1 kHz make the
-/// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
-/// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
-/// rectifies into bias.
+/// The model's inputs from a measured run. The motor angle is band-limited (`signal::band_limited`)
+/// because it drives the model: the encoder's steps and noise it carries near the link's resonance
+/// are amplified there and the fit damps them (C high), and steps of 2π/10000 at 1 kHz make the
+/// raw slope jitter by ~0.6 rad/s, which the PCL damper passes to the link as torque noise and a
+/// never-pulling backlash contact rectifies into bias. `smoothing_seconds`: a quintic
+/// Savitzky–Golay smoothing of that half-width instead (0: the raw samples).
 pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> super::sim::SimInput {
     super::sim::SimInput {
         time: r.time.clone(),
-        motor: smooth(&r.time, &r.motor, smoothing_half_width(r, smoothing_seconds)),
+        motor: model_motor(r, smoothing_seconds).0,
         housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
         frequency_hz: r.frequency_hz,
         link_inertia: r.link_inertia,
@@ -85,6 +86,27 @@ pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> super::sim::SimInpu
         initial_link_speed: initial_speed(&r.time, &r.link),
         after_gap: r.segment.is_some_and(|(k, _)| k > 1),
     }
+}
+
+/// How the motor angle that drives the model was conditioned: the band's edge (Hz) or the
+/// smoothing's half-width (s), for the report.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MotorConditioning {
+    BandLimited { edge_hz: f64 },
+    Smoothed { half_width_s: f64 },
+}
+
+/// The motor angle that drives the model, and how it was conditioned (`sim_input`).
+pub fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorConditioning) {
+    let n = r.time.len();
+    let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
+    if smoothing_seconds.is_none() {
+        if let Some((motor, edge_hz)) = super::signal::band_limited(&r.time, &r.motor) {
+            return (motor, MotorConditioning::BandLimited { edge_hz });
+        }
+    }
+    let half = smoothing_half_width(r, smoothing_seconds);
+    (smooth(&r.time, &r.motor, half), MotorConditioning::Smoothed { half_width_s: half as f64 * dt })
 }
 
 /// Speed at the first sample when the data show one (a run need not start at rest): the slope of

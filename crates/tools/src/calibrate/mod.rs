@@ -23,7 +23,7 @@ pub mod sim;
 pub mod stepwise;
 pub mod synthetic;
 
-use conditioning::{group_runs, held_out_groups, sim_input, smoothing_half_width};
+use conditioning::{group_runs, held_out_groups, model_motor, sim_input, MotorConditioning};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -70,10 +70,12 @@ pub struct CalibrateArgs {
     /// FMU instances simulating in parallel (the default is this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
-    /// Half-width in seconds of the zero-phase Savitzky–Golay smoothing of the measured motor angle
-    /// before it drives the model; 0 uses the raw samples. Default: per run, 0.1 s over the
-    /// highest frequency it carries (a quintic window that passes it flat while it averages the
-    /// encoder steps), and off when the motor angle carries no noise.
+    /// Half-width in seconds of a zero-phase Savitzky–Golay smoothing of the measured motor angle
+    /// before it drives the model, in place of the default; 0 uses the raw samples. Default: per
+    /// run (and per segment between gaps), the motor angle band-limited to its motion: flat up to
+    /// the frequency above which it holds no more than twice its own noise's variance, zero at
+    /// twice that (the report's runs[].input_band_hz), so the encoder's steps near the link's
+    /// resonance do not drive the model; a noise-free motor angle passes unchanged.
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
     pub input_smoothing: Option<f64>,
     /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and
@@ -379,9 +381,10 @@ fn calibrate_device(
         offset += lengths[i];
         j["final_rmse_rad"] =
             serde_json::json!((residual.iter().map(|e| e * e).sum::<f64>() / residual.len().max(1) as f64).sqrt());
-        let n = r.time.len();
-        let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
-        j["input_smoothing_s"] = serde_json::json!(smoothing_half_width(r, args.input_smoothing) as f64 * dt);
+        match model_motor(r, args.input_smoothing).1 {
+            MotorConditioning::BandLimited { edge_hz } => j["input_band_hz"] = serde_json::json!(edge_hz),
+            MotorConditioning::Smoothed { half_width_s } => j["input_smoothing_s"] = serde_json::json!(half_width_s),
+        }
         j["inertia_declared"] = serde_json::json!(r.link_inertia.is_some());
     }
     // "unexplained" against a flexible reference, not only white noise (issue 10, item 6)
