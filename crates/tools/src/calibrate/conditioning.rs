@@ -3,7 +3,7 @@
 //! `drive::DriveInput`.
 
 use super::data::Run;
-use super::signal::{rms_frequency, second_difference_noise, smooth};
+use super::signal::{band_limited, fade_ends, rms_frequency, second_difference_noise, smooth};
 
 /// The fitted temperature group each held-out run uses: the one nearest its own temperature
 /// (held-out runs take the moduli fitted there; nothing is fitted on them).
@@ -37,9 +37,26 @@ pub fn group_runs(runs: &[Run]) -> (Vec<usize>, Vec<f64>) {
     (group, temps)
 }
 
+/// The highest frequency a run's motor angle carries: its own for a single sinusoid, else three
+/// times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms.
+fn top_frequency(r: &Run) -> f64 {
+    if super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz) {
+        r.frequency_hz
+    } else {
+        3.0 * rms_frequency(&r.time, &r.motor)
+    }
+}
+
+/// The motor angle's band reaches at most this many times its top frequency (`top_frequency`):
+/// the passband of the earlier default smoothing (a quintic Savitzky–Golay window of 0.1 s over
+/// the top frequency passes up to about ten times it, Schafer 2011). The noise alone does not set
+/// the edge: an encoder's error near a sinusoid's turns, where it dwells on a count, is no white
+/// noise, and up to 13 Hz of it (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white
+/// level; passed to a never-pulling backlash it left the fit at 2.2× its noise floor.
+pub const BAND_TOP_FACTOR: f64 = 10.0;
+
 /// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
-/// default): 0.1 s over the highest frequency the run carries, its own for a single sinusoid, else
-/// three times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms. A quintic
+/// default): 0.1 s over the highest frequency the run carries (`top_frequency`). A quintic
 /// Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
 /// frequency. A motor angle without noise (second-difference noise below 1e-12 of its swing) is
 /// not smoothed.
@@ -53,11 +70,7 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
             if second_difference_noise(&r.motor) <= 1e-12 * swing {
                 return 0;
             }
-            let top = if super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz) {
-                r.frequency_hz
-            } else {
-                3.0 * rms_frequency(&r.time, &r.motor)
-            };
+            let top = top_frequency(r);
             if top > 0.0 {
                 0.1 / top
             } else {
@@ -100,13 +113,18 @@ pub enum MotorConditioning {
 pub fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorConditioning) {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
+    let half = smoothing_half_width(r, smoothing_seconds);
+    let smoothed = smooth(&r.time, &r.motor, half);
     if smoothing_seconds.is_none() {
-        if let Some((motor, edge_hz)) = super::signal::band_limited(&r.time, &r.motor) {
-            return (motor, MotorConditioning::BandLimited { edge_hz });
+        let cap = BAND_TOP_FACTOR * top_frequency(r);
+        if let Some((band, edge_hz)) = band_limited(&r.time, &r.motor, (cap > 0.0).then_some(cap)) {
+            // near the ends, where the band limit's reflection is a guess, the quintic smoothing
+            // (raw samples there let a never-pulling backlash take a kick that stays in its play:
+            // 2.2–3.7× the noise floor on a synthetic backlash rig)
+            return (fade_ends(&r.time, &band, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
         }
     }
-    let half = smoothing_half_width(r, smoothing_seconds);
-    (smooth(&r.time, &r.motor, half), MotorConditioning::Smoothed { half_width_s: half as f64 * dt })
+    (smoothed, MotorConditioning::Smoothed { half_width_s: half as f64 * dt })
 }
 
 /// Speed at the first sample when the data show one (a run need not start at rest): the slope of

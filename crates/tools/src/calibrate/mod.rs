@@ -73,9 +73,10 @@ pub struct CalibrateArgs {
     /// Half-width in seconds of a zero-phase Savitzky–Golay smoothing of the measured motor angle
     /// before it drives the model, in place of the default; 0 uses the raw samples. Default: per
     /// run (and per segment between gaps), the motor angle band-limited to its motion: flat up to
-    /// the frequency above which it holds no more than twice its own noise's variance, zero at
-    /// twice that (the report's runs[].input_band_hz), so the encoder's steps near the link's
-    /// resonance do not drive the model; a noise-free motor angle passes unchanged.
+    /// the frequency above which it holds no more than twice its own noise's variance (at most ten
+    /// times the run's top frequency), zero at twice that (the report's runs[].input_band_hz), so
+    /// the encoder's steps near the link's resonance do not drive the model; a noise-free motor
+    /// angle passes unchanged.
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
     pub input_smoothing: Option<f64>,
     /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and

@@ -158,9 +158,12 @@ pub const BAND_NOISE_FACTOR: f64 = 2.0;
 /// Why: the model is driven by this angle, and the encoder's steps and noise it carries near the
 /// link's resonance are amplified there by the model (by its Q), which the fit then damps: on a
 /// 3000-count encoder at 200 Hz, C came out 100–490 % high with a quintic smoothing of
-/// 0.1 s over the excitation's top frequency, within 5 % band-limited (campaign rig 5). None when
-/// the run is too short (16 samples) or its times do not increase.
-pub fn band_limited(t: &[f64], x: &[f64]) -> Option<(Vec<f64>, f64)> {
+/// 0.1 s over the excitation's top frequency, within 5 % band-limited (campaign rig 5).
+/// `most_hz` caps the edge. Within one period of the edge of either end the reflection is a guess
+/// (`fade_ends`). None when the run is too short (16 samples) or its times do not increase; a
+/// noise-free angle (second-difference noise below 1e-12 of its swing) comes back unchanged, its
+/// edge the Nyquist frequency.
+pub fn band_limited(t: &[f64], x: &[f64], most_hz: Option<f64>) -> Option<(Vec<f64>, f64)> {
     let n = x.len();
     if n < 16 || t.windows(2).any(|w| !(w[1] > w[0])) {
         return None;
@@ -180,6 +183,11 @@ pub fn band_limited(t: &[f64], x: &[f64]) -> Option<(Vec<f64>, f64)> {
     // each one-sided bin's share of the variance (Parseval over the padded length)
     let share = |k: usize| if k == 0 || k == bins - 1 { 1.0 } else { 2.0 } * buf[k].norm_sqr() / (n_u * size) as f64;
     let sigma2 = second_difference_noise(x).powi(2);
+    let swing = x.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(f64::MIN_POSITIVE);
+    if sigma2.sqrt() <= 1e-12 * swing {
+        // a noise-free angle (a simulation's) has nothing to take out
+        return Some((x.to_vec(), nyquist));
+    }
     // the variance above each bin, and the lowest bin above which it is noise's
     let mut above = vec![0.0; bins + 1];
     for k in (0..bins).rev() {
@@ -188,7 +196,7 @@ pub fn band_limited(t: &[f64], x: &[f64]) -> Option<(Vec<f64>, f64)> {
     let edge = (1..bins)
         .find(|&k| above[k] <= BAND_NOISE_FACTOR * sigma2 * (nyquist - freq(k)) / nyquist)
         .map_or(nyquist, freq);
-    let edge = edge.max(freq(1));
+    let edge = most_hz.map_or(edge, |most| edge.min(most)).max(freq(1));
     // filtered with each end reflected oddly about the end's value a as a quadratic over a
     // quarter period of the band's edge reads it (x(−τ) = 2a − x(τ)), its curvature c put back
     // near the end (+2cτ², faded out over one period of the edge): value, slope and curvature run
@@ -234,20 +242,21 @@ pub fn band_limited(t: &[f64], x: &[f64]) -> Option<(Vec<f64>, f64)> {
     }
     fft(&mut buf, true);
     let yu: Vec<f64> = (0..n_u).map(|k| buf[k + reflect].re / size as f64 + trend(k + reflect)).collect();
-    // within one period of the edge from either end the reflection is a guess, and the filtered
-    // angle can be further off than the samples (2 mrad against their 0.6 mrad on campaign rig 5's
-    // first 0.25 s): there it fades back to the samples
-    let filtered = interpolate(&grid, &yu, t);
-    let out = t
-        .iter()
-        .zip(x.iter().zip(&filtered))
-        .map(|(&tk, (&raw, &band))| {
-            let from_end = (tk - t[0]).min(t[n - 1] - tk);
+    Some((interpolate(&grid, &yu, t), edge))
+}
+
+/// `band` faded into `ends` within one period of `edge_hz` of either end of `t` (a raised cosine):
+/// there the band limit's reflection is a guess.
+pub fn fade_ends(t: &[f64], band: &[f64], ends: &[f64], edge_hz: f64) -> Vec<f64> {
+    let n = t.len();
+    let period = 1.0 / edge_hz;
+    (0..n)
+        .map(|k| {
+            let from_end = (t[k] - t[0]).min(t[n - 1] - t[k]);
             let weight = 0.5 * (1.0 - (std::f64::consts::PI * (from_end / period).min(1.0)).cos());
-            raw + weight * (band - raw)
+            ends[k] + weight * (band[k] - ends[k])
         })
-        .collect();
-    Some((out, edge))
+        .collect()
 }
 
 /// The widest quintic smoothing, up to `cap` samples each side, that takes out no more than the
@@ -530,14 +539,15 @@ mod tests {
             let t: Vec<f64> = (0..n).map(|k| (k as f64 + spread * jitter[k].clamp(-3.0, 3.0)) * dt).collect();
             let truth: Vec<f64> = t.iter().map(|&t| 0.3 * (w * t + 0.7).sin() + 0.1 * t).collect();
             let x: Vec<f64> = truth.iter().map(|v| q * (v / q).round()).collect();
-            let (y, edge) = band_limited(&t, &x).unwrap();
+            let (y, edge) = band_limited(&t, &x, None).unwrap();
             let rms = |a: &[f64], b: &[f64]| {
                 (a.iter().zip(b).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / a.len() as f64).sqrt()
             };
-            let worst = (0..n).map(|k| (y[k] - truth[k]).abs()).fold(0.0, f64::max);
             assert!(edge > 0.5 && edge < 5.0, "edge {edge} Hz");
-            // beyond one period of the edge from the ends (within it, the samples fade back in)
+            // beyond one period of the edge from the ends (within it, callers fade to another
+            // estimate: `fade_ends`)
             let inner = ((1.0 / (edge * dt)).ceil() as usize)..n - ((1.0 / (edge * dt)).ceil() as usize);
+            let worst = inner.clone().map(|k| (y[k] - truth[k]).abs()).fold(0.0, f64::max);
             let (y_in, x_in, truth_in) = (&y[inner.clone()], &x[inner.clone()], &truth[inner]);
             assert!(
                 rms(y_in, truth_in) < 0.3 * rms(x_in, truth_in),
@@ -547,5 +557,20 @@ mod tests {
             );
             assert!(worst < q, "worst {worst:e} against a step of {q:e}");
         }
+    }
+
+    #[test]
+    fn a_noise_free_angle_is_not_band_limited() {
+        let t: Vec<f64> = (0..2000).map(|k| k as f64 * 1e-3).collect();
+        // a ramp (no second differences at all) comes back as it is
+        let ramp: Vec<f64> = t.iter().map(|&t| 0.3 * t - 0.1).collect();
+        let (y, edge) = band_limited(&t, &ramp, None).unwrap();
+        assert_eq!(y, ramp);
+        assert!((edge - 500.0).abs() < 1.0, "edge {edge}");
+        // a smooth swing's second differences are its curvature, not noise: it passes the band
+        let swing: Vec<f64> = t.iter().map(|&t| 0.2 * (2.0 * std::f64::consts::PI * 0.5 * t).sin()).collect();
+        let (y, _) = band_limited(&t, &swing, None).unwrap();
+        let worst = y.iter().zip(&swing).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        assert!(worst < 1e-6 * 0.2, "worst {worst:e}");
     }
 }
