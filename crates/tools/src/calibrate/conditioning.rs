@@ -81,16 +81,16 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
     ((seconds / dt).round() as usize).min(n / 4)
 }
 
-/// The model's inputs from a measured run. The motor angle is band-limited (`signal::band_limited`)
-/// because it drives the model: the encoder's steps and noise it carries near the link's resonance
-/// are amplified there and the fit damps them (C high), and steps of 2π/10000 at 1 kHz make the
-/// raw slope jitter by ~0.6 rad/s, which the PCL damper passes to the link as torque noise and a
-/// never-pulling backlash contact rectifies into bias. `smoothing_seconds`: a quintic
-/// Savitzky–Golay smoothing of that half-width instead (0: the raw samples).
-pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> super::sim::SimInput {
+/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`;
+/// `smoothing_seconds` sets its half-width, 0 the raw samples) because it sets the commanded
+/// speed of every step: encoder steps of 2π/10000 at 1 kHz make the raw slope jitter by
+/// ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C and 0.5 Hz) passes to
+/// the link as torque noise, and which a never-pulling backlash contact rectifies into bias.
+/// `band`: band-limited instead (`model_motor`; an option, not the default: docs/calibration.md).
+pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> super::sim::SimInput {
     super::sim::SimInput {
         time: r.time.clone(),
-        motor: model_motor(r, smoothing_seconds).0,
+        motor: model_motor(r, smoothing_seconds, band).0,
         housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
         frequency_hz: r.frequency_hz,
         link_inertia: r.link_inertia,
@@ -109,19 +109,21 @@ pub enum MotorConditioning {
     Smoothed { half_width_s: f64 },
 }
 
-/// The motor angle that drives the model, and how it was conditioned (`sim_input`).
-pub fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorConditioning) {
+/// The motor angle that drives the model, and how it was conditioned (`sim_input`): smoothed,
+/// or with `band` (and no `smoothing_seconds`) band-limited to its motion (`signal::band_limited`,
+/// the edge capped at `BAND_TOP_FACTOR` times the top frequency) and faded into the smoothing
+/// within one period of the edge of either end, where the band limit's reflection is a guess
+/// (raw samples there let a never-pulling backlash take a kick that stays in its play: 3.7× the
+/// noise floor on a synthetic backlash rig).
+pub fn model_motor(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> (Vec<f64>, MotorConditioning) {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
     let half = smoothing_half_width(r, smoothing_seconds);
     let smoothed = smooth(&r.time, &r.motor, half);
-    if smoothing_seconds.is_none() {
+    if band && smoothing_seconds.is_none() {
         let cap = BAND_TOP_FACTOR * top_frequency(r);
-        if let Some((band, edge_hz)) = band_limited(&r.time, &r.motor, (cap > 0.0).then_some(cap)) {
-            // near the ends, where the band limit's reflection is a guess, the quintic smoothing
-            // (raw samples there let a never-pulling backlash take a kick that stays in its play:
-            // 2.2–3.7× the noise floor on a synthetic backlash rig)
-            return (fade_ends(&r.time, &band, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
+        if let Some((limited, edge_hz)) = band_limited(&r.time, &r.motor, (cap > 0.0).then_some(cap)) {
+            return (fade_ends(&r.time, &limited, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
         }
     }
     (smoothed, MotorConditioning::Smoothed { half_width_s: half as f64 * dt })

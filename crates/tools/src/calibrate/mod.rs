@@ -70,15 +70,19 @@ pub struct CalibrateArgs {
     /// FMU instances simulating in parallel (the default is this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
-    /// Half-width in seconds of a zero-phase Savitzky–Golay smoothing of the measured motor angle
-    /// before it drives the model, in place of the default; 0 uses the raw samples. Default: per
-    /// run (and per segment between gaps), the motor angle band-limited to its motion: flat up to
-    /// the frequency above which it holds no more than twice its own noise's variance (at most ten
-    /// times the run's top frequency), zero at twice that (the report's runs[].input_band_hz), so
-    /// the encoder's steps near the link's resonance do not drive the model; a noise-free motor
-    /// angle passes unchanged.
+    /// Half-width in seconds of the zero-phase Savitzky–Golay smoothing of the measured motor angle
+    /// before it drives the model; 0 uses the raw samples. Default: per run, 0.1 s over the
+    /// highest frequency it carries (a quintic window that passes it flat while it averages the
+    /// encoder steps), and off when the motor angle carries no noise.
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
     pub input_smoothing: Option<f64>,
+    /// Band-limit the measured motor angle to its motion instead of smoothing it: zero phase, flat up
+    /// to where its variance falls to twice its white noise's (at most ten times its top
+    /// frequency), zero at twice that (runs[].input_band_hz). For a coarse motor encoder near a
+    /// lightly damped resonance, where smoothing leaves C high; not the default, because it left two
+    /// synthetic rigs of the paper's bench just above 1.2× their floor (docs/calibration.md).
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "input_smoothing"))]
+    pub input_band: bool,
     /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and
     /// paper.md into --out. Without FILE, the repository's data/paper-reported.json (built in).
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE", num_args = 0..=1))]
@@ -267,7 +271,7 @@ fn calibrate_device(
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
-    let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing)).collect();
+    let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band)).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let mut prob = fit::Problem::new(sim, inputs, measured, group, &temperatures)?;
     let laws = search::damping_laws(&prob);
@@ -284,7 +288,7 @@ fn calibrate_device(
     let mut notes: Vec<String> = Vec::new();
     let held_prob = (!held.is_empty()).then(|| {
         prob.held_out(
-            held.iter().map(|r| sim_input(r, args.input_smoothing)).collect(),
+            held.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band)).collect(),
             held.iter().map(|r| r.link.clone()).collect(),
             held_out_groups(&held, &temperatures),
         )
@@ -382,7 +386,7 @@ fn calibrate_device(
         offset += lengths[i];
         j["final_rmse_rad"] =
             serde_json::json!((residual.iter().map(|e| e * e).sum::<f64>() / residual.len().max(1) as f64).sqrt());
-        match model_motor(r, args.input_smoothing).1 {
+        match model_motor(r, args.input_smoothing, args.input_band).1 {
             MotorConditioning::BandLimited { edge_hz } => j["input_band_hz"] = serde_json::json!(edge_hz),
             MotorConditioning::Smoothed { half_width_s } => j["input_smoothing_s"] = serde_json::json!(half_width_s),
         }
