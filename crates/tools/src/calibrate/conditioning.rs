@@ -3,7 +3,7 @@
 //! `drive::DriveInput`.
 
 use super::data::Run;
-use super::signal::{band_limited, fade_ends, rms_frequency, second_difference_noise, smooth};
+use super::signal::{band_limited, fade_ends, noise_free, rms_frequency, smooth};
 
 /// The fitted temperature group each held-out run uses: the one nearest its own temperature
 /// (held-out runs take the moduli fitted there; nothing is fitted on them).
@@ -66,8 +66,7 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
     let seconds = match seconds {
         Some(s) => s,
         None => {
-            let swing = r.motor.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(1e-300);
-            if second_difference_noise(&r.motor) <= 1e-12 * swing {
+            if noise_free(&r.motor) {
                 return 0;
             }
             let top = top_frequency(r);
@@ -87,10 +86,12 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
 /// ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C and 0.5 Hz) passes to
 /// the link as torque noise, and which a never-pulling backlash contact rectifies into bias.
 /// `band`: band-limited instead (`model_motor`; an option, not the default: docs/calibration.md).
-pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> super::sim::SimInput {
-    super::sim::SimInput {
+/// Returns how the motor angle was conditioned too, for the report.
+pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> (super::sim::SimInput, MotorConditioning) {
+    let (motor, conditioning) = model_motor(r, smoothing_seconds, band);
+    let input = super::sim::SimInput {
         time: r.time.clone(),
-        motor: model_motor(r, smoothing_seconds, band).0,
+        motor,
         housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
         frequency_hz: r.frequency_hz,
         link_inertia: r.link_inertia,
@@ -98,7 +99,8 @@ pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> super::
         com_distance: r.meta_f64("link_length_m").unwrap_or(0.14),
         initial_link_speed: initial_speed(&r.time, &r.link),
         after_gap: r.segment.is_some_and(|(k, _)| k > 1),
-    }
+    };
+    (input, conditioning)
 }
 
 /// How the motor angle that drives the model was conditioned: the band's edge (Hz) or the
@@ -115,7 +117,7 @@ pub enum MotorConditioning {
 /// within one period of the edge of either end, where the band limit's reflection is a guess
 /// (raw samples there let a never-pulling backlash take a kick that stays in its play: 3.7× the
 /// noise floor on a synthetic backlash rig).
-pub fn model_motor(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> (Vec<f64>, MotorConditioning) {
+fn model_motor(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> (Vec<f64>, MotorConditioning) {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
     let half = smoothing_half_width(r, smoothing_seconds);

@@ -23,7 +23,7 @@ pub mod sim;
 pub mod stepwise;
 pub mod synthetic;
 
-use conditioning::{group_runs, held_out_groups, model_motor, sim_input, MotorConditioning};
+use conditioning::{group_runs, held_out_groups, sim_input, MotorConditioning};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -271,7 +271,8 @@ fn calibrate_device(
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
-    let inputs: Vec<sim::SimInput> = runs.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band)).collect();
+    let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
+        runs.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band)).unzip();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let mut prob = fit::Problem::new(sim, inputs, measured, group, &temperatures)?;
     let laws = search::damping_laws(&prob);
@@ -288,7 +289,7 @@ fn calibrate_device(
     let mut notes: Vec<String> = Vec::new();
     let held_prob = (!held.is_empty()).then(|| {
         prob.held_out(
-            held.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band)).collect(),
+            held.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band).0).collect(),
             held.iter().map(|r| r.link.clone()).collect(),
             held_out_groups(&held, &temperatures),
         )
@@ -386,7 +387,7 @@ fn calibrate_device(
         offset += lengths[i];
         j["final_rmse_rad"] =
             serde_json::json!((residual.iter().map(|e| e * e).sum::<f64>() / residual.len().max(1) as f64).sqrt());
-        match model_motor(r, args.input_smoothing, args.input_band).1 {
+        match conditioning[i] {
             MotorConditioning::BandLimited { edge_hz } => j["input_band_hz"] = serde_json::json!(edge_hz),
             MotorConditioning::Smoothed { half_width_s } => j["input_smoothing_s"] = serde_json::json!(half_width_s),
         }

@@ -53,6 +53,8 @@
 
 use nalgebra::{Complex, DMatrix, DVector, Schur};
 
+use super::signal::interpolate;
+
 /// One run: time (s, strictly increasing), motor angle (input), link angle (output), same length.
 #[derive(Debug, Clone, Copy)]
 pub struct RunSignals<'a> {
@@ -128,7 +130,7 @@ pub fn arx_grouped(runs: &[RunSignals], groups: &[usize], max_order: usize) -> R
         let Some(fit) = fit_group(&data, na, nb) else { return fallback() };
         for (&i, (x0, c)) in idx.iter().zip(&fit.locals) {
             let sim = simulate(&fit.a, &fit.b, *c, x0, &uniform[i].u);
-            let at = interpolate_back(&sim, &uniform[i], runs[i].time);
+            let at = interpolate(&uniform[i].time, &sim, runs[i].time);
             per[i] = (at.iter().zip(runs[i].link).map(|(s, y)| (y - s).powi(2)).sum(), at.len());
         }
     }
@@ -198,7 +200,8 @@ fn combine(per: &[(f64, usize)]) -> (f64, Vec<f64>) {
 
 /// A run on a uniform grid t0 + k h.
 struct Uniform {
-    t0: f64,
+    /// The grid's times: t0 + k h.
+    time: Vec<f64>,
     h: f64,
     u: Vec<f64>,
     y: Vec<f64>,
@@ -208,42 +211,16 @@ fn resample(r: &RunSignals) -> Uniform {
     let n = r.time.len();
     assert!(n == r.motor.len() && n == r.link.len(), "time, motor and link of one length");
     if n < 2 {
-        return Uniform { t0: r.time.first().copied().unwrap_or(0.0), h: 1.0, u: r.motor.to_vec(), y: r.link.to_vec() };
+        return Uniform { time: r.time.to_vec(), h: 1.0, u: r.motor.to_vec(), y: r.link.to_vec() };
     }
     let mut steps: Vec<f64> = r.time.windows(2).map(|w| w[1] - w[0]).collect();
     steps.sort_by(f64::total_cmp);
     let h = steps[steps.len() / 2];
     let t0 = r.time[0];
     let m = ((r.time[n - 1] - t0) / h + 1e-9).floor() as usize + 1;
-    let (mut u, mut y) = (Vec::with_capacity(m), Vec::with_capacity(m));
-    let mut j = 0;
-    for k in 0..m {
-        let t = t0 + k as f64 * h;
-        while j + 2 < n && r.time[j + 1] <= t {
-            j += 1;
-        }
-        let w = ((t - r.time[j]) / (r.time[j + 1] - r.time[j])).clamp(0.0, 1.0);
-        u.push(r.motor[j] + w * (r.motor[j + 1] - r.motor[j]));
-        y.push(r.link[j] + w * (r.link[j + 1] - r.link[j]));
-    }
-    Uniform { t0, h, u, y }
-}
-
-/// Values on the uniform grid → at the run's own times (linear).
-fn interpolate_back(x: &[f64], g: &Uniform, times: &[f64]) -> Vec<f64> {
-    let last = x.len().saturating_sub(1);
-    times
-        .iter()
-        .map(|&t| {
-            let s = ((t - g.t0) / g.h).max(0.0);
-            let i = (s.floor() as usize).min(last.saturating_sub(1));
-            if last == 0 {
-                return x.first().copied().unwrap_or(f64::NAN);
-            }
-            let w = (s - i as f64).min(1.0);
-            x[i] + w * (x[i + 1] - x[i])
-        })
-        .collect()
+    let time: Vec<f64> = (0..m).map(|k| t0 + k as f64 * h).collect();
+    let (u, y) = (interpolate(r.time, r.motor, &time), interpolate(r.time, r.link, &time));
+    Uniform { time, h, u, y }
 }
 
 /// y[k] = init(k) for k < n0, else forcing(k) + Σ a_i y[k−i] (n0 ≥ na).

@@ -117,8 +117,12 @@ fn fft(buf: &mut [Complex<f64>], inverse: bool) {
     }
 }
 
-/// Linear interpolation of (t, x) at `at` (t increasing; constant beyond its ends).
-fn interpolate(t: &[f64], x: &[f64], at: &[f64]) -> Vec<f64> {
+/// Linear interpolation of (t, x) at `at` (t increasing, `at` too for speed; constant beyond its
+/// ends; x's one value, or NaN for none, with fewer than two samples).
+pub fn interpolate(t: &[f64], x: &[f64], at: &[f64]) -> Vec<f64> {
+    if t.len() < 2 {
+        return vec![x.first().copied().unwrap_or(f64::NAN); at.len()];
+    }
     let mut i = 0;
     at.iter()
         .map(|&u| {
@@ -134,12 +138,29 @@ fn interpolate(t: &[f64], x: &[f64], at: &[f64]) -> Vec<f64> {
 
 /// Value and half curvature at t[0] of a least-squares quadratic over the first `n` samples.
 fn end_quadratic(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64)> {
+    let (beta, _, _) = leading_quadratic(t, x, n)?;
+    (beta[0].is_finite() && beta[2].is_finite()).then_some((beta[0], beta[2]))
+}
+
+/// The least-squares quadratic in t − t[0] over the first `n` samples: its coefficients, the
+/// inverse of the normal matrix and the residual's variance; None with fewer than 4 samples.
+fn leading_quadratic(t: &[f64], x: &[f64], n: usize) -> Option<(DVector<f64>, DMatrix<f64>, f64)> {
     if n < 4 || n > t.len() {
         return None;
     }
     let a = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
-    let beta = spd_inverse(&(a.transpose() * &a)) * (a.transpose() * DVector::from_column_slice(&x[..n]));
-    (beta[0].is_finite() && beta[2].is_finite()).then_some((beta[0], beta[2]))
+    let y = DVector::from_column_slice(&x[..n]);
+    let ainv = spd_inverse(&(a.transpose() * &a));
+    let beta = &ainv * (a.transpose() * &y);
+    let sigma2 = (&y - &a * &beta).norm_squared() / (n - 3).max(1) as f64;
+    Some((beta, ainv, sigma2))
+}
+
+/// Whether a signal carries no noise: its second-difference noise below 1e-12 of its swing (a
+/// simulation's output; a smoothing or band limit has nothing to take out of it).
+pub fn noise_free(x: &[f64]) -> bool {
+    let swing = x.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(f64::MIN_POSITIVE);
+    second_difference_noise(x) <= 1e-12 * swing
 }
 
 /// How far above white noise the motor angle's spectrum must stand, as variance above a frequency,
@@ -182,12 +203,10 @@ pub fn band_limited(t: &[f64], x: &[f64], most_hz: Option<f64>) -> Option<(Vec<f
     let nyquist = freq(bins - 1);
     // each one-sided bin's share of the variance (Parseval over the padded length)
     let share = |k: usize| if k == 0 || k == bins - 1 { 1.0 } else { 2.0 } * buf[k].norm_sqr() / (n_u * size) as f64;
-    let sigma2 = second_difference_noise(x).powi(2);
-    let swing = x.iter().fold(0.0f64, |a, &b| a.max(b.abs())).max(f64::MIN_POSITIVE);
-    if sigma2.sqrt() <= 1e-12 * swing {
-        // a noise-free angle (a simulation's) has nothing to take out
+    if noise_free(x) {
         return Some((x.to_vec(), nyquist));
     }
+    let sigma2 = second_difference_noise(x).powi(2);
     // the variance above each bin, and the lowest bin above which it is noise's
     let mut above = vec![0.0; bins + 1];
     for k in (0..bins).rev() {
@@ -373,14 +392,7 @@ pub fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
 /// Slope at t[0] of a least-squares quadratic over the first `n` samples, with its standard error
 /// and the fit's residual rms; None with fewer than 4 samples.
 fn start_quadratic(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64, f64)> {
-    if n < 4 || n > t.len() {
-        return None;
-    }
-    let a = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
-    let y = DVector::from_column_slice(&x[..n]);
-    let ainv = spd_inverse(&(a.transpose() * &a));
-    let beta = &ainv * (a.transpose() * &y);
-    let sigma2 = (&y - &a * &beta).norm_squared() / (n - 3).max(1) as f64;
+    let (beta, ainv, sigma2) = leading_quadratic(t, x, n)?;
     Some((beta[1], (sigma2 * ainv[(1, 1)]).max(0.0).sqrt(), sigma2.sqrt()))
 }
 
