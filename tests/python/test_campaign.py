@@ -51,6 +51,26 @@ def test_the_ci_subset_is_fixed():
     assert all(campaign.draw(s)["samples"] <= campaign.CI_SAMPLES for s in seeds)
 
 
+def test_an_equivalent_form_counts_only_where_the_report_declares_it_and_it_is_the_truths_set():
+    found = [{"effect": "coulomb_friction", "parameters": {"torque_nm": 0.3}},
+             {"effect": "constant_load", "parameters": {"torque_nm": -0.1}}]
+    form = {"found": {"coulomb_friction": {"torque_nm": 0.3}, "constant_load": {"torque_nm": -0.1}},
+            "equivalent": {"asymmetric_friction": {"coulomb_positive": 0.4, "coulomb_negative": 0.2}}}
+    truth = {"asymmetric_friction": {}}
+    effects, equivalent = campaign.in_truths_form({"added_effects": found, "equivalent_forms": [form]}, truth)
+    assert equivalent and effects == form["equivalent"]
+    # undeclared, or declared for a set the truth is not: the found set is judged as it stands
+    effects, equivalent = campaign.in_truths_form({"added_effects": found, "equivalent_forms": []}, truth)
+    assert not equivalent and set(effects) == {"coulomb_friction", "constant_load"}
+    effects, equivalent = campaign.in_truths_form({"added_effects": found, "equivalent_forms": [form]},
+                                                  {"asymmetric_friction": {}, "gravity": {}})
+    assert not equivalent and set(effects) == {"coulomb_friction", "constant_load"}
+    # the truth's own form is preferred when it was found as such
+    effects, equivalent = campaign.in_truths_form({"added_effects": found, "equivalent_forms": [form]},
+                                                  {"coulomb_friction": {}, "constant_load": {}})
+    assert not equivalent
+
+
 # Rigs of the campaign that pass with today's loop (measured 2026-11-26; 18: a coarse encoder judged against the
 # truth's replay, 43: the moving starts after gaps fitted): a regression guard, not the
 # campaign's pass rate (which the benchmark reports).

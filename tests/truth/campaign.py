@@ -269,10 +269,27 @@ def final_rmse(report):
     return report["final"].get("rmse", report["final"].get("rmse_rad"))
 
 
+def in_truths_form(report, expected):
+    """The found effects {name: parameters}, read in the equivalent form the report declares
+    (`equivalent_forms`: sets the runs cannot tell apart) where that form is the truth's set, and
+    whether it was: judging which of two indistinguishable forms the truth happened to use would score
+    a coin. The parameters are then judged in the truth's form."""
+    found = {e["effect"]: e["parameters"] for e in report.get("added_effects", [])}
+    if set(found) == set(expected):
+        return found, False
+    for form in report.get("equivalent_forms", []):
+        if all(k in found for k in form["found"]):
+            other = {k: v for k, v in found.items() if k not in form["found"]}
+            other.update(form["equivalent"])
+            if set(other) == set(expected):
+                return other, True
+    return found, False
+
+
 def score(rig, report):
     """(passed, reasons) of one calibrated rig against its truth."""
     why = []
-    found = {e["effect"]: e["parameters"] for e in report.get("added_effects", [])}
+    found, rig["equivalent_form"] = in_truths_form(report, rig["expected"])
     ratio = final_rmse(report) / rig["floor"]
     if rig["outside"]:
         ok = report.get("unexplained") is True or ratio <= 1.2
@@ -364,6 +381,7 @@ def calibrate_and_score(rig, data, result, budget, scorer, replay_floor=None):
         passed, why = scorer(rig, report)
     return {"seed": rig["seed"], "class": rig["class"], "passed": passed, "why": why, "seconds": seconds,
             "ratio": final_rmse(report) / rig["floor"], "added": [e["effect"] for e in report["added_effects"]],
+            "equivalent_form": rig.get("equivalent_form", False),
             "expected": sorted(rig["expected"]), "rig": rig["rig"]}
 
 
@@ -416,7 +434,7 @@ def main(argv=None):
         for i, future in enumerate(futures):
             r = future.result()
             results.append(r)
-            mark = "pass" if r["passed"] else "FAIL"
+            mark = ("pass" if r["passed"] else "FAIL") + (" (in the truth's equivalent form)" if r.get("equivalent_form") else "")
             print(f"[{i + 1}/{len(seeds)}] seed {r['seed']} ({r['class']}): {mark} in {r['seconds']:.1f} s"
                   + ("" if r["passed"] else f": {'; '.join(r['why'])}"), flush=True)
             (a.out / "campaign.json").write_text(json.dumps({"seeds": seeds, "results": results}, indent=1) + "\n")
@@ -431,6 +449,9 @@ def main(argv=None):
     print(f"{'all':<26} {len(results):>4}  {n:>6}  {100 * n / len(results):5.1f} %")
     if inside:
         print(f"device rigs inside the library: {100 * sum(r['passed'] for r in inside) / len(inside):.1f} %")
+        equivalent = sum(r["passed"] and r.get("equivalent_form", False) for r in inside)
+        if equivalent:
+            print(f"  of which {equivalent} passed in the equivalent form of the truth's effects (equivalent_forms)")
     drive_results = [r for r in results if r["class"].startswith("drive")]
     if drive_results:
         print(f"drive rigs: {100 * sum(r['passed'] for r in drive_results) / len(drive_results):.1f} %")

@@ -726,6 +726,42 @@ pub fn equivalent_forms(added: &[Value]) -> Value {
             "note": note,
         }));
     }
+    // The same pair read the other way: symmetric friction Fc with a load L no larger is asymmetric
+    // friction of Fc − L forward and Fc + L back (a larger load would need a level < 0: friction that
+    // pushes, no form of friction), its viscous levels both the link damping's.
+    let find = |name: &str, key: &str| added.iter().find(|x| x["effect"] == name).and_then(|x| param(x, key));
+    let asymmetric = added.iter().any(|e| e["effect"] == "asymmetric_friction");
+    if let (false, Some(fc), Some(load)) =
+        (asymmetric, find("coulomb_friction", "torque_nm"), find("constant_load", "torque_nm"))
+    {
+        if load.abs() <= fc {
+            let viscous = find("link_damping", "damping_nms");
+            let (fp, fm, b) = (fc - load, fc + load, viscous.unwrap_or(0.0));
+            let mut found = json!({"coulomb_friction": {"torque_nm": fc}, "constant_load": {"torque_nm": load}});
+            if let Some(b) = viscous {
+                found["link_damping"] = json!({"damping_nms": b});
+            }
+            let note = format!(
+                "Equivalent form: symmetric Coulomb friction of {} N.m with a constant load of {} N.m on the link is, \
+                 while the link moves, asymmetric Coulomb friction of {} N.m forward and {} N.m back{}. The runs \
+                 cannot tell the two apart except at rest; the search kept the symmetric form with the load.",
+                short(fc),
+                short(load),
+                short(fp),
+                short(fm),
+                viscous.map_or(String::new(), |b| format!(
+                    ", its viscous levels both the link damping's {} N.m.s/rad",
+                    short(b)
+                ))
+            );
+            forms.push(json!({
+                "found": found,
+                "equivalent": {"asymmetric_friction": {"coulomb_positive": fp, "coulomb_negative": fm,
+                    "viscous_positive": b, "viscous_negative": b}},
+                "note": note,
+            }));
+        }
+    }
     Value::Array(forms)
 }
 
@@ -886,6 +922,28 @@ mod tests {
         assert!((f["equivalent"]["constant_load"]["torque_nm"].as_f64().unwrap() + 0.008).abs() < 1e-15);
         assert!(f["note"].as_str().unwrap().contains("constant load of -0.008"), "{}", f["note"]);
         assert_eq!(equivalent_forms(&added[1..]).as_array().unwrap().len(), 0);
+    }
+
+    #[test]
+    fn symmetric_friction_with_a_load_is_reported_with_its_asymmetric_form() {
+        let with = |load: f64, damping: Option<f64>| {
+            let mut added = vec![
+                json!({"effect": "coulomb_friction", "parameters": {"torque_nm": 0.04}}),
+                json!({"effect": "constant_load", "parameters": {"torque_nm": load}}),
+            ];
+            added.extend(damping.map(|b| json!({"effect": "link_damping", "parameters": {"damping_nms": b}})));
+            equivalent_forms(&added)
+        };
+        let forms = with(-0.01, Some(0.002));
+        let a = &forms[0]["equivalent"]["asymmetric_friction"];
+        // the inverse of the asymmetric form's map: F+ = c − L, F− = c + L
+        assert!((a["coulomb_positive"].as_f64().unwrap() - 0.05).abs() < 1e-15, "{a}");
+        assert!((a["coulomb_negative"].as_f64().unwrap() - 0.03).abs() < 1e-15, "{a}");
+        assert_eq!(a["viscous_positive"], 0.002);
+        assert_eq!(forms[0]["found"]["link_damping"]["damping_nms"], 0.002);
+        assert_eq!(with(0.01, None)[0]["equivalent"]["asymmetric_friction"]["viscous_negative"], 0.0);
+        // a load larger than the friction has no friction form: it would push
+        assert_eq!(with(0.05, None).as_array().unwrap().len(), 0);
     }
 
     use super::*;
