@@ -1690,9 +1690,16 @@ pub fn calibrate(
         &*h
     });
     let mut load_column = held.and_then(|h| diagnose_load_column(h, &baseline));
+    // the budget is a hard end for the search (the baseline alone may run past it), and lifted for
+    // the predictions that report the chosen model
+    let sim = prob.sim;
+    if let Some(end) = budget.end() {
+        sim.tighten_deadline(end);
+    }
     let rig =
         DriveRig { prob, held, inverse: &inverse, equation_error, held_scores: std::cell::RefCell::new(Vec::new()) };
     let found = super::stepwise::search(&rig, baseline.clone(), budget);
+    sim.clear_deadline();
     let current = found.model;
     let mut validation_sims = None;
     let validation = held.and_then(|h| {

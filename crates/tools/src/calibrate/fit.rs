@@ -167,6 +167,17 @@ impl Effect {
         }
     }
 
+    /// The lighter effect that does much of what this one does on runs that show little more of it,
+    /// with fewer parameters: a gravity whose link angle barely moves is a constant torque, and an
+    /// asymmetric friction whose viscous levels are alike is (Coulomb and link damping besides) a
+    /// constant load (the equivalent forms). The backward check tries it (`stepwise::Rig::lighter`).
+    pub fn lighter_form(self) -> Option<Effect> {
+        match self {
+            Effect::Gravity | Effect::AsymmetricFriction => Some(Effect::ConstantLoad),
+            _ => None,
+        }
+    }
+
     /// Internal parameters: (name, typical size used for difference steps, lower bound).
     /// Gravity is (a, b) = m g d (cos, sin) of the offset; the Maxwell time is fitted as ln λ.
     pub fn params(self) -> &'static [(&'static str, f64, Option<f64>)] {

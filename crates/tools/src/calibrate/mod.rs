@@ -236,9 +236,10 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
     calibrate_device(args, runs, held, &sim, t0).map_err(|e| over_budget(&sim, args, e))
 }
 
-/// The backstop past which every simulation fails: the search stops itself between refits when
-/// `--search-budget` runs out, and this bounds what a fit in progress (the baseline's included) may
-/// add to it: a quarter of the budget, at least 10 s.
+/// The backstop past which every simulation fails while the baseline is fitted: the first model to
+/// report may take a quarter of `--search-budget` more (at least 10 s); once it is in, the budget
+/// itself is the deadline (`search::calibrate`, `drive::calibrate`), and a fit in progress stops at
+/// its best so far.
 fn hard_deadline(t0: std::time::Instant, budget: f64) -> std::time::Instant {
     let seconds = if budget.is_finite() && budget >= 0.0 { budget + (0.25 * budget).max(10.0) } else { 1e9 };
     t0 + std::time::Duration::from_secs_f64(seconds.min(1e9))
@@ -252,8 +253,8 @@ fn over_budget(
 ) -> Box<dyn std::error::Error> {
     if sim.past_deadline() {
         format!(
-            "the calibration ran past its time budget (--search-budget {} s, plus a quarter for the fit in progress) \
-             before it had a model to report ({e}); nothing was written: raise --search-budget, or give fewer or \
+            "the calibration ran past its time budget (--search-budget {} s, plus a quarter for the baseline) before it \
+             had a model to report ({e}); nothing was written: raise --search-budget, or give fewer or \
              shorter runs",
             args.search_budget
         )
@@ -278,7 +279,7 @@ fn calibrate_device(
     let laws = search::damping_laws(&prob);
     // the black-box references need no FMU: computed beside the search
     let groups = prob.group.clone();
-    let budget = stepwise::Budget::seconds(args.search_budget);
+    let budget = stepwise::Budget::since(t0, args.search_budget);
     let (outcome, references) = std::thread::scope(|scope| {
         let refs = scope.spawn(|| reference::black_box(&runs, &groups));
         (search::calibrate(&mut prob, &laws, &budget), refs.join())
@@ -294,29 +295,12 @@ fn calibrate_device(
             held_out_groups(&held, &temperatures),
         )
     });
-    // One frequency per temperature cannot tell viscous from hysteretic damping (identical fits,
-    // identical in-sample predictions). Held-out runs at other frequencies can, but they judge the
-    // model and never choose it: their verdict is reported, the law stays viscous.
-    if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.sinusoidal().iter().all(|&s| s)) {
-        let mut other = outcome.final_fit.spec.clone();
-        other.law = fit::DampingLaw::Hysteretic;
-        let sse = |spec: &fit::ModelSpec| {
-            h.outputs(spec, &outcome.final_fit.p).map_or(f64::INFINITY, |o| h.residual(&o).iter().map(|e| e * e).sum())
-        };
-        let (v, hy) = (sse(&outcome.final_fit.spec), sse(&other));
-        notes.push(format!(
-            "the fitting runs have one frequency per temperature, so the damping law cannot be chosen from them; the \
-             held-out runs judge it (SSE viscous {v:.4e}, hysteretic {hy:.4e}: they favour {}), but do not choose it: \
-             add runs at a second frequency to the fitting set",
-            if hy < v { "hysteretic" } else { "viscous" }
-        ));
-    }
     // The held-out check that may drop the added effects (issue 10, item 5) is a blocked fold on
     // the fitting runs (fitted on the first half of every run, scored on the second); --validate
     // runs are only scored.
     // The fold is two refits and more: left out where it would end past the budget (or is cut off
     // by it), and the search's model stands.
-    let fold = (!budget.spent()).then(|| {
+    let fold = budget.affords(2.0).then(|| {
         let base = budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.baseline));
         (base, budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.final_fit)))
     });
@@ -375,6 +359,25 @@ fn calibrate_device(
         outcome.final_signatures = sig;
         outcome.unexplained = !outcome.final_signatures.white();
         held_final = rmse;
+    }
+    // the model is chosen: what follows only reports it (the validation runs, the plots)
+    sim.clear_deadline();
+    // One frequency per temperature cannot tell viscous from hysteretic damping (identical fits,
+    // identical in-sample predictions). Held-out runs at other frequencies can, but they judge the
+    // model and never choose it: their verdict is reported, the law stays viscous.
+    if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.sinusoidal().iter().all(|&s| s)) {
+        let mut other = outcome.final_fit.spec.clone();
+        other.law = fit::DampingLaw::Hysteretic;
+        let sse = |spec: &fit::ModelSpec| {
+            h.outputs(spec, &outcome.final_fit.p).map_or(f64::INFINITY, |o| h.residual(&o).iter().map(|e| e * e).sum())
+        };
+        let (v, hy) = (sse(&outcome.final_fit.spec), sse(&other));
+        notes.push(format!(
+            "the fitting runs have one frequency per temperature, so the damping law cannot be chosen from them; the \
+             held-out runs judge it (SSE viscous {v:.4e}, hysteretic {hy:.4e}: they favour {}), but do not choose it: \
+             add runs at a second frequency to the fitting set",
+            if hy < v { "hysteretic" } else { "viscous" }
+        ));
     }
     let reverted = !dropped.is_empty();
     let seconds = t0.elapsed().as_secs_f64();
@@ -540,7 +543,7 @@ fn calibrate_drive_with(
     } else {
         Some(drive::DriveProblem::new(sim, &held, held_out_groups(&held, &temperatures), temperatures.len()))
     };
-    let budget = stepwise::Budget::seconds(args.search_budget);
+    let budget = stepwise::Budget::since(t0, args.search_budget);
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut(), &budget)?;
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);

@@ -1075,6 +1075,30 @@ impl Rig for DeviceRig<'_, '_> {
         let fit = levenberg_marquardt(self.prob, m.fit.spec, m.fit.p, MAX_ITERATIONS).ok()?;
         Some(self.judged(self.prob, fit))
     }
+    fn lighter(&self, m: &Judged, e: Effect) -> Option<(Effect, Judged)> {
+        let lighter = e.lighter_form()?;
+        let current = &m.fit;
+        if current.spec.effects.contains(&lighter) {
+            return None;
+        }
+        let mut effects: Vec<Effect> = current.spec.effects.iter().copied().filter(|&x| x != e).collect();
+        effects.push(lighter);
+        let spec = ModelSpec { effects, law: current.spec.law, springs: current.spec.springs, elasto_backlash: false };
+        let mut p = current.p[..2 * self.prob.n_groups].to_vec();
+        // the constant part of what the heavier effect did: gravity's torque at angle 0 is ∓ m g d sin φ,
+        // asymmetric friction's Coulomb asymmetry a is a load of ∓ a; both signs are tried, and none
+        let mut guess = 0.0;
+        for (o, x) in current.spec.offsets(self.prob.n_groups) {
+            if x == e {
+                guess = if e == Effect::Gravity { current.p[o + 1] } else { current.p[o] };
+            } else {
+                p.extend_from_slice(&current.p[o..o + x.params().len()]);
+            }
+        }
+        let starts = [guess, -guess, 0.0].map(|g| p.iter().copied().chain([g]).collect()).to_vec();
+        let fit = fit_from_best(self.prob, spec, starts, SCREEN_ITERATIONS).ok()?;
+        Some((lighter, self.judged(self.prob, fit)))
+    }
 }
 
 pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Result<Outcome, String> {
@@ -1090,6 +1114,11 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     let baseline = fit_initial_speeds(prob, resolved);
     debug(format_args!("initial speeds: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline_signatures = signatures(prob, &baseline);
+    // With a model to report, the budget is a hard end: a fit in progress when it runs out stops
+    // at its best so far (the baseline alone may run past it, to the backstop of `hard_deadline`).
+    if let Some(end) = budget.end() {
+        prob.sim.tighten_deadline(end);
+    }
     let rig = DeviceRig {
         prob,
         laws,

@@ -235,6 +235,17 @@ impl Simulator {
         *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = Some(at);
     }
 
+    /// Moves the deadline to `at` where that is earlier (never later).
+    pub fn tighten_deadline(&self, at: std::time::Instant) {
+        let mut d = self.deadline.lock().unwrap_or_else(|p| p.into_inner());
+        *d = Some(d.map_or(at, |d| d.min(at)));
+    }
+
+    /// Lifts the deadline: the simulations that write the report of a model already chosen.
+    pub fn clear_deadline(&self) {
+        *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+
     pub fn past_deadline(&self) -> bool {
         self.deadline.lock().unwrap_or_else(|p| p.into_inner()).is_some_and(|d| std::time::Instant::now() >= d)
     }

@@ -62,15 +62,24 @@ pub struct Budget {
 /// The share of the budget the search leaves to what follows it (the final model's starts and law,
 /// the held-out fold: each a refit or two).
 pub const FINISH_SHARE: f64 = 0.2;
+/// The share of the budget left after the last fit for writing the report and its plots.
+pub const REPORT_SHARE: f64 = 0.02;
 
 impl Budget {
     pub fn seconds(seconds: f64) -> Budget {
-        Budget {
-            start: std::time::Instant::now(),
-            seconds,
-            exhausted: std::cell::Cell::new(None),
-            longest: std::cell::Cell::new(0.0),
-        }
+        Budget::since(std::time::Instant::now(), seconds)
+    }
+    /// A budget counted from `start` (the command's start: reading the runs and the baseline count).
+    pub fn since(start: std::time::Instant, seconds: f64) -> Budget {
+        Budget { start, seconds, exhausted: std::cell::Cell::new(None), longest: std::cell::Cell::new(0.0) }
+    }
+    /// The instant the fits must end (None for a budget too large to name one): the budget less
+    /// [`REPORT_SHARE`] of it, which the report and its plots take after the last fit.
+    pub fn end(&self) -> Option<std::time::Instant> {
+        let seconds = (1.0 - REPORT_SHARE) * self.seconds;
+        (seconds.is_finite() && seconds >= 0.0)
+            .then(|| self.start.checked_add(std::time::Duration::from_secs_f64(seconds.min(1e9))))
+            .flatten()
     }
     /// Whether the search may go on to `next`: the longest refit so far must still end within the
     /// search's share of the budget. Records the first refusal.
@@ -251,6 +260,12 @@ pub trait Rig {
     fn without(&self, m: &Self::Model, e: Self::Effect) -> Option<Self::Model>;
     /// A screening refit run to convergence on every sample.
     fn polish(&self, m: Self::Model) -> Option<Self::Model>;
+    /// `m` with effect `e` replaced by a lighter form that does much the same on these runs (fewer
+    /// parameters: a constant load for a gravity whose angle barely moves), a screening refit, with
+    /// the effect that replaced it; None where `e` has no lighter form.
+    fn lighter(&self, _m: &Self::Model, _e: Self::Effect) -> Option<(Self::Effect, Self::Model)> {
+        None
+    }
 }
 
 /// What the search found.
@@ -267,8 +282,9 @@ pub struct Record<E, S, D> {
     pub rounds: Vec<Round<E, S, D>>,
     /// Effect sets refitted at once: the rig's combinations and pairs of candidates.
     pub combinations: Vec<Attempt<E, D>>,
-    /// Effects removed again by the backward check: (effect, BIC with it, BIC without).
-    pub pruned: Vec<(E, f64, f64)>,
+    /// Effects removed again by the backward check: (effect, the lighter form that took its place if
+    /// any, BIC with it, BIC without).
+    pub pruned: Vec<(E, Option<E>, f64, f64)>,
     /// Set when the budget ran out: (seconds allowed, what was skipped).
     pub budget_exhausted: Option<(f64, &'static str)>,
 }
@@ -405,30 +421,34 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         }
     }
     // Backward check: an effect added early may be redundant once a later one is in (a Maxwell
-    // branch standing in for link damping). Any whose removal does not cost BIC_MARGIN goes.
+    // branch standing in for link damping). Any whose removal does not cost BIC_MARGIN goes, and
+    // any whose lighter form does as well (within BIC_MARGIN) gives way to it: the minimal set.
     let mut pruned = Vec::new();
-    let mut changed = rig.effects(&current).len() > 1;
+    // (a lone effect earned its place against the start already: only its lighter form is tried)
+    let mut changed = !rig.effects(&current).is_empty();
     while changed && budget.allows("the backward check") {
         changed = false;
         for e in rig.effects(&current) {
             // far beyond the margin the effect is plainly needed: a refit without it would only
-            // wander to a bound, where every simulation is slow
-            if rig.removal_delta_bic(&current, e) > PRUNE_SKIP * BIC_MARGIN {
-                continue;
-            }
+            // wander to a bound, where every simulation is slow (its lighter form may still do)
+            let needed =
+                rig.effects(&current).len() < 2 || rig.removal_delta_bic(&current, e) > PRUNE_SKIP * BIC_MARGIN;
             if !budget.allows("the rest of the backward check") {
                 break;
             }
-            let Some(screen) = budget.timed(|| rig.without(&current, e)) else { continue };
-            if rig.bic(&screen) >= rig.bic(&current) + BIC_MARGIN {
-                continue;
-            }
+            let removal = if needed { None } else { budget.timed(|| rig.without(&current, e)).map(|m| (None, m)) };
+            let removal = removal.filter(|(_, m)| rig.bic(m) < rig.bic(&current) + BIC_MARGIN);
+            let step = removal.or_else(|| {
+                let (lighter, m) = budget.timed(|| rig.lighter(&current, e))?;
+                (rig.bic(&m) < rig.bic(&current) + BIC_MARGIN).then_some((Some(lighter), m))
+            });
+            let Some((lighter, screen)) = step else { continue };
             let Some(refit) = budget.timed(|| rig.polish(screen)) else { continue };
             if rig.bic(&refit) < rig.bic(&current) + BIC_MARGIN {
-                pruned.push((e, rig.bic(&current), rig.bic(&refit)));
+                pruned.push((e, lighter, rig.bic(&current), rig.bic(&refit)));
                 current = refit;
                 path.push(current.clone());
-                changed = rig.effects(&current).len() > 1;
+                changed = !rig.effects(&current).is_empty();
                 break;
             }
         }
@@ -481,7 +501,13 @@ pub fn record_json<E: Copy, S, D>(
     json!({
         "rounds": rounds,
         "combinations": s.combinations.iter().map(attempt).collect::<Vec<_>>(),
-        "pruned_effects": s.pruned.iter().map(|p| json!({"effect": name(p.0), "bic_with": p.1, "bic_without": p.2})).collect::<Vec<_>>(),
+        "pruned_effects": s.pruned.iter().map(|p| {
+            let mut j = json!({"effect": name(p.0), "bic_with": p.2, "bic_without": p.3});
+            if let Some(l) = p.1 {
+                j["replaced_by"] = json!(name(l));
+            }
+            j
+        }).collect::<Vec<_>>(),
         "search_budget": s.budget_exhausted.map(|(seconds, what)| json!({"seconds": seconds, "exhausted": true,
             "skipped": what, "note": "the search stopped when its time budget ran out (--search-budget) and kept the best model found so far"})),
     })
@@ -539,12 +565,22 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
         s += "\n";
     }
     for p in record["pruned_effects"].as_array().into_iter().flatten() {
-        s += &format!(
-            "Backward check: **{}** removed again (BIC {} with it, {} without: redundant once the later effects were in).\n\n",
-            p["effect"].as_str().unwrap_or(""),
-            f(&p["bic_with"]),
-            f(&p["bic_without"])
-        );
+        s += &match p["replaced_by"].as_str() {
+            Some(l) => format!(
+                "Backward check: **{}** gave way to its lighter form **{l}** (BIC {} with it, {} with {l}: the runs \
+                 show no more of it than that).\n\n",
+                p["effect"].as_str().unwrap_or(""),
+                f(&p["bic_with"]),
+                f(&p["bic_without"])
+            ),
+            None => format!(
+                "Backward check: **{}** removed again (BIC {} with it, {} without: redundant once the later effects \
+                 were in).\n\n",
+                p["effect"].as_str().unwrap_or(""),
+                f(&p["bic_with"]),
+                f(&p["bic_without"])
+            ),
+        };
     }
     s
 }
@@ -579,6 +615,8 @@ mod tests {
         x: Vec<Vec<f64>>,
         y: Vec<f64>,
         noise_var: f64,
+        /// (effect, its lighter form)
+        lighter: Option<(usize, usize)>,
     }
 
     impl Linear {
@@ -676,6 +714,10 @@ mod tests {
         fn polish(&self, m: Model) -> Option<Model> {
             Some(m)
         }
+        fn lighter(&self, m: &Model, e: usize) -> Option<(usize, Model)> {
+            let (_, l) = self.lighter.filter(|&(h, l)| h == e && !m.cols.contains(&l))?;
+            Some((l, self.fit(m.cols.iter().map(|&c| if c == e { l } else { c }).collect())))
+        }
     }
 
     const N: usize = 2000;
@@ -684,7 +726,7 @@ mod tests {
     fn rig(x: Vec<Vec<f64>>, y: impl Fn(usize) -> f64) -> (Linear, Model) {
         let e = normals(99, N);
         let y: Vec<f64> = (0..N).map(|i| y(i) + NOISE * e[i]).collect();
-        let r = Linear { x, y, noise_var: NOISE * NOISE };
+        let r = Linear { x, y, noise_var: NOISE * NOISE, lighter: None };
         let start = r.fit(vec![]);
         (r, start)
     }
@@ -737,6 +779,28 @@ mod tests {
     }
 
     #[test]
+    fn an_effect_gives_way_to_its_lighter_form_only_where_that_does_as_well() {
+        // x0 is the truth's column; x1, "lighter", follows it to a fiftieth of the noise (a gravity
+        // whose angle barely moves against a constant load), x2 does not follow it at all
+        let (x0, z, x2) = (normals(41, N), normals(42, N), normals(43, N));
+        let x1: Vec<f64> = (0..N).map(|i| x0[i] + 0.02 * NOISE * z[i]).collect();
+        let x = vec![x0.clone(), x1, x2];
+        let (mut r, _) = rig(x, |i| x0[i]);
+        r.lighter = Some((0, 1));
+        // started from the truth's column: the backward check alone decides
+        let start = r.fit(vec![0]);
+        let s = search(&r, start.clone(), &Budget::seconds(60.0));
+        assert_eq!(s.model.cols, vec![1]);
+        assert_eq!(s.record.pruned.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(), vec![(0, Some(1))]);
+        let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
+        assert_eq!(j["pruned_effects"][0]["replaced_by"], "x1");
+        r.lighter = Some((0, 2));
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(s.model.cols, vec![0], "a lighter form that does worse leaves the effect be");
+        assert!(s.record.pruned.is_empty());
+    }
+
+    #[test]
     fn a_search_out_of_budget_keeps_its_start_and_says_what_it_skipped() {
         let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 31, N)).collect();
         let (r, start) = rig(x.clone(), |i| x[0][i]);
@@ -760,5 +824,16 @@ mod tests {
         assert!(!budget.spent(), "what follows the search still has its share");
         budget.longest.set(100.0 + 1.0);
         assert!(budget.spent(), "a step as long as the whole budget would overrun it");
+    }
+
+    #[test]
+    fn the_fits_end_counts_from_the_commands_start_and_leaves_the_report_its_share() {
+        let t0 = std::time::Instant::now();
+        let budget = Budget::since(t0, 100.0);
+        let end = budget.end().expect("a finite budget has an end");
+        assert!((end.duration_since(t0).as_secs_f64() - (1.0 - REPORT_SHARE) * 100.0).abs() < 1e-9);
+        assert!(Budget::since(t0, f64::INFINITY).end().is_none());
+        assert!(Budget::since(t0, f64::NAN).end().is_none());
+        assert_eq!(Budget::since(t0, 0.0).end(), Some(t0));
     }
 }
