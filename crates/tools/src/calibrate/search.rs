@@ -263,6 +263,51 @@ pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> 
     ranked.into_iter().take(count).map(effects_of).collect()
 }
 
+/// The rms over every sample of effect `e`'s linearised share J_e·p_e of the output: its levels
+/// only (a log-parameter only shapes one: a Stribeck speed, a Maxwell time). None where the fit
+/// has no Jacobian to tell.
+fn effect_share(fit: &Fit, n_groups: usize, e: Effect) -> Option<f64> {
+    let cols: Vec<usize> = fit
+        .spec
+        .offsets(n_groups)
+        .into_iter()
+        .filter(|&(_, x)| x == e)
+        .flat_map(|(o, x)| {
+            x.params().iter().enumerate().filter(|(_, q)| !q.0.starts_with("ln_")).map(move |(k, _)| o + k)
+        })
+        .collect();
+    let (rows, columns) = fit.jacobian.shape();
+    if cols.is_empty() || rows == 0 || columns != fit.p.len() {
+        return None;
+    }
+    let share =
+        (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum::<f64>().powi(2)).sum::<f64>()
+            / rows as f64;
+    Some(share.sqrt())
+}
+
+/// The effects of `fit` no sample can show: their share of the output below the noise floor.
+fn below_noise(fit: &Fit, n_groups: usize, floor: f64) -> Vec<Effect> {
+    fit.spec.effects.iter().copied().filter(|&e| effect_share(fit, n_groups, e).is_some_and(|s| s <= floor)).collect()
+}
+
+/// `fit`'s model and parameters without the effects `drop` (the backlash law re-chosen later).
+fn spec_without(fit: &Fit, n_groups: usize, drop: &[Effect]) -> (ModelSpec, Vec<f64>) {
+    let spec = ModelSpec {
+        effects: fit.spec.effects.iter().copied().filter(|x| !drop.contains(x)).collect(),
+        law: fit.spec.law,
+        springs: fit.spec.springs,
+        elasto_backlash: false,
+    };
+    let mut p = fit.p[..2 * n_groups].to_vec();
+    for (o, x) in fit.spec.offsets(n_groups) {
+        if !drop.contains(&x) {
+            p.extend_from_slice(&fit.p[o..o + x.params().len()]);
+        }
+    }
+    (spec, p)
+}
+
 /// The equation error's combinations refitted at once through the FMU: their linear effects with
 /// the current fit's other effects (backlash, thermal lag, ...) at their values, from the equation
 /// error's transmission, the current one and the closed form, under every allowed structure.
@@ -389,11 +434,19 @@ fn try_combination(
     if !attempt.verdict.keep {
         return Some((attempt, None));
     }
-    let done = if screen.is_some() {
-        levenberg_marquardt(prob, screened.spec.clone(), screened.p.clone(), MAX_ITERATIONS).ok()?
+    // an effect the screening shows below the noise goes before the long fit on every sample (the
+    // combination is judged without it; the backward check would drop it, if the budget let it)
+    let hidden = below_noise(&screened, prob.n_groups, screened_sig.noise_floor);
+    if !hidden.is_empty() {
+        debug(format_args!("combination: {hidden:?} below the noise floor, refitted without"));
+    }
+    let done = if screen.is_some() || !hidden.is_empty() {
+        let (spec, p) = spec_without(&screened, prob.n_groups, &hidden);
+        levenberg_marquardt(prob, spec, p, MAX_ITERATIONS).ok()?
     } else {
         screened
     };
+    attempt.effects = done.spec.effects.clone();
     let s = signatures(prob, &done);
     attempt.verdict = verdict(current, sig, &done, &s);
     let accepted = attempt.verdict.keep.then_some((done, s));
@@ -1055,25 +1108,16 @@ impl Rig for DeviceRig<'_, '_> {
         super::stepwise::removal_delta_bic(&m.fit.jacobian, &m.fit.p, m.fit.sse, &idx)
     }
     fn without(&self, m: &Judged, e: Effect) -> Option<Judged> {
-        let current = &m.fit;
-        let spec = ModelSpec {
-            effects: current.spec.effects.iter().copied().filter(|&x| x != e).collect(),
-            law: current.spec.law,
-            springs: current.spec.springs,
-            elasto_backlash: false,
-        };
-        let mut p = current.p[..2 * self.prob.n_groups].to_vec();
-        for (o, x) in current.spec.offsets(self.prob.n_groups) {
-            if x != e {
-                p.extend_from_slice(&current.p[o..o + x.params().len()]);
-            }
-        }
+        let (spec, p) = spec_without(&m.fit, self.prob.n_groups, &[e]);
         let fit = levenberg_marquardt(self.prob, spec, p, SCREEN_ITERATIONS).ok()?;
         Some(self.judged(self.prob, fit))
     }
     fn polish(&self, m: Judged) -> Option<Judged> {
         let fit = levenberg_marquardt(self.prob, m.fit.spec, m.fit.p, MAX_ITERATIONS).ok()?;
         Some(self.judged(self.prob, fit))
+    }
+    fn visible(&self, m: &Judged, e: Effect) -> bool {
+        effect_share(&m.fit, self.prob.n_groups, e).is_none_or(|share| share > m.sig.noise_floor)
     }
     fn lighter(&self, m: &Judged, e: Effect) -> Option<(Effect, Judged)> {
         let lighter = e.lighter_form()?;

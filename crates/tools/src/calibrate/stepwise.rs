@@ -260,6 +260,12 @@ pub trait Rig {
     fn without(&self, m: &Self::Model, e: Self::Effect) -> Option<Self::Model>;
     /// A screening refit run to convergence on every sample.
     fn polish(&self, m: Self::Model) -> Option<Self::Model>;
+    /// Whether effect `e` of `m` moves the measured output by more than the noise can hide: one
+    /// below it may still lower the BIC over many samples, but no sample shows it (issue 28: an
+    /// effect stays only where both hold).
+    fn visible(&self, _m: &Self::Model, _e: Self::Effect) -> bool {
+        true
+    }
     /// `m` with effect `e` replaced by a lighter form that does much the same on these runs (fewer
     /// parameters: a constant load for a gravity whose angle barely moves), a screening refit, with
     /// the effect that replaced it; None where `e` has no lighter form.
@@ -282,11 +288,68 @@ pub struct Record<E, S, D> {
     pub rounds: Vec<Round<E, S, D>>,
     /// Effect sets refitted at once: the rig's combinations and pairs of candidates.
     pub combinations: Vec<Attempt<E, D>>,
-    /// Effects removed again by the backward check: (effect, the lighter form that took its place if
-    /// any, BIC with it, BIC without).
-    pub pruned: Vec<(E, Option<E>, f64, f64)>,
+    /// Effects removed again by the backward check.
+    pub pruned: Vec<Pruned<E>>,
     /// Set when the budget ran out: (seconds allowed, what was skipped).
     pub budget_exhausted: Option<(f64, &'static str)>,
+}
+
+/// An effect the backward check removed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Pruned<E> {
+    pub effect: E,
+    /// The lighter form that took its place, if any.
+    pub replaced_by: Option<E>,
+    pub bic_with: f64,
+    /// BIC without it (with its lighter form, where one replaced it).
+    pub bic_without: f64,
+    /// Removed because no sample could show it (`Rig::visible`), whatever the BIC said.
+    pub below_noise: bool,
+}
+
+/// One step of the backward check on `current`: the first effect that goes (or gives way to its
+/// lighter form), refitted without it; with `below_noise_only`, only an effect no sample can show.
+fn backward_step<R: Rig>(
+    rig: &R,
+    current: &R::Model,
+    budget: &Budget,
+    below_noise_only: bool,
+) -> Option<(Pruned<R::Effect>, R::Model)> {
+    for e in rig.effects(current) {
+        let below_noise = !rig.visible(current, e);
+        if below_noise_only && !below_noise {
+            continue;
+        }
+        // far beyond the margin the effect is plainly needed: a refit without it would only
+        // wander to a bound, where every simulation is slow (its lighter form may still do)
+        let needed = !below_noise
+            && (rig.effects(current).len() < 2 || rig.removal_delta_bic(current, e) > PRUNE_SKIP * BIC_MARGIN);
+        if !budget.allows("the rest of the backward check") {
+            return None;
+        }
+        let removal = if needed { None } else { budget.timed(|| rig.without(current, e)).map(|m| (None, m)) };
+        let removal = removal.filter(|(_, m)| below_noise || rig.bic(m) < rig.bic(current) + BIC_MARGIN);
+        let step = removal.or_else(|| {
+            if below_noise_only {
+                return None;
+            }
+            let (lighter, m) = budget.timed(|| rig.lighter(current, e))?;
+            (rig.bic(&m) < rig.bic(current) + BIC_MARGIN).then_some((Some(lighter), m))
+        });
+        let Some((lighter, screen)) = step else { continue };
+        let Some(refit) = budget.timed(|| rig.polish(screen)) else { continue };
+        if below_noise || rig.bic(&refit) < rig.bic(current) + BIC_MARGIN {
+            let p = Pruned {
+                effect: e,
+                replaced_by: lighter,
+                bic_with: rig.bic(current),
+                bic_without: rig.bic(&refit),
+                below_noise: below_noise && lighter.is_none(),
+            };
+            return Some((p, refit));
+        }
+    }
+    None
 }
 
 /// The search from `start` (the rig's baseline).
@@ -296,6 +359,18 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
     let mut path = vec![current.clone()];
     let mut rounds: Vec<Round<R::Effect, R::State, R::Detail>> = Vec::new();
     let mut combinations: Vec<Attempt<R::Effect, R::Detail>> = Vec::new();
+    let mut pruned = Vec::new();
+    // An effect no sample can show goes as soon as a step brings it in: left to the backward check,
+    // a search the budget stops would report it (campaign rig 8: a 9 µrad backlash beside the
+    // truth's asymmetric friction, on a 1.9 mrad encoder).
+    let below_noise_gone = |current: &mut R::Model, path: &mut Vec<R::Model>, pruned: &mut Vec<Pruned<R::Effect>>| {
+        while let Some((p, m)) = backward_step(rig, current, budget, true) {
+            pruned.push(p);
+            *current = m;
+            rig.moved_to(current);
+            path.push(current.clone());
+        }
+    };
     // Several effects at once first: one at a time, each would be judged against a baseline that
     // absorbed the others (and a greedy first step can take a wrong effect that mimics two, such as
     // gravity at an offset for asymmetric friction, and never leave it).
@@ -306,6 +381,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 current = m;
                 rig.moved_to(&current);
                 path.push(current.clone());
+                below_noise_gone(&mut current, &mut path, &mut pruned);
             }
         }
     }
@@ -395,6 +471,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     current = rig.adopt(f, round_number);
                     rig.moved_to(&current);
                     path.push(current.clone());
+                    below_noise_gone(&mut current, &mut path, &mut pruned);
                 }
                 None => break,
             }
@@ -412,6 +489,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 current = m;
                 rig.moved_to(&current);
                 path.push(current.clone());
+                below_noise_gone(&mut current, &mut path, &mut pruned);
             }
             Some((attempt, None)) => {
                 combinations.push(attempt);
@@ -421,37 +499,15 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         }
     }
     // Backward check: an effect added early may be redundant once a later one is in (a Maxwell
-    // branch standing in for link damping). Any whose removal does not cost BIC_MARGIN goes, and
-    // any whose lighter form does as well (within BIC_MARGIN) gives way to it: the minimal set.
-    let mut pruned = Vec::new();
+    // branch standing in for link damping). Any whose removal does not cost BIC_MARGIN goes, any
+    // no sample can show goes whatever the BIC, and any whose lighter form does as well (within
+    // BIC_MARGIN) gives way to it: the minimal set.
     // (a lone effect earned its place against the start already: only its lighter form is tried)
-    let mut changed = !rig.effects(&current).is_empty();
-    while changed && budget.allows("the backward check") {
-        changed = false;
-        for e in rig.effects(&current) {
-            // far beyond the margin the effect is plainly needed: a refit without it would only
-            // wander to a bound, where every simulation is slow (its lighter form may still do)
-            let needed =
-                rig.effects(&current).len() < 2 || rig.removal_delta_bic(&current, e) > PRUNE_SKIP * BIC_MARGIN;
-            if !budget.allows("the rest of the backward check") {
-                break;
-            }
-            let removal = if needed { None } else { budget.timed(|| rig.without(&current, e)).map(|m| (None, m)) };
-            let removal = removal.filter(|(_, m)| rig.bic(m) < rig.bic(&current) + BIC_MARGIN);
-            let step = removal.or_else(|| {
-                let (lighter, m) = budget.timed(|| rig.lighter(&current, e))?;
-                (rig.bic(&m) < rig.bic(&current) + BIC_MARGIN).then_some((Some(lighter), m))
-            });
-            let Some((lighter, screen)) = step else { continue };
-            let Some(refit) = budget.timed(|| rig.polish(screen)) else { continue };
-            if rig.bic(&refit) < rig.bic(&current) + BIC_MARGIN {
-                pruned.push((e, lighter, rig.bic(&current), rig.bic(&refit)));
-                current = refit;
-                path.push(current.clone());
-                changed = !rig.effects(&current).is_empty();
-                break;
-            }
-        }
+    while budget.allows("the backward check") {
+        let Some((p, m)) = backward_step(rig, &current, budget, false) else { break };
+        pruned.push(p);
+        current = m;
+        path.push(current.clone());
     }
     Search {
         model: current,
@@ -502,8 +558,9 @@ pub fn record_json<E: Copy, S, D>(
         "rounds": rounds,
         "combinations": s.combinations.iter().map(attempt).collect::<Vec<_>>(),
         "pruned_effects": s.pruned.iter().map(|p| {
-            let mut j = json!({"effect": name(p.0), "bic_with": p.2, "bic_without": p.3});
-            if let Some(l) = p.1 {
+            let mut j = json!({"effect": name(p.effect), "bic_with": p.bic_with, "bic_without": p.bic_without,
+                "below_noise": p.below_noise});
+            if let Some(l) = p.replaced_by {
                 j["replaced_by"] = json!(name(l));
             }
             j
@@ -566,6 +623,13 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
     }
     for p in record["pruned_effects"].as_array().into_iter().flatten() {
         s += &match p["replaced_by"].as_str() {
+            None if p["below_noise"] == true => format!(
+                "Backward check: **{}** removed again (BIC {} with it, {} without): it moves the link by less than \
+                 the noise floor, so no sample shows it.\n\n",
+                p["effect"].as_str().unwrap_or(""),
+                f(&p["bic_with"]),
+                f(&p["bic_without"])
+            ),
             Some(l) => format!(
                 "Backward check: **{}** gave way to its lighter form **{l}** (BIC {} with it, {} with {l}: the runs \
                  show no more of it than that).\n\n",
@@ -714,6 +778,11 @@ mod tests {
         fn polish(&self, m: Model) -> Option<Model> {
             Some(m)
         }
+        fn visible(&self, m: &Model, e: usize) -> bool {
+            let i = m.cols.iter().position(|&c| c == e).unwrap();
+            let share = self.x[e].iter().map(|x| (x * m.p[i]).powi(2)).sum::<f64>() / self.y.len() as f64;
+            share > self.noise_var
+        }
         fn lighter(&self, m: &Model, e: usize) -> Option<(usize, Model)> {
             let (_, l) = self.lighter.filter(|&(h, l)| h == e && !m.cols.contains(&l))?;
             Some((l, self.fit(m.cols.iter().map(|&c| if c == e { l } else { c }).collect())))
@@ -774,7 +843,7 @@ mod tests {
         let s = search(&r, start, &Budget::seconds(60.0));
         assert_eq!(s.record.rounds[0].candidates[0].effect, 2, "the stand-in ranks first");
         assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
-        assert_eq!(s.record.pruned.iter().map(|p| p.0).collect::<Vec<_>>(), vec![2]);
+        assert_eq!(s.record.pruned.iter().map(|p| p.effect).collect::<Vec<_>>(), vec![2]);
         assert_eq!(s.path.last().map(|m| sorted(m.cols.clone())), Some(vec![0, 1]));
     }
 
@@ -791,13 +860,28 @@ mod tests {
         let start = r.fit(vec![0]);
         let s = search(&r, start.clone(), &Budget::seconds(60.0));
         assert_eq!(s.model.cols, vec![1]);
-        assert_eq!(s.record.pruned.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(), vec![(0, Some(1))]);
+        assert_eq!(s.record.pruned.iter().map(|p| (p.effect, p.replaced_by)).collect::<Vec<_>>(), vec![(0, Some(1))]);
         let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
         assert_eq!(j["pruned_effects"][0]["replaced_by"], "x1");
         r.lighter = Some((0, 2));
         let s = search(&r, start, &Budget::seconds(60.0));
         assert_eq!(s.model.cols, vec![0], "a lighter form that does worse leaves the effect be");
         assert!(s.record.pruned.is_empty());
+    }
+
+    #[test]
+    fn an_effect_no_sample_can_show_goes_whatever_the_bic() {
+        // x1 at a third of the noise: over 2000 samples the BIC takes it, no single sample shows it
+        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 51, N)).collect();
+        let (r, _) = rig(x.clone(), |i| x[0][i] + 0.3 * NOISE * x[1][i]);
+        // started from the truth's columns: the backward check alone decides
+        let s = search(&r, r.fit(vec![0, 1]), &Budget::seconds(60.0));
+        let p = &s.record.pruned;
+        assert_eq!(p.iter().map(|p| (p.effect, p.below_noise)).collect::<Vec<_>>(), vec![(1, true)], "{p:?}");
+        assert!(p[0].bic_without > p[0].bic_with, "the BIC alone would have kept it");
+        assert_eq!(s.model.cols, vec![0]);
+        let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
+        assert_eq!(j["pruned_effects"][0]["below_noise"], true);
     }
 
     #[test]
