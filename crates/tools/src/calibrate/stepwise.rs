@@ -100,6 +100,10 @@ impl Budget {
         self.longest.set(self.longest.get().max(t.elapsed().as_secs_f64()));
         out
     }
+    /// Whether the fits' end ([`Budget::end`]) has passed.
+    pub fn past_end(&self) -> bool {
+        self.end().is_some_and(|end| std::time::Instant::now() >= end)
+    }
     /// Whether a step as long as the longest refit so far would end past the whole budget.
     pub fn spent(&self) -> bool {
         !self.affords(1.0)
@@ -324,7 +328,10 @@ fn backward_step<R: Rig>(
         // wander to a bound, where every simulation is slow (its lighter form may still do)
         let needed = !below_noise
             && (rig.effects(current).len() < 2 || rig.removal_delta_bic(current, e) > PRUNE_SKIP * BIC_MARGIN);
-        if !budget.allows("the rest of the backward check") {
+        // An effect no sample shows is dropped past the search's share of the budget too (its model
+        // is the current one less a level at or near nothing: a refit from there is short), up to
+        // the budget's hard end; the rest of the check keeps to the search's share.
+        if if below_noise_only { budget.past_end() } else { !budget.allows("the rest of the backward check") } {
             return None;
         }
         let removal = if needed { None } else { budget.timed(|| rig.without(current, e)).map(|m| (None, m)) };
