@@ -710,10 +710,7 @@ impl<'a> DriveProblem<'a> {
         if cols.is_empty() || rows == 0 {
             return true;
         }
-        let share: f64 =
-            (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum::<f64>().powi(2)).sum::<f64>()
-                / rows as f64;
-        share.sqrt() > self.position_noise
+        super::fit::linearised_share(&fit.jacobian, &fit.p, &cols) > self.position_noise
     }
 
     /// The declared inertia every run shares (None when any run leaves it to the fit).

@@ -1239,6 +1239,15 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
 /// Broyden updates in a row before the Jacobian is differenced again.
 pub const MAX_BROYDEN_UPDATES: usize = 3;
 
+/// The rms over the Jacobian's rows of the linearised share Σ_j J_ij p_j of the parameters `cols`:
+/// how far they move the output (an effect's levels, judged against the noise).
+pub fn linearised_share(jacobian: &DMatrix<f64>, p: &[f64], cols: &[usize]) -> f64 {
+    let rows = jacobian.nrows().max(1);
+    let sum: f64 =
+        (0..jacobian.nrows()).map(|i| cols.iter().map(|&j| jacobian[(i, j)] * p[j]).sum::<f64>().powi(2)).sum();
+    (sum / rows as f64).sqrt()
+}
+
 pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_iter: usize) -> Result<Fit, String> {
     let (lower, upper) = prob.bounds(&spec);
     let typical = spec.typical(prob.n_groups);

@@ -280,10 +280,7 @@ fn effect_share(fit: &Fit, n_groups: usize, e: Effect) -> Option<f64> {
     if cols.is_empty() || rows == 0 || columns != fit.p.len() {
         return None;
     }
-    let share =
-        (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum::<f64>().powi(2)).sum::<f64>()
-            / rows as f64;
-    Some(share.sqrt())
+    Some(super::fit::linearised_share(&fit.jacobian, &fit.p, &cols))
 }
 
 /// The effects of `fit` no sample can show: their share of the output below the noise floor.
@@ -1125,20 +1122,12 @@ impl Rig for DeviceRig<'_, '_> {
         if current.spec.effects.contains(&lighter) {
             return None;
         }
-        let mut effects: Vec<Effect> = current.spec.effects.iter().copied().filter(|&x| x != e).collect();
-        effects.push(lighter);
-        let spec = ModelSpec { effects, law: current.spec.law, springs: current.spec.springs, elasto_backlash: false };
-        let mut p = current.p[..2 * self.prob.n_groups].to_vec();
+        let (mut spec, p) = spec_without(current, self.prob.n_groups, &[e]);
+        spec.effects.push(lighter);
         // the constant part of what the heavier effect did: gravity's torque at angle 0 is ∓ m g d sin φ,
         // asymmetric friction's Coulomb asymmetry a is a load of ∓ a; both signs are tried, and none
-        let mut guess = 0.0;
-        for (o, x) in current.spec.offsets(self.prob.n_groups) {
-            if x == e {
-                guess = if e == Effect::Gravity { current.p[o + 1] } else { current.p[o] };
-            } else {
-                p.extend_from_slice(&current.p[o..o + x.params().len()]);
-            }
-        }
+        let offset = current.spec.offsets(self.prob.n_groups).into_iter().find(|&(_, x)| x == e).map(|(o, _)| o)?;
+        let guess = if e == Effect::Gravity { current.p[offset + 1] } else { current.p[offset] };
         let starts = [guess, -guess, 0.0].map(|g| p.iter().copied().chain([g]).collect()).to_vec();
         let fit = fit_from_best(self.prob, spec, starts, SCREEN_ITERATIONS).ok()?;
         Some((lighter, self.judged(self.prob, fit)))
