@@ -71,6 +71,33 @@ def test_an_equivalent_form_counts_only_where_the_report_declares_it_and_it_is_t
     assert not equivalent
 
 
+def test_a_drive_is_judged_in_the_equivalent_form_it_declares():
+    # drive rig 16's shape: asymmetric friction found with a load the truth does not have
+    levels = {"coulomb_positive": 0.00148, "coulomb_negative": 0.00132,
+              "viscous_positive": 2.0e-4, "viscous_negative": 8.4e-5}
+    folded = dict(levels, coulomb_positive=0.00192, coulomb_negative=0.00088)
+    report = {"added_effects": [{"effect": "coulomb_friction", "parameters": {"torque_nm": 0.0014}},
+                                {"effect": "asymmetric_friction", "parameters": levels}],
+              "parameters": {"final": [{"name": "inertia", "value": 5.7e-5},
+                                       {"name": "constant_load", "value": -0.00044}]},
+              "final": {"rmse": 1e-3}, "unexplained": False,
+              "equivalent_forms": [{"found": {"asymmetric_friction": levels, "constant_load": {"torque_nm": -0.00044}},
+                                    "equivalent": {"asymmetric_friction": folded}}]}
+    rig = {"expected": {"coulomb_friction": {"torque_nm": 0.00148},
+                        "asymmetric_friction": dict(levels, coulomb_positive=0.00206, coulomb_negative=0.00091)},
+           "params": {"inertia": 5.69e-5}, "floor": 1e-3, "rig": {"drive": "reference", "coulomb": 0.00148}}
+    passed, why = campaign.score_drive(rig, report)
+    assert passed and rig["equivalent_form"], why
+    # undeclared, the found form is judged, and fails on its levels
+    passed, why = campaign.score_drive(rig, dict(report, equivalent_forms=[]))
+    assert not passed and not rig["equivalent_form"] and "coulomb_positive" in " ".join(why)
+    # a truth with its own load judges the folded form's zero load
+    rig["params"]["constant_load"] = -0.00044
+    rig["expected"]["asymmetric_friction"] = levels
+    passed, _ = campaign.score_drive(rig, report)
+    assert passed and not rig["equivalent_form"]
+
+
 # Rigs of the campaign that pass with today's loop (measured 2026-11-26; 18: a coarse encoder judged against the
 # truth's replay, 43: the moving starts after gaps fitted): a regression guard, not the
 # campaign's pass rate (which the benchmark reports).

@@ -1872,6 +1872,22 @@ pub fn report_json(
         })
         .into_iter()
         .collect();
+    // the sets the runs cannot tell apart (interfaces.md `equivalent_forms`), by the device's rules:
+    // the drive's load is a baseline parameter and its viscous friction the FMU's link damping
+    let mut as_device = added.clone();
+    as_device.extend(baseline_effects.iter().cloned());
+    as_device.extend(
+        o.final_fit
+            .value(Param::Viscous)
+            .map(|(b, _)| json!({"effect": "link_damping", "parameters": {"damping_nms": b}})),
+    );
+    let mut equivalent_forms = super::report::equivalent_forms(&as_device);
+    if axis == Axis::Linear {
+        for form in equivalent_forms.as_array_mut().into_iter().flatten() {
+            let note = form["note"].as_str().unwrap_or_default().replace("N.m.s/rad", "N.s/m").replace("N.m", "N");
+            form["note"] = json!(note.replace("the link", "the axis"));
+        }
+    }
     let params = |f: &DriveFit| -> Value {
         parameter_table(prob, f, axis)
             .into_iter()
@@ -1910,6 +1926,7 @@ pub fn report_json(
         "diagnosis": diagnosis,
         "added_effects": added,
         "baseline_effects": baseline_effects,
+        "equivalent_forms": equivalent_forms,
         "final": metrics_json(&fm, axis, Some(o.final_fit.bic()), Some(o.final_fit.p.len())),
         "unexplained": o.unexplained,
         "identified": identified,
@@ -2224,6 +2241,9 @@ pub fn report_markdown(j: &Value) -> String {
         if let Some(note) = j["published_same_simulation"]["note"].as_str() {
             s += &format!("\n{note}.\n");
         }
+    }
+    for form in j["equivalent_forms"].as_array().into_iter().flatten() {
+        s += &format!("\n{}\n", form["note"].as_str().unwrap_or_default());
     }
     s += "\n## Chain of evidence\n\n";
     let record = json!({"rounds": j["rounds"], "combinations": j["combinations"], "pruned_effects": j["pruned_effects"],

@@ -713,7 +713,9 @@ pub fn equivalent_forms(added: &[Value]) -> Value {
             _ => String::new(),
         };
         let note = format!(
-            "Equivalent form: asymmetric Coulomb friction ({} N.m forward, {} N.m back) is, while the link moves,              symmetric Coulomb friction of {} N.m with a constant load of {} N.m on the link{}. The runs cannot tell              the two apart except at rest; the search kept the asymmetric form.",
+            "Equivalent form: asymmetric Coulomb friction ({} N.m forward, {} N.m back) is, while the link moves, \
+             symmetric Coulomb friction of {} N.m with a constant load of {} N.m on the link{}. The runs cannot tell \
+             the two apart except at rest; the search kept the asymmetric form.",
             short(fp),
             short(fm),
             short(coulomb),
@@ -726,38 +728,55 @@ pub fn equivalent_forms(added: &[Value]) -> Value {
             "note": note,
         }));
     }
-    // The same pair read the other way: symmetric friction Fc with a load L no larger is asymmetric
-    // friction of Fc − L forward and Fc + L back (a larger load would need a level < 0: friction that
-    // pushes, no form of friction), its viscous levels both the link damping's.
+    // The same pair read the other way: friction F+ forward and F− back (symmetric: both Fc) with a
+    // load L is, without the load, asymmetric friction of F+ − L forward and F− + L back; where either
+    // would be < 0 there is no such form (friction that pushes). Its viscous levels are the
+    // asymmetric friction's, else both the link damping's.
     let find = |name: &str, key: &str| added.iter().find(|x| x["effect"] == name).and_then(|x| param(x, key));
-    let asymmetric = added.iter().any(|e| e["effect"] == "asymmetric_friction");
-    if let (false, Some(fc), Some(load)) =
-        (asymmetric, find("coulomb_friction", "torque_nm"), find("constant_load", "torque_nm"))
-    {
-        if load.abs() <= fc {
-            let viscous = find("link_damping", "damping_nms");
-            let (fp, fm, b) = (fc - load, fc + load, viscous.unwrap_or(0.0));
-            let mut found = json!({"coulomb_friction": {"torque_nm": fc}, "constant_load": {"torque_nm": load}});
-            if let Some(b) = viscous {
-                found["link_damping"] = json!({"damping_nms": b});
-            }
+    let asymmetric = added.iter().find(|e| e["effect"] == "asymmetric_friction");
+    let levels = match asymmetric {
+        Some(e) => param(e, "coulomb_positive").zip(param(e, "coulomb_negative")),
+        None => find("coulomb_friction", "torque_nm").map(|fc| (fc, fc)),
+    };
+    let load = find("constant_load", "torque_nm").filter(|l| *l != 0.0);
+    if let (Some((fp, fm)), Some(load)) = (levels, load) {
+        if fp - load >= 0.0 && fm + load >= 0.0 {
+            let damping = find("link_damping", "damping_nms");
+            let (bp, bn) = match asymmetric {
+                Some(e) => (param(e, "viscous_positive").unwrap_or(0.0), param(e, "viscous_negative").unwrap_or(0.0)),
+                None => (damping.unwrap_or(0.0), damping.unwrap_or(0.0)),
+            };
+            let (fp2, fm2) = (fp - load, fm + load);
+            let mut found = json!({"constant_load": {"torque_nm": load}});
+            let friction = match asymmetric {
+                Some(e) => {
+                    found["asymmetric_friction"] = e["parameters"].clone();
+                    format!("asymmetric Coulomb friction of {} N.m forward and {} N.m back", short(fp), short(fm))
+                }
+                None => {
+                    found["coulomb_friction"] = json!({"torque_nm": fp});
+                    if let Some(b) = damping {
+                        found["link_damping"] = json!({"damping_nms": b});
+                    }
+                    format!("symmetric Coulomb friction of {} N.m", short(fp))
+                }
+            };
+            let viscous = match (asymmetric, damping) {
+                (None, Some(b)) => format!(", its viscous levels both the link damping's {} N.m.s/rad", short(b)),
+                _ => String::new(),
+            };
             let note = format!(
-                "Equivalent form: symmetric Coulomb friction of {} N.m with a constant load of {} N.m on the link is, \
-                 while the link moves, asymmetric Coulomb friction of {} N.m forward and {} N.m back{}. The runs \
-                 cannot tell the two apart except at rest; the search kept the symmetric form with the load.",
-                short(fc),
+                "Equivalent form: {friction} with a constant load of {} N.m on the link is, while the link moves, \
+                 asymmetric Coulomb friction of {} N.m forward and {} N.m back with no load{viscous}. The runs \
+                 cannot tell the two apart except at rest; the search kept the form with the load.",
                 short(load),
-                short(fp),
-                short(fm),
-                viscous.map_or(String::new(), |b| format!(
-                    ", its viscous levels both the link damping's {} N.m.s/rad",
-                    short(b)
-                ))
+                short(fp2),
+                short(fm2),
             );
             forms.push(json!({
                 "found": found,
-                "equivalent": {"asymmetric_friction": {"coulomb_positive": fp, "coulomb_negative": fm,
-                    "viscous_positive": b, "viscous_negative": b}},
+                "equivalent": {"asymmetric_friction": {"coulomb_positive": fp2, "coulomb_negative": fm2,
+                    "viscous_positive": bp, "viscous_negative": bn}},
                 "note": note,
             }));
         }
@@ -921,6 +940,12 @@ mod tests {
         assert!((f["equivalent"]["coulomb_friction"]["torque_nm"].as_f64().unwrap() - 0.04).abs() < 1e-15);
         assert!((f["equivalent"]["constant_load"]["torque_nm"].as_f64().unwrap() + 0.008).abs() < 1e-15);
         assert!(f["note"].as_str().unwrap().contains("constant load of -0.008"), "{}", f["note"]);
+        // and without the load: −(F+ − L) forward and F− + L back, the same forces while it moves
+        let folded = &forms[1]["equivalent"]["asymmetric_friction"];
+        assert!((folded["coulomb_positive"].as_f64().unwrap() - 0.048).abs() < 1e-15, "{folded}");
+        assert!((folded["coulomb_negative"].as_f64().unwrap() - 0.032).abs() < 1e-15, "{folded}");
+        assert_eq!(forms[1]["found"]["constant_load"]["torque_nm"], 0.002);
+        assert_eq!(forms.as_array().unwrap().len(), 2);
         assert_eq!(equivalent_forms(&added[1..]).as_array().unwrap().len(), 0);
     }
 
