@@ -132,7 +132,8 @@ def write_run(path, meta, columns):
             fh.write(",".join(repr(float(x)) for x in row) + "\n")
 
 
-def main(argv=None):
+def parse_args(argv=None):
+    """The truth's arguments (argparse's exit on a bad one)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, required=True, help="folder for run_K.csv and truth.json")
     ap.add_argument("--axis", choices=["rotary", "linear"], default="rotary")
@@ -165,6 +166,11 @@ def main(argv=None):
     a = ap.parse_args(argv)
     if not 0.0 <= a.jitter < 0.5:
         ap.error("--jitter must be in [0, 0.5)")
+    return a
+
+
+def main(argv=None):
+    a = parse_args(argv)
     rng = np.random.default_rng(a.seed)
     lin = a.axis == "linear"
     pos, force = ("motor_position_m", "motor_force_n") if lin else ("motor_angle_rad", "motor_torque_nm")
