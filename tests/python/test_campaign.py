@@ -5,6 +5,8 @@ import math
 import sys
 from pathlib import Path
 
+import numpy as np
+
 import pytest
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -171,3 +173,16 @@ PASSING_DRIVES = [8, 14, 20, 2, 19]
 def test_drive_rigs_that_pass_keep_passing(tmp_path, seed):
     result = campaign.run_rig(campaign.draw_drive(seed), tmp_path, 120.0)
     assert result["passed"], result["why"]
+
+
+def test_a_torque_multisine_reaches_the_rigs_peak_speed(tmp_path):
+    # drive rig 13's body (inertia-dominated at the multisine's 0.3-5 Hz): a torque peak of the peak
+    # speed's friction alone reached 9 of its 143 rad/s, below its 15 rad/s Stribeck speed
+    args = ["--axis", "rotary", "--drive", "motor_torque", "--excitation", "multisine", "--inertia", "4.29e-05",
+            "--viscous", "9.7e-06", "--coulomb", "2.34e-4", "--stribeck", "1.44e-4", "15.1", "--speed", "143",
+            "--runs", "1", "--duration", "10", "--rate", "500", "--noise", "1e-6", "--quantum", "0", "--seed", "13"]
+    campaign.drive_truth.main(["--out", str(tmp_path), *args])
+    lines = [l for l in (tmp_path / "run_0.csv").read_text().splitlines() if not l.startswith("#")]
+    rows = np.array([[float(x) for x in l.split(",")[:2]] for l in lines[1:]])
+    speed = np.abs(np.diff(rows[:, 1]) / np.diff(rows[:, 0]))
+    assert 0.5 * 143 < speed.max() < 2 * 143, speed.max()

@@ -409,13 +409,15 @@ def generate(model, data, args):
     arguments (the truth models are pure Python: the device's RK4 at 1e-4 s is most of a campaign's
     time on a first run)."""
     stamp = data / "truth_args.json"
-    if stamp.exists() and (data / "truth.json").exists() and json.loads(stamp.read_text()) == args \
+    # a truth model with a VERSION stamps it beside the arguments: its runs change when it does
+    made = args if not hasattr(model, "VERSION") else {"args": args, "version": model.VERSION}
+    if stamp.exists() and (data / "truth.json").exists() and json.loads(stamp.read_text()) == made \
             and not lacks_replay(args, json.loads((data / "truth.json").read_text())):
         return
     for old in data.glob("*.csv") if data.exists() else []:
         old.unlink()  # another draw's runs must not join this one's
     model.main(["--out", str(data), *args])
-    stamp.write_text(json.dumps(args) + "\n")
+    stamp.write_text(json.dumps(made) + "\n")
 
 
 def calibrate_and_score(rig, data, result, budget, scorer, replay_floor=None):

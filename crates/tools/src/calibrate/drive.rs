@@ -1141,6 +1141,18 @@ impl InverseModel {
                 solved.iter().filter(|s| !only_physical || physical(s)).min_by(|a, b| a.1.total_cmp(&b.1)).cloned()
             };
             let (beta, sse, cov, g) = best(true).or_else(|| best(false))?;
+            if let Some(i) = stribeck_col {
+                for s in &solved {
+                    super::stepwise::debug(format_args!(
+                        "stribeck grid {:.4} level {:.4e} coulomb {:?} sse {:.6e}",
+                        self.stribeck_grid[s.3],
+                        s.0[i],
+                        cols.iter().position(|&q| q == Param::Coulomb).map(|j| s.0[j]),
+                        s.1
+                    ));
+                }
+                super::stepwise::debug(format_args!("fixed {:?}", fixed));
+            }
             let value = |q: Param| -> f64 {
                 if let Some(&(_, v)) = fixed.iter().find(|f| f.0 == q) {
                     return v;
