@@ -441,9 +441,10 @@ impl<'a> DriveProblem<'a> {
         let speed_scale = (vs / nf.max(1) as f64).sqrt().max(1e-12);
         let (mut noise_sq, mut ny) = (0.0, 0usize);
         for inp in &inputs {
-            let y = inp.measured();
-            noise_sq += super::signal::robust_noise(&y).powi(2) * y.len() as f64;
-            ny += y.len();
+            for y in std::iter::once(&inp.motor).chain(inp.link.as_ref()) {
+                noise_sq += super::signal::robust_noise(&inp.time, y).powi(2) * y.len() as f64;
+                ny += y.len();
+            }
         }
         DriveProblem {
             sim,
@@ -1601,6 +1602,17 @@ impl Rig for DriveRig<'_, '_> {
             .collect();
         let visible = added.iter().all(|&e| self.prob.visible(refit, e));
         let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof)) && visible;
+        super::stepwise::debug(format_args!(
+            "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, visible {}, noise {:.3e}, rms {:.3e} -> {:.3e}",
+            added,
+            m.bic(),
+            refit.bic(),
+            walds,
+            visible,
+            self.prob.position_noise,
+            (m.sse / m.n() as f64).sqrt(),
+            (refit.sse / refit.n() as f64).sqrt()
+        ));
         Verdict {
             keep,
             bic_before: m.bic(),
