@@ -135,9 +135,9 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
         offset += n;
         let model = &fit.outputs[r];
         let t = &inp.time;
-        for k in 1..n - 1 {
-            noise_num += (y[k + 1] - 2.0 * y[k] + y[k - 1]).powi(2);
-            noise_den += 6.0;
+        for r in super::signal::cubic_residuals(&inp.time, y) {
+            noise_num += r * r;
+            noise_den += 1.0;
         }
         quantum_sq += n as f64 * super::signal::resolution(y).powi(2) / 12.0;
         let span = t[n - 1] - t[0];
@@ -214,8 +214,9 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
             late_rms: rms_between(t1 - third, t1),
         });
     }
-    // the whiteness test compares with white noise of the second differences' size: quantisation
-    // held still is not white, and counting it there would hide structure
+    // the whiteness test compares with white noise of the cubic residuals' size (a second
+    // difference's, without the motion's curvature): quantisation held still is not white, and
+    // counting it there would hide structure
     let white_noise = (noise_num / noise_den.max(1.0)).sqrt();
     let samples = prob.inputs.iter().map(|i| i.time.len()).sum::<usize>().max(1) as f64;
     let noise_floor = white_noise.max((quantum_sq / samples).sqrt());
