@@ -1553,6 +1553,11 @@ impl Rig for DriveRig<'_, '_> {
         // for Coulomb friction alone also the inverse model's (M, Fv, L, Fc): the baseline's viscous
         // friction has absorbed the Coulomb level and, through a saturating controller, the score
         // test's start can lie in another valley
+        let cost = |spec: &[Param], x: &[f64]| {
+            prob.simulate_all(spec, x)
+                .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
+                .unwrap_or(f64::INFINITY)
+        };
         if let ([c], Some(iv)) = (added, self.inverse) {
             if c.effect == DriveEffect::CoulombFriction {
                 let mut q = m.p.clone();
@@ -1565,13 +1570,26 @@ impl Rig for DriveRig<'_, '_> {
                     }
                 }
                 q.push(iv.coulomb.max(0.0));
-                let cost = |x: &[f64]| {
-                    prob.simulate_all(&spec, x)
-                        .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
-                        .unwrap_or(f64::INFINITY)
-                };
-                if cost(&q) < cost(&p) {
+                if cost(&spec, &q) < cost(&spec, &p) {
                     p = q;
+                }
+            }
+            // for a Stribeck excess also the inverse model's levels and speed (the best of its grid
+            // over the measured motion): the score test linearises at one speed, and an output-error
+            // fit from there can trade the excess for Coulomb friction (drive rig 31: 28 rad/s for 16)
+            if c.effect == DriveEffect::StribeckFriction {
+                let without_smoothing: Vec<Param> =
+                    spec.iter().copied().filter(|q| *q != Param::LnFrictionSmoothing).collect();
+                if let Some(ee) = iv.parameters(&without_smoothing, prob.declared_inertia()) {
+                    let mut q = p.clone();
+                    for (x, param) in q.iter_mut().zip(&spec) {
+                        if let Some(i) = without_smoothing.iter().position(|w| w == param) {
+                            *x = ee.p[i];
+                        }
+                    }
+                    if cost(&spec, &q) < cost(&spec, &p) {
+                        p = q;
+                    }
                 }
             }
         }
