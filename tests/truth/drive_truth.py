@@ -87,9 +87,14 @@ def excitation(kind, level, duration, rng, floor=0.0):
         return lambda t: float(levels[np.searchsorted(edges, t, side="right") - 1])
     freqs = np.array(MULTISINE_HZ)
     phases = rng.uniform(0, 2 * math.pi, freqs.size)
-    amps = 1.0 / np.sqrt(freqs)
+    amps = multisine_weights()
     amps *= level / amps.sum()
     return lambda t: float(np.sum(amps * np.sin(2 * math.pi * freqs * t + phases)))
+
+
+def multisine_weights():
+    """Each multisine component's relative amplitude, 1/√f."""
+    return 1.0 / np.sqrt(np.array(MULTISINE_HZ))
 
 
 def multisine_level(a, breakaway):
@@ -98,9 +103,8 @@ def multisine_level(a, breakaway):
     friction alone, the steps' level, would leave an inertia-dominated drive far below that speed
     (drive rig 13: 9 rad/s of a drawn 143, under its 15 rad/s Stribeck speed: no Stribeck to see)."""
     freqs = np.array(MULTISINE_HZ)
-    amps = 1.0 / np.sqrt(freqs)
-    amps /= amps.sum()
-    mobility = np.sum(amps / np.abs(a.viscous + 1j * a.inertia * 2 * math.pi * freqs))
+    amps = multisine_weights()
+    mobility = np.sum(amps / amps.sum() / np.abs(a.viscous + 1j * a.inertia * 2 * math.pi * freqs))
     return a.speed / mobility + breakaway
 
 

@@ -1142,18 +1142,6 @@ impl InverseModel {
                 solved.iter().filter(|s| !only_physical || physical(s)).min_by(|a, b| a.1.total_cmp(&b.1)).cloned()
             };
             let (beta, sse, cov, g) = best(true).or_else(|| best(false))?;
-            if let Some(i) = stribeck_col {
-                for s in &solved {
-                    super::stepwise::debug(format_args!(
-                        "stribeck grid {:.4} level {:.4e} coulomb {:?} sse {:.6e}",
-                        self.stribeck_grid[s.3],
-                        s.0[i],
-                        cols.iter().position(|&q| q == Param::Coulomb).map(|j| s.0[j]),
-                        s.1
-                    ));
-                }
-                super::stepwise::debug(format_args!("fixed {:?}", fixed));
-            }
             let value = |q: Param| -> f64 {
                 if let Some(&(_, v)) = fixed.iter().find(|f| f.0 == q) {
                     return v;
@@ -1550,15 +1538,15 @@ impl Rig for DriveRig<'_, '_> {
             let ee = iv.parameters(&spec, prob.declared_inertia())?;
             return prob.at(spec, effects, ee).ok();
         }
-        // for Coulomb friction alone also the inverse model's (M, Fv, L, Fc): the baseline's viscous
-        // friction has absorbed the Coulomb level and, through a saturating controller, the score
-        // test's start can lie in another valley
         let cost = |spec: &[Param], x: &[f64]| {
             prob.simulate_all(spec, x)
                 .map(|sims| prob.residual(&sims).iter().map(|e| e * e).sum::<f64>())
                 .unwrap_or(f64::INFINITY)
         };
         if let ([c], Some(iv)) = (added, self.inverse) {
+            // for Coulomb friction alone also the inverse model's (M, Fv, L, Fc): the baseline's viscous
+            // friction has absorbed the Coulomb level and, through a saturating controller, the score
+            // test's start can lie in another valley
             if c.effect == DriveEffect::CoulombFriction {
                 let mut q = m.p.clone();
                 for (x, param) in q.iter_mut().zip(&m.spec) {

@@ -413,8 +413,8 @@ pub fn start_speed(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64)> {
     start_quadratic(t, x, 4).map(|(v, se, _)| (v, se))
 }
 
-/// Noise of a sampled signal robust to its fast moves, and at least what its resolution (the
-/// smallest step it takes) leaves, q/√12. Each sample's residual against the cubic through its two
+/// Noise of a sampled signal robust to its fast moves, and at least what its quantum (`quantum`:
+/// an encoder's count) leaves, q/√12. Each sample's residual against the cubic through its two
 /// neighbours on either side, in the samples' own times: white noise of σ gives it variance
 /// σ²(1 + Σw²) (w the cubic's weights; 1 + 17/18 on an even grid), so σ is 1.4826 × the median of
 /// |residual|/√(1 + Σw²). The cubic passes the motion's curvature, which a second difference counts as
