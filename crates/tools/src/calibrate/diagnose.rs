@@ -43,8 +43,9 @@ pub struct RunResidual {
 pub struct Signatures {
     pub rmse: f64,
     /// Noise floor estimated from the data alone: what a perfect model leaves of the measured link
-    /// angle, √max(var(Δ²y)/6, q²/12) with q its resolution (`signal::resolution`). The second
-    /// differences alone miss a coarse encoder's error: while the link holds still they are zero,
+    /// angle, the larger of the white noise (`signal::cubic_noise`'s mean square) and an encoder's
+    /// q/√12 (`signal::quantisation_floor`: none on a signal that is not quantised). The white
+    /// noise alone misses a coarse encoder's error: while the link holds still it reads zero,
     /// yet the reading is off by up to q/2 (campaign rigs 7 and 18, steps with noise ≪ q: 0.78 and
     /// 0.52 of q/√12).
     pub noise_floor: f64,
@@ -139,7 +140,7 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
             noise_num += r * r;
             noise_den += 1.0;
         }
-        quantum_sq += n as f64 * super::signal::resolution(y).powi(2) / 12.0;
+        quantum_sq += n as f64 * super::signal::quantisation_floor(y).powi(2);
         let span = t[n - 1] - t[0];
         for k in 0..n {
             all_e.push(e[k]);

@@ -424,7 +424,7 @@ pub fn robust_noise(t: &[f64], x: &[f64]) -> f64 {
     if x.len() < 3 {
         return 0.0;
     }
-    let floor = quantum(x) / 12f64.sqrt();
+    let floor = quantisation_floor(x);
     let scaled: Vec<f64> = cubic_residuals(t, x).map(f64::abs).collect();
     if scaled.is_empty() {
         return median_second_difference_noise(x).max(floor);
@@ -477,6 +477,12 @@ pub fn quantum(x: &[f64]) -> f64 {
     } else {
         0.0
     }
+}
+
+/// What a quantised reading adds to a perfect model's error: q/√12 with q the signal's `quantum`,
+/// 0 for a signal that is not quantised (its smallest step is chance, not a resolution).
+pub fn quantisation_floor(x: &[f64]) -> f64 {
+    quantum(x) / 12f64.sqrt()
 }
 
 /// The resolution of a sampled signal: the smallest step it takes between neighbours (an encoder's
@@ -602,6 +608,18 @@ mod tests {
             assert!((mean_square / sigma - 1.0).abs() < 0.15, "jitter {jitter}: mean square {mean_square}");
             assert!(second_difference_noise(&x) > 5.0 * sigma);
         }
+    }
+
+    #[test]
+    fn only_a_quantised_signal_has_a_quantisation_floor() {
+        // a 2500-line encoder's counts on a slow sine, and the same sine unquantised at 200 Hz
+        let q = 2.0 * std::f64::consts::PI / 10_000.0;
+        let x: Vec<f64> =
+            (0..2000).map(|k| 0.3 * (2.0 * std::f64::consts::PI * 0.5 * k as f64 / 200.0).sin()).collect();
+        let counts: Vec<f64> = x.iter().map(|v| (v / q).round() * q).collect();
+        assert!((quantisation_floor(&counts) - q / 12f64.sqrt()).abs() < 1e-15);
+        assert!(resolution(&x) > 0.0, "a continuous signal still has a smallest step");
+        assert_eq!(quantisation_floor(&x), 0.0, "but no quantum");
     }
 
     #[test]
