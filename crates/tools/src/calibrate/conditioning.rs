@@ -47,17 +47,30 @@ fn top_frequency(r: &Run) -> f64 {
     }
 }
 
-/// The motor angle's band reaches at most this many times its top frequency (`top_frequency`):
-/// the passband of the earlier default smoothing (a quintic Savitzky–Golay window of 0.1 s over
-/// the top frequency passes up to about ten times it, Schafer 2011). The noise alone does not set
+/// The motor angle's band reaches at most this many times its top frequency (`top_frequency`), its
+/// half-power point there (`band_edge_cap`): the passband of the smoothing the band fades into at
+/// its ends (a quintic Savitzky–Golay window of half-width 0.1 s over the top frequency passes up
+/// to about ten times it, Schafer 2011). The noise alone does not set
 /// the edge: an encoder's error near a sinusoid's turns, where it dwells on a count, is no white
 /// noise, and up to 13 Hz of it (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white
 /// level; passed to a never-pulling backlash it left the fit at 2.2× its noise floor.
 pub const BAND_TOP_FACTOR: f64 = 10.0;
 
+/// The highest edge the band limit may take for a run whose top frequency is `top_hz`: the band's
+/// response is flat to its edge f_c and falls as a cosine to zero at 2 f_c, so it passes half
+/// the power at f_c (1 + acos(√2 − 1)/π) ≈ 1.36 f_c; that point sits at `BAND_TOP_FACTOR` times
+/// the top frequency, where the smoothing's does. Capping the edge itself there let the taper
+/// pass up to twice as far, 68 % of the amplitude at a 0.5 Hz sine's 6.9 Hz resonance where the
+/// smoothing passes little: a lightly damped link (ζ = 0.004, tests/python/test_blind_calibration.py)
+/// sat at 1.27× its floor, 1.18× smoothed, 1.16× with this cap.
+pub fn band_edge_cap(top_hz: f64) -> f64 {
+    let half_power = 1.0 + (std::f64::consts::SQRT_2 - 1.0).acos() / std::f64::consts::PI;
+    BAND_TOP_FACTOR * top_hz / half_power
+}
+
 /// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
-/// default): 0.1 s over the highest frequency the run carries (`top_frequency`). A quintic
-/// Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
+/// band limit's ends, `model_motor`): 0.1 s over the highest frequency the run carries
+/// (`top_frequency`). A quintic Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
 /// frequency. A motor angle without noise (second-difference noise below 1e-12 of its swing) is
 /// not smoothed.
 pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
@@ -80,15 +93,14 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
     ((seconds / dt).round() as usize).min(n / 4)
 }
 
-/// The model's inputs from a measured run. The motor angle is smoothed (`smoothing_half_width`;
-/// `smoothing_seconds` sets its half-width, 0 the raw samples) because it sets the commanded
-/// speed of every step: encoder steps of 2π/10000 at 1 kHz make the raw slope jitter by
-/// ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C and 0.5 Hz) passes to
-/// the link as torque noise, and which a never-pulling backlash contact rectifies into bias.
-/// `band`: band-limited instead (`model_motor`; an option, not the default: docs/calibration.md).
-/// Returns how the motor angle was conditioned too, for the report.
-pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> (super::sim::SimInput, MotorConditioning) {
-    let (motor, conditioning) = model_motor(r, smoothing_seconds, band);
+/// The model's inputs from a measured run. The motor angle is band-limited to its motion
+/// (`model_motor`), or smoothed with `smoothing_seconds` (its half-width, 0 the raw samples),
+/// because it sets the commanded speed of every step: encoder steps of 2π/10000 at 1 kHz make the
+/// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
+/// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
+/// rectifies into bias. Returns how the motor angle was conditioned too, for the report.
+pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> (super::sim::SimInput, MotorConditioning) {
+    let (motor, conditioning) = model_motor(r, smoothing_seconds);
     let input = super::sim::SimInput {
         time: r.time.clone(),
         motor,
@@ -111,19 +123,20 @@ pub enum MotorConditioning {
     Smoothed { half_width_s: f64 },
 }
 
-/// The motor angle that drives the model, and how it was conditioned (`sim_input`): smoothed,
-/// or with `band` (and no `smoothing_seconds`) band-limited to its motion (`signal::band_limited`,
-/// the edge capped at `BAND_TOP_FACTOR` times the top frequency) and faded into the smoothing
-/// within one period of the edge of either end, where the band limit's reflection is a guess
-/// (raw samples there let a never-pulling backlash take a kick that stays in its play: 3.7× the
-/// noise floor on a synthetic backlash rig).
-fn model_motor(r: &Run, smoothing_seconds: Option<f64>, band: bool) -> (Vec<f64>, MotorConditioning) {
+/// The motor angle that drives the model, and how it was conditioned (`sim_input`): with
+/// `smoothing_seconds`, smoothed; else band-limited to its motion (`signal::band_limited`, the edge
+/// capped by `band_edge_cap`) and faded into the smoothing within one period of the edge of either
+/// end, where the band limit's reflection is a guess (raw samples there let a never-pulling
+/// backlash take a kick that stays in its play: 3.7× the noise floor on a synthetic backlash rig).
+/// Band-limited rather than smoothed by default: on the campaign's CI subset, device rigs inside
+/// the library 17/28 → 19/28, held-out seeds 51–90 12/22 → 15/22, none lost (docs/calibration.md).
+fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorConditioning) {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
     let half = smoothing_half_width(r, smoothing_seconds);
     let smoothed = smooth(&r.time, &r.motor, half);
-    if band && smoothing_seconds.is_none() {
-        let cap = BAND_TOP_FACTOR * top_frequency(r);
+    if smoothing_seconds.is_none() {
+        let cap = band_edge_cap(top_frequency(r));
         if let Some((limited, edge_hz)) = band_limited(&r.time, &r.motor, (cap > 0.0).then_some(cap)) {
             return (fade_ends(&r.time, &limited, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
         }

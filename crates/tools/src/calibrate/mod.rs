@@ -70,19 +70,14 @@ pub struct CalibrateArgs {
     /// FMU instances simulating in parallel (the default is this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
-    /// Half-width in seconds of the zero-phase Savitzky–Golay smoothing of the measured motor angle
-    /// before it drives the model; 0 uses the raw samples. Default: per run, 0.1 s over the
-    /// highest frequency it carries (a quintic window that passes it flat while it averages the
-    /// encoder steps), and off when the motor angle carries no noise.
+    /// Smooth the measured motor angle instead of band-limiting it: the half-width in seconds of a
+    /// zero-phase quintic Savitzky–Golay window (0: the raw samples). Default: per run, band-limited
+    /// to its motion, zero phase, flat up to where its variance falls to twice its white noise's
+    /// (the band's half-power point at most ten times the run's top frequency), zero at twice that
+    /// (runs[].input_band_hz), so a coarse motor encoder's steps do not ring the model's resonance;
+    /// off when the motor angle carries no noise.
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
     pub input_smoothing: Option<f64>,
-    /// Band-limit the measured motor angle to its motion instead of smoothing it: zero phase, flat up
-    /// to where its variance falls to twice its white noise's (at most ten times its top
-    /// frequency), zero at twice that (runs[].input_band_hz). For a coarse motor encoder near a
-    /// lightly damped resonance, where smoothing leaves C high; not the default, because it left two
-    /// synthetic rigs of the paper's bench just above 1.2× their floor (docs/calibration.md).
-    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "input_smoothing"))]
-    pub input_band: bool,
     /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and
     /// paper.md into --out. Without FILE, the repository's data/paper-reported.json (built in).
     #[cfg_attr(feature = "cli", arg(long, value_name = "FILE", num_args = 0..=1))]
@@ -273,7 +268,7 @@ fn calibrate_device(
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
     let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
-        runs.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band)).unzip();
+        runs.iter().map(|r| sim_input(r, args.input_smoothing)).unzip();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let mut prob = fit::Problem::new(sim, inputs, measured, group, &temperatures)?;
     let laws = search::damping_laws(&prob);
@@ -290,7 +285,7 @@ fn calibrate_device(
     let mut notes: Vec<String> = Vec::new();
     let held_prob = (!held.is_empty()).then(|| {
         prob.held_out(
-            held.iter().map(|r| sim_input(r, args.input_smoothing, args.input_band).0).collect(),
+            held.iter().map(|r| sim_input(r, args.input_smoothing).0).collect(),
             held.iter().map(|r| r.link.clone()).collect(),
             held_out_groups(&held, &temperatures),
         )

@@ -688,4 +688,42 @@ mod tests {
         let worst = y.iter().zip(&swing).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(worst < 1e-6 * 0.2, "worst {worst:e}");
     }
+
+    #[test]
+    fn the_band_passes_half_the_power_where_its_cap_puts_it() {
+        // a 0.5 Hz swing with white noise and a tone at 10× (the cap's half-power point) or at
+        // 13.8× (a lightly damped link's resonance, docs/calibration.md), large enough that the
+        // edge is the cap's. The band limit is linear once its edge is set: the tone's share of
+        // the output is the output with the tone less the output without it
+        use crate::calibrate::conditioning::{band_edge_cap, BAND_TOP_FACTOR};
+        let (n, dt, f0) = (20_001, 1e-3, 0.5);
+        let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+        let noise = normals(7, n);
+        let tone = |f: f64, t: f64| (2.0 * std::f64::consts::PI * f * t).sin();
+        let cap = band_edge_cap(f0);
+        let band = |f: Option<f64>| {
+            let x: Vec<f64> = (0..n)
+                .map(|k| 0.3 * tone(f0, t[k]) + f.map_or(0.0, |f| 1e-3 * tone(f, t[k])) + 1e-5 * noise[k])
+                .collect();
+            band_limited(&t, &x, Some(cap)).unwrap()
+        };
+        let (without, _) = band(None);
+        let passed = |f: f64| {
+            let (y, edge) = band(Some(f));
+            assert!((edge - cap).abs() < 0.01, "edge {edge} Hz against the cap's {cap} Hz");
+            let inner = 2000..n - 2000;
+            let (mut s, mut c) = (0.0, 0.0);
+            for k in inner.clone() {
+                let phase = 2.0 * std::f64::consts::PI * f * t[k];
+                s += (y[k] - without[k]) * phase.sin();
+                c += (y[k] - without[k]) * phase.cos();
+            }
+            2.0 * (s * s + c * c).sqrt() / inner.len() as f64 / 1e-3
+        };
+        let at_cap = passed(BAND_TOP_FACTOR * f0);
+        assert!((at_cap - std::f64::consts::FRAC_1_SQRT_2).abs() < 0.03, "{at_cap} of the tone at the cap");
+        // the edge at the cap itself would have passed 68 % of it
+        let at_resonance = passed(6.9);
+        assert!(at_resonance < 0.1, "{at_resonance} of the tone at the resonance");
+    }
 }
