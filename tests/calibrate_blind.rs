@@ -285,3 +285,40 @@ fn a_search_out_of_budget_says_so_and_keeps_the_best_model_found() {
     assert!(c.report["search_budget"].is_null());
     assert_eq!(added(&c), vec!["coulomb_friction"]);
 }
+
+/// Issue 28: `--search-budget` bounds the whole run, so a simulation already running when the
+/// deadline passes stops there, not only one about to start (on campaign rig 19 the fits'
+/// simulations in flight ran the calibration 2–6 s past its budget).
+#[test]
+fn a_simulation_looks_at_the_deadline_while_it_runs() {
+    use thermovia_tools::calibrate::sim::{simulate, RunModel, SimError, SimInput};
+    let fmu = common::fmu();
+    let mut inst = fmu.instantiate(None).unwrap();
+    let n = 20_000;
+    let time: Vec<f64> = (0..n).map(|k| k as f64 * 1e-3).collect();
+    let input = SimInput {
+        motor: time.iter().map(|t| 0.3 * (std::f64::consts::PI * t).sin()).collect(),
+        time,
+        housing_k: vec![313.15; n],
+        frequency_hz: 0.5,
+        link_inertia: None,
+        link0: 0.0,
+        com_distance: 0.14,
+        initial_link_speed: 0.0,
+        after_gap: false,
+    };
+    let model = RunModel::default();
+    // `simulate` looks at the clock inside its loop of steps (`run_jobs` refuses a job past the
+    // deadline before it starts, so this calls it directly): a deadline already passed stops it
+    // at its first look, without depending on how fast this machine steps
+    let now = std::time::Instant::now();
+    match simulate(&mut inst, &input, &model, Some(now)) {
+        Err(SimError::Deadline) => {}
+        Ok(link) => panic!("ran to the end ({} samples) past its deadline", link.len()),
+        Err(e) => panic!("failed otherwise: {e}"),
+    }
+    // the same instance, with a deadline an hour away or none, runs the whole run
+    let later = now + std::time::Duration::from_secs(3600);
+    assert_eq!(simulate(&mut inst, &input, &model, Some(later)).unwrap().len(), n);
+    assert_eq!(simulate(&mut inst, &input, &model, None).unwrap().len(), n);
+}

@@ -287,8 +287,13 @@ pub const HARD_SIGN_VELOCITY: f64 = 1e-6;
 
 use super::sim::STEP_SNAP;
 
-/// One run through one instance.
-pub fn simulate(inst: &mut Instance, inp: &DriveInput, m: &DriveModel) -> Result<Simulated, HarnessError> {
+/// One run through one instance; stops with `SimError::Deadline` once `until` passes.
+pub fn simulate(
+    inst: &mut Instance,
+    inp: &DriveInput,
+    m: &DriveModel,
+    until: Option<std::time::Instant>,
+) -> Result<Simulated, super::sim::SimError> {
     let vr = |n: &str| inst.handle(n).map(|h| h.value_reference);
     let (vr_torque, vr_load, vr_housing) =
         (vr("motor_torque")?, vr("load_torque")?, vr("housing_temperature_command")?);
@@ -336,6 +341,7 @@ pub fn simulate(inst: &mut Instance, inp: &DriveInput, m: &DriveModel) -> Result
     let mut est = inp.controller.map(|c| VelocityEstimator::new(q, inp.speed0, c.period));
     let mut y = [0.0; 2];
     for k in 0..n {
+        super::sim::check_deadline(k, until)?;
         out.motor.push(q);
         out.link.push(l);
         let tau = match (inp.drive, &inp.controller, &inp.reference, est.as_mut()) {
@@ -521,11 +527,12 @@ impl<'a> DriveProblem<'a> {
     /// Simulates (run, parameter vector) jobs in parallel.
     pub fn simulate_jobs(&self, spec: &[Param], jobs: &[(usize, Vec<f64>)]) -> Vec<Result<Simulated, String>> {
         let models: Vec<(usize, DriveModel)> = jobs.iter().map(|(r, p)| (*r, self.model(spec, p, *r))).collect();
+        let until = self.sim.deadline();
         self.sim.map(&models, |inst, (r, m)| {
             if self.sim.past_deadline() {
                 return Err(super::sim::DEADLINE_PASSED.to_string());
             }
-            simulate(inst, &self.inputs[*r], m).map_err(|e| e.to_string())
+            simulate(inst, &self.inputs[*r], m, until).map_err(|e| e.to_string())
         })
     }
 

@@ -131,8 +131,57 @@ fn handles(inst: &Instance) -> Result<Handles, HarnessError> {
     })
 }
 
-/// One run through one instance; returns the model's link angle at every sample.
-pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<Vec<f64>, HarnessError> {
+/// Why a simulation stopped short: the FMU refused a call, or the calibration's deadline passed
+/// while it ran.
+#[derive(Debug)]
+pub enum SimError {
+    Fmu(HarnessError),
+    Deadline,
+}
+
+impl std::fmt::Display for SimError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            SimError::Fmu(e) => write!(f, "{e}"),
+            SimError::Deadline => f.write_str(DEADLINE_PASSED),
+        }
+    }
+}
+
+impl std::error::Error for SimError {}
+
+impl From<HarnessError> for SimError {
+    fn from(e: HarnessError) -> Self {
+        SimError::Fmu(e)
+    }
+}
+
+/// Steps between two looks at the clock while a run is simulated: a look costs ~20 ns, a step
+/// microseconds, and a stiff run's steps (a backlash contact with friction) still end within
+/// milliseconds of the deadline.
+const STEPS_PER_CLOCK_LOOK: usize = 64;
+
+/// Err(Deadline) once `until` has passed, looked at every `STEPS_PER_CLOCK_LOOK` steps: a simulation
+/// in progress stops too, not only one about to start (a stiff run of 27 000 samples took seconds,
+/// and a fit's simulations in flight at the deadline ran the calibration 2–6 s past its budget:
+/// campaign rig 19).
+pub fn check_deadline(step: usize, until: Option<std::time::Instant>) -> Result<(), SimError> {
+    match until {
+        Some(at) if step.is_multiple_of(STEPS_PER_CLOCK_LOOK) && std::time::Instant::now() >= at => {
+            Err(SimError::Deadline)
+        }
+        _ => Ok(()),
+    }
+}
+
+/// One run through one instance; returns the model's link angle at every sample. Stops with
+/// `SimError::Deadline` once `until` passes.
+pub fn simulate(
+    inst: &mut Instance,
+    input: &SimInput,
+    m: &RunModel,
+    until: Option<std::time::Instant>,
+) -> Result<Vec<f64>, SimError> {
     let h = handles(inst)?;
     inst.reset()?;
     let e = &m.effects;
@@ -193,6 +242,7 @@ pub fn simulate(inst: &mut Instance, input: &SimInput, m: &RunModel) -> Result<V
     let vrs = [h.motor_cmd, h.speed_cmd, h.housing_cmd];
     let mut y = [0.0];
     for k in 0..n - 1 {
+        check_deadline(k, until)?;
         let mut dt = input.time[k + 1] - input.time[k];
         if (dt - nominal).abs() <= STEP_SNAP * nominal {
             dt = nominal;
@@ -230,7 +280,8 @@ impl Simulator {
         Ok(Simulator { fmu, instances, simulations: AtomicUsize::new(0), deadline: Mutex::new(None) })
     }
 
-    /// Every simulation started after `at` fails with [`DEADLINE_PASSED`].
+    /// Every simulation started after `at` fails with [`DEADLINE_PASSED`], and one running then
+    /// stops with it.
     pub fn set_deadline(&self, at: std::time::Instant) {
         *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = Some(at);
     }
@@ -244,6 +295,11 @@ impl Simulator {
     /// Lifts the deadline: the simulations that write the report of a model already chosen.
     pub fn clear_deadline(&self) {
         *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = None;
+    }
+
+    /// The deadline, if one is set.
+    pub fn deadline(&self) -> Option<std::time::Instant> {
+        *self.deadline.lock().unwrap_or_else(|p| p.into_inner())
     }
 
     pub fn past_deadline(&self) -> bool {
@@ -307,11 +363,12 @@ impl Simulator {
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
     /// absurd trial parameter) is returned as an error for that job only.
     pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<JobResult> {
+        let until = self.deadline();
         self.map(jobs, |inst, (run, model)| {
             if self.past_deadline() {
                 return Err(DEADLINE_PASSED.to_string());
             }
-            simulate(inst, &inputs[*run], model).map_err(|e| e.to_string())
+            simulate(inst, &inputs[*run], model, until).map_err(|e| e.to_string())
         })
     }
 }

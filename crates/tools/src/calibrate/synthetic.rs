@@ -217,7 +217,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
                 com_distance: 0.14,
                 after_gap: false,
             };
-            let link = simulate(&mut inst, &input, &model)?;
+            let link = simulate(&mut inst, &input, &model, None)?;
             let mut text = String::new();
             text += "# source=thermovia synth (truth model through the FMU; truth.json holds the truth)\n";
             text += &format!("# temperature_c={temp}\n# frequency_hz={f}\n# link_inertia_kgm2={}\n", args.link_inertia);
