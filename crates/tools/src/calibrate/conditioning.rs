@@ -50,10 +50,10 @@ fn top_frequency(r: &Run) -> f64 {
 /// The motor angle's band reaches at most this many times its top frequency (`top_frequency`), its
 /// half-power point there (`band_edge_cap`): the passband of the smoothing the band fades into at
 /// its ends (a quintic Savitzky–Golay window of half-width 0.1 s over the top frequency passes up
-/// to about ten times it, Schafer 2011). The noise alone does not set
-/// the edge: an encoder's error near a sinusoid's turns, where it dwells on a count, is no white
-/// noise, and up to 13 Hz of it (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white
-/// level; passed to a never-pulling backlash it left the fit at 2.2× its noise floor.
+/// to about ten times it, Schafer 2011). The noise alone does not set the edge: an encoder's error
+/// near a sinusoid's turns, where it dwells on a count, is no white noise, and up to 13 Hz of it
+/// (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white level; passed to a
+/// never-pulling backlash it left the fit at 2.2× its noise floor.
 pub const BAND_TOP_FACTOR: f64 = 10.0;
 
 /// The highest edge the band limit may take for a run whose top frequency is `top_hz`: the band's
@@ -70,9 +70,9 @@ pub fn band_edge_cap(top_hz: f64) -> f64 {
 
 /// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
 /// band limit's ends, `model_motor`): 0.1 s over the highest frequency the run carries
-/// (`top_frequency`). A quintic Savitzky–Golay window of M samples passes up to about fs/M (Schafer 2011), ten times that
-/// frequency. A motor angle without noise (second-difference noise below 1e-12 of its swing) is
-/// not smoothed.
+/// (`top_frequency`). A quintic Savitzky–Golay window of M samples passes up to about fs/M
+/// (Schafer 2011), ten times that frequency. A motor angle without noise (second-difference noise
+/// below 1e-12 of its swing) is not smoothed.
 pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;

@@ -527,13 +527,10 @@ impl<'a> DriveProblem<'a> {
     /// Simulates (run, parameter vector) jobs in parallel.
     pub fn simulate_jobs(&self, spec: &[Param], jobs: &[(usize, Vec<f64>)]) -> Vec<Result<Simulated, String>> {
         let models: Vec<(usize, DriveModel)> = jobs.iter().map(|(r, p)| (*r, self.model(spec, p, *r))).collect();
+        // `simulate` refuses a job already past the deadline at its first step, and stops one that
+        // reaches it
         let until = self.sim.deadline();
-        self.sim.map(&models, |inst, (r, m)| {
-            if self.sim.past_deadline() {
-                return Err(super::sim::DEADLINE_PASSED.to_string());
-            }
-            simulate(inst, &self.inputs[*r], m, until).map_err(|e| e.to_string())
-        })
+        self.sim.map(&models, |inst, (r, m)| simulate(inst, &self.inputs[*r], m, until).map_err(|e| e.to_string()))
     }
 
     pub fn simulate_all(&self, spec: &[Param], p: &[f64]) -> Option<Vec<Simulated>> {

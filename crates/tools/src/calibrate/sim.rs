@@ -363,12 +363,9 @@ impl Simulator {
     /// Runs every job; results in job order. A failed simulation (e.g. the solver stalls for an
     /// absurd trial parameter) is returned as an error for that job only.
     pub fn run_jobs(&self, inputs: &[SimInput], jobs: &[(usize, RunModel)]) -> Vec<JobResult> {
+        // `simulate` refuses a job already past the deadline at its first step, and stops one that
+        // reaches it
         let until = self.deadline();
-        self.map(jobs, |inst, (run, model)| {
-            if self.past_deadline() {
-                return Err(DEADLINE_PASSED.to_string());
-            }
-            simulate(inst, &inputs[*run], model, until).map_err(|e| e.to_string())
-        })
+        self.map(jobs, |inst, (run, model)| simulate(inst, &inputs[*run], model, until).map_err(|e| e.to_string()))
     }
 }
