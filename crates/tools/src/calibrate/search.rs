@@ -451,7 +451,7 @@ fn try_combination(
 }
 
 /// Starting points for refitting `current` with the candidates' effects added: the current
-/// transmission and the closed-form one (the transmission fitted without an effect may have
+/// transmission (the table's for a group at a bound) and the closed-form one (the transmission fitted without an effect may have
 /// absorbed it: friction mimicked by a softer, more damped link; gravity by a rigid one), each with
 /// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
 /// bounded fit can be absurd); and the equation error with the effects' torques as regressors
@@ -461,8 +461,16 @@ fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Ranked<Effect>], la
     let closed = prob.closed_form_start(law);
     let linearised: Vec<f64> = added.iter().flat_map(|c| c.start.iter().copied()).collect();
     let typical: Vec<f64> = added.iter().flat_map(|c| c.effect.params().iter().map(|p| p.1)).collect();
+    let table = prob.table_start();
+    // a group whose transmission stopped at a bound starts from the table's: the bound is where the
+    // structure without the effect went (K → 0 dragging the link like friction, or a rigid link
+    // under gravity), and that start would win every comparison of starts by cost (campaign rig 22)
+    let mut here = current.p[..n_t].to_vec();
+    for g in (0..prob.n_groups).filter(|&g| prob.transmission_at_bound(g, &current.p)) {
+        here[2 * g..2 * g + 2].copy_from_slice(&table[2 * g..2 * g + 2]);
+    }
     let mut starts = Vec::new();
-    for transmission in [&current.p[..n_t], &closed[..]] {
+    for transmission in [&here[..], &closed[..]] {
         for effect in [&linearised, &typical] {
             let mut q = transmission.to_vec();
             q.extend_from_slice(&current.p[n_t..]);

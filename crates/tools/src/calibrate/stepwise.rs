@@ -235,7 +235,8 @@ pub trait Rig {
     /// Whether the residual still shows structure the rounds should look for.
     fn structure_left(&self, m: &Self::Model) -> bool;
     /// False where the linearised ranking is blind (a fit at a bound: a rigid link does not feel a
-    /// small probe): every candidate predicting a gain is then refitted, and no pairs are formed.
+    /// small probe): every candidate predicting a gain is then refitted, not only those the
+    /// ranking cannot tell from the best (pairs are formed either way).
     fn rankable(&self, m: &Self::Model) -> bool;
     fn state(&self, m: &Self::Model) -> Self::State;
     /// Candidates, best first.
@@ -430,7 +431,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 }
             }
             let mut pair_index = None;
-            if accepted.is_none() && shortlist > 0 && rankable && budget.allows("pairs of candidates") {
+            if accepted.is_none() && shortlist > 0 && budget.allows("pairs of candidates") {
                 let pool: Vec<&Ranked<R::Effect>> =
                     candidates.iter().filter(|c| c.predicted_delta_bic < -BIC_MARGIN).take(PAIR_POOL).collect();
                 let first_pair = combinations.len();
@@ -688,6 +689,8 @@ mod tests {
         noise_var: f64,
         /// (effect, its lighter form)
         lighter: Option<(usize, usize)>,
+        /// the ranking is blind (the device's fit at a bound)
+        blind: bool,
     }
 
     impl Linear {
@@ -737,7 +740,7 @@ mod tests {
             self.excess(m) > 0.05 * self.noise_var
         }
         fn rankable(&self, _m: &Model) -> bool {
-            true
+            !self.blind
         }
         fn state(&self, _m: &Model) {}
         fn rank(&self, m: &Model) -> Vec<Ranked<usize>> {
@@ -802,7 +805,7 @@ mod tests {
     fn rig(x: Vec<Vec<f64>>, y: impl Fn(usize) -> f64) -> (Linear, Model) {
         let e = normals(99, N);
         let y: Vec<f64> = (0..N).map(|i| y(i) + NOISE * e[i]).collect();
-        let r = Linear { x, y, noise_var: NOISE * NOISE, lighter: None };
+        let r = Linear { x, y, noise_var: NOISE * NOISE, lighter: None, blind: false };
         let start = r.fit(vec![]);
         (r, start)
     }
@@ -838,6 +841,23 @@ mod tests {
         assert!(first.attempts.iter().all(|a| !a.verdict.keep), "no single effect earns its place");
         let pair = s.record.combinations.iter().find(|c| c.verdict.keep).expect("a kept pair");
         assert_eq!((pair.stage, sorted(pair.effects.clone())), ("pair after a round", vec![0, 1]));
+    }
+
+    /// A model whose ranking is blind (the device's transmission at a bound) still gets its pairs:
+    /// there the ranking's order says least, and campaign rig 22 (gravity and Coulomb friction on a
+    /// link the baseline made rigid) shows only as a pair.
+    #[test]
+    fn pairs_are_formed_where_the_ranking_is_blind() {
+        let (u, v, w) = (normals(11, N), normals(12, N), normals(13, N));
+        let x0: Vec<f64> = (0..N).map(|i| 3.0 * u[i] + v[i]).collect();
+        let x1: Vec<f64> = (0..N).map(|i| 3.0 * u[i] + w[i]).collect();
+        let x = vec![normals(14, N), x0.clone(), x1.clone()];
+        let (mut r, start) = rig(x, |i| x0[i] - x1[i]);
+        r.blind = true;
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(sorted(s.model.cols.clone()), vec![1, 2]);
+        let pair = s.record.combinations.iter().find(|c| c.verdict.keep).expect("a kept pair");
+        assert_eq!((pair.stage, sorted(pair.effects.clone())), ("pair after a round", vec![1, 2]));
     }
 
     #[test]
