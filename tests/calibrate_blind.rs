@@ -322,3 +322,59 @@ fn a_simulation_looks_at_the_deadline_while_it_runs() {
     assert_eq!(simulate(&mut inst, &input, &model, Some(later)).unwrap().len(), n);
     assert_eq!(simulate(&mut inst, &input, &model, None).unwrap().len(), n);
 }
+
+/// A run that starts its file at rest is judged at rest beside its own segment after a gap, which
+/// keeps its moving start: here a 3.85 Hz sine at 250 Hz starts the motor at 4.4 rad/s against a
+/// link at rest (the window estimate reads the start's kick as −0.3 rad/s), and 0.44 s of samples
+/// are cut out mid-run, after which the link moves at ~8 rad/s. Tried at rest together, the moving
+/// segment's misfit pulled the parameters every run is judged with, the file's start kept its wrong
+/// speed (baseline 2.5× the floor), and a gravity was added to make up for it (campaign seed 88).
+#[test]
+fn a_run_starting_at_rest_is_judged_beside_a_moving_segment_after_a_gap() {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("blind-start-and-gap");
+    let data = dir.join("data");
+    let synth = SynthArgs::from_cli(&[
+        "--temperatures",
+        "50",
+        "--frequencies",
+        "3.85",
+        "--rate",
+        "250",
+        "--duration",
+        "8",
+        "--seed",
+        "3",
+        "--link-inertia",
+        "0.033",
+        "--out",
+        data.to_str().unwrap(),
+    ])
+    .unwrap();
+    let files: Vec<_> = generate(&synth, common::fmu())
+        .unwrap()
+        .into_iter()
+        .map(|(n, t)| {
+            let kept: Vec<&str> = t
+                .lines()
+                .filter(|l| {
+                    let time = l.split(',').next().and_then(|c| c.parse::<f64>().ok());
+                    time.is_none_or(|s| !(4.5..=4.94).contains(&s))
+                })
+                .collect();
+            (n, (kept.join("\n") + "\n").into_bytes())
+        })
+        .collect();
+    write_atomically(&data, &files).unwrap();
+    let report = dir.join("report");
+    let args =
+        CalibrateArgs::from_cli(&[data.to_str().unwrap(), "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
+    let c = calibrate(&args).unwrap();
+    let runs = c.report["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2, "the gap splits the run: {}", c.report["runs"]);
+    let floor = synth.noise_floor();
+    let (base, fin) =
+        (c.report["baseline"]["rmse_rad"].as_f64().unwrap(), c.report["final"]["rmse_rad"].as_f64().unwrap());
+    eprintln!("baseline {base:.3e}, final {fin:.3e}, floor {floor:.3e}, added {:?}", added(&c));
+    assert!(added(&c).is_empty(), "nothing to add: {:?}", added(&c));
+    assert!(base <= 1.2 * floor && fin <= 1.2 * floor, "baseline {base:.3e}, final {fin:.3e}, floor {floor:.3e}");
+}

@@ -646,19 +646,26 @@ fn restart_moving_runs(prob: &mut Problem, current: Fit, estimated: &[f64]) -> F
 /// still moving. Returns the fit refitted with the chosen starts.
 pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
     let speeds = prob.initial_speeds();
-    if speeds.iter().all(|&v| v == 0.0) {
+    // only runs that start their file are tried at rest: a segment after a gap is moving, and its
+    // speed is fitted (`fit_initial_speeds`); at rest it would pull the parameters every other run
+    // is judged with (campaign seed 88: a segment at 11 rad/s set to rest left the file-starting
+    // runs 30x worse at rest than with a wrong speed of -0.45 rad/s, so that speed was kept)
+    let judged: Vec<bool> = prob.inputs.iter().zip(&speeds).map(|(i, &v)| v != 0.0 && !i.after_gap).collect();
+    if !judged.iter().any(|&j| j) {
         return moving;
     }
-    prob.set_initial_speeds(&vec![0.0; speeds.len()]);
+    let at_rest: Vec<f64> = speeds.iter().zip(&judged).map(|(&v, &j)| if j { 0.0 } else { v }).collect();
+    prob.set_initial_speeds(&at_rest);
     let Ok(resting) = levenberg_marquardt(prob, moving.spec.clone(), moving.p.clone(), MAX_ITERATIONS) else {
         prob.set_initial_speeds(&speeds);
         return moving;
     };
     let lengths = prob.lengths();
     let (sm, sr) = (prob.run_sse(&moving.residual), prob.run_sse(&resting.residual));
+    debug(format_args!("initial speeds {speeds:?}: sse moving {sm:?}, at rest {sr:?}"));
     let mut kept = 0;
     for (r, inp) in prob.inputs.iter_mut().enumerate() {
-        if speeds[r] != 0.0 && moving_start_earns(lengths[r], sr[r], sm[r]) {
+        if judged[r] && moving_start_earns(lengths[r], sr[r], sm[r]) {
             inp.initial_link_speed = speeds[r];
             kept += 1;
         }
@@ -666,7 +673,7 @@ pub fn resolve_initial_speeds(prob: &mut Problem, moving: Fit) -> Fit {
     if kept == 0 {
         return resting;
     }
-    if kept == speeds.iter().filter(|&&v| v != 0.0).count() {
+    if kept == judged.iter().filter(|&&j| j).count() {
         return moving;
     }
     let start = if resting.sse < moving.sse { resting.p.clone() } else { moving.p.clone() };
