@@ -13,21 +13,9 @@ use thermovia_tools::calibrate::synthetic::{generate, write_atomically, SynthArg
 use thermovia_tools::calibrate::{calibrate, CalibrateArgs, Calibration};
 
 fn blind(name: &str, truth: &[&str]) -> (Calibration, SynthArgs) {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(format!("blind-{name}"));
     let mut cli = vec!["--temperatures", "40,60", "--duration", "8", "--seed", "7"];
     cli.extend_from_slice(truth);
-    let out = dir.join("data");
-    let out_s = out.to_str().unwrap().to_string();
-    cli.extend_from_slice(&["--out", &out_s]);
-    let synth = SynthArgs::from_cli(&cli).unwrap();
-    let files = generate(&synth, common::fmu()).unwrap();
-    let files: Vec<_> = files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect();
-    write_atomically(&out, &files).unwrap();
-    let report = dir.join("report");
-    let args = CalibrateArgs::from_cli(&[&out_s, "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
-    let c = calibrate(&args).unwrap();
-    write_atomically(&report, &c.files).unwrap();
-    (c, synth)
+    edited_blind(&format!("blind-{name}"), &cli, |_| true)
 }
 
 fn added(c: &Calibration) -> Vec<String> {
@@ -41,6 +29,31 @@ fn param(c: &Calibration, effect: &str, name: &str) -> f64 {
 
 fn within(got: f64, truth: f64, rel: f64) -> bool {
     (got - truth).abs() <= rel * truth.abs()
+}
+
+/// Synthetic runs from `cli` (plus `--out`) with only the lines `keep` allows (a header edited, a
+/// stretch cut out), calibrated blind. Returns the calibration and the synthetic arguments.
+fn edited_blind(name: &str, cli: &[&str], keep: impl Fn(&str) -> bool) -> (Calibration, SynthArgs) {
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join(name);
+    let data = dir.join("data");
+    let mut cli = cli.to_vec();
+    cli.extend_from_slice(&["--out", data.to_str().unwrap()]);
+    let synth = SynthArgs::from_cli(&cli).unwrap();
+    let files: Vec<_> = generate(&synth, common::fmu())
+        .unwrap()
+        .into_iter()
+        .map(|(n, t)| {
+            let kept: Vec<&str> = t.lines().filter(|l| keep(l)).collect();
+            (n, (kept.join("\n") + "\n").into_bytes())
+        })
+        .collect();
+    write_atomically(&data, &files).unwrap();
+    let report = dir.join("report");
+    let args =
+        CalibrateArgs::from_cli(&[data.to_str().unwrap(), "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
+    let c = calibrate(&args).unwrap();
+    write_atomically(&report, &c.files).unwrap();
+    (c, synth)
 }
 
 /// The right effect found, nothing else, its parameter within 20 %, final error within 1.5×
@@ -199,34 +212,8 @@ fn two_effects_are_both_found() {
 /// `report::tests`).
 #[test]
 fn a_defaulted_inertia_is_warned_about_and_a_baseline_bound_the_final_fit_resolves_is_not() {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("blind-warnings");
-    let data = dir.join("data");
-    let synth = SynthArgs::from_cli(&[
-        "--temperatures",
-        "60",
-        "--frequencies",
-        "1",
-        "--duration",
-        "6",
-        "--gravity-mgl",
-        "3",
-        "--out",
-        data.to_str().unwrap(),
-    ])
-    .unwrap();
-    let files: Vec<_> = generate(&synth, common::fmu())
-        .unwrap()
-        .into_iter()
-        .map(|(n, t)| {
-            let kept: Vec<&str> = t.lines().filter(|l| !l.starts_with("# link_inertia_kgm2=")).collect();
-            (n, (kept.join("\n") + "\n").into_bytes())
-        })
-        .collect();
-    write_atomically(&data, &files).unwrap();
-    let report = dir.join("report");
-    let args =
-        CalibrateArgs::from_cli(&[data.to_str().unwrap(), "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
-    let c = calibrate(&args).unwrap();
+    let cli = ["--temperatures", "60", "--frequencies", "1", "--duration", "6", "--gravity-mgl", "3"];
+    let (c, _) = edited_blind("blind-warnings", &cli, |l| !l.starts_with("# link_inertia_kgm2="));
     let warnings: Vec<String> =
         c.report["warnings"].as_array().unwrap().iter().map(|w| w.as_str().unwrap().to_string()).collect();
     assert!(warnings.iter().any(|w| w.contains("link_inertia_kgm2 is not declared in 1 of 1 runs")), "{warnings:?}");
@@ -331,9 +318,7 @@ fn a_simulation_looks_at_the_deadline_while_it_runs() {
 /// speed (baseline 2.5× the floor), and a gravity was added to make up for it (campaign seed 88).
 #[test]
 fn a_run_starting_at_rest_is_judged_beside_a_moving_segment_after_a_gap() {
-    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("blind-start-and-gap");
-    let data = dir.join("data");
-    let synth = SynthArgs::from_cli(&[
+    let cli = [
         "--temperatures",
         "50",
         "--frequencies",
@@ -346,29 +331,11 @@ fn a_run_starting_at_rest_is_judged_beside_a_moving_segment_after_a_gap() {
         "3",
         "--link-inertia",
         "0.033",
-        "--out",
-        data.to_str().unwrap(),
-    ])
-    .unwrap();
-    let files: Vec<_> = generate(&synth, common::fmu())
-        .unwrap()
-        .into_iter()
-        .map(|(n, t)| {
-            let kept: Vec<&str> = t
-                .lines()
-                .filter(|l| {
-                    let time = l.split(',').next().and_then(|c| c.parse::<f64>().ok());
-                    time.is_none_or(|s| !(4.5..=4.94).contains(&s))
-                })
-                .collect();
-            (n, (kept.join("\n") + "\n").into_bytes())
-        })
-        .collect();
-    write_atomically(&data, &files).unwrap();
-    let report = dir.join("report");
-    let args =
-        CalibrateArgs::from_cli(&[data.to_str().unwrap(), "--out", report.to_str().unwrap(), "--no-plots"]).unwrap();
-    let c = calibrate(&args).unwrap();
+    ];
+    // 4.5–4.94 s cut out (headers and comments kept)
+    let (c, synth) = edited_blind("blind-start-and-gap", &cli, |l| {
+        l.split(',').next().and_then(|c| c.parse::<f64>().ok()).is_none_or(|s| !(4.5..=4.94).contains(&s))
+    });
     let runs = c.report["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 2, "the gap splits the run: {}", c.report["runs"]);
     let floor = synth.noise_floor();
