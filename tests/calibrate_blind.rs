@@ -295,9 +295,8 @@ fn a_simulation_looks_at_the_deadline_while_it_runs() {
         after_gap: false,
     };
     let model = RunModel::default();
-    // `simulate` looks at the clock inside its loop of steps (`run_jobs` refuses a job past the
-    // deadline before it starts, so this calls it directly): a deadline already passed stops it
-    // at its first look, without depending on how fast this machine steps
+    // `simulate` looks at the clock inside its loop of steps: a deadline already passed stops it at
+    // its first look, without depending on how fast this machine steps
     let now = std::time::Instant::now();
     match simulate(&mut inst, &input, &model, Some(now)) {
         Err(SimError::Deadline) => {}

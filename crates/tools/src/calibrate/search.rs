@@ -451,8 +451,9 @@ fn try_combination(
 }
 
 /// Starting points for refitting `current` with the candidates' effects added: the current
-/// transmission (the table's for a group at a bound) and the closed-form one (the transmission fitted without an effect may have
-/// absorbed it: friction mimicked by a softer, more damped link; gravity by a rigid one), each with
+/// transmission (the table's for a group at a bound) and the closed-form one (the transmission
+/// fitted without an effect may have absorbed it: friction mimicked by a softer, more damped link;
+/// gravity by a rigid one), each with
 /// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
 /// bounded fit can be absurd); and the equation error with the effects' torques as regressors
 /// (transmission and effects estimated together, so neither absorbs the other).

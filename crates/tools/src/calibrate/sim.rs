@@ -303,7 +303,7 @@ impl Simulator {
     }
 
     pub fn past_deadline(&self) -> bool {
-        self.deadline.lock().unwrap_or_else(|p| p.into_inner()).is_some_and(|d| std::time::Instant::now() >= d)
+        self.deadline().is_some_and(|d| std::time::Instant::now() >= d)
     }
 
     pub fn threads(&self) -> usize {
