@@ -614,13 +614,29 @@ impl Model {
             let s0 = start.get_or_insert_with(|| {
                 mechanics::StepStart::anchored(&self.params, &x, &mut self.sine_anchor, &friction)
             });
-            let (mut x_new, err) = if coupling == Coupling::Engaged {
-                let i = self.prepare_etd(t, key, level);
-                coefficients = self.etd_steps[i].2.step.coefficients();
-                self.etd_steps[i].2.step.step(&self.params, &shifted, u, s0)
-            } else {
-                let i = self.contact_etd(len, coupling);
-                self.contact_etd[i].2.step(&self.params, &shifted, u, s0)
+            let linearised = mechanics::friction_linearisation(&self.params, &friction, x[mechanics::LINK_SPEED], key);
+            let (mut x_new, err) = match (coupling == Coupling::Engaged, linearised) {
+                (true, None) => {
+                    let i = self.prepare_etd(t, key, level);
+                    coefficients = self.etd_steps[i].2.step.coefficients();
+                    self.etd_steps[i].2.step.step(&self.params, &shifted, u, s0)
+                }
+                (false, None) => {
+                    let i = self.contact_etd(len, coupling);
+                    self.contact_etd[i].2.step(&self.params, &shifted, u, s0)
+                }
+                // a link at or near rest under friction: its slope in the linear part
+                (engaged, Some(damping)) => {
+                    let c = if engaged {
+                        let i = self.prepare_etd(t, key, level);
+                        coefficients = self.etd_steps[i].2.step.coefficients();
+                        coefficients
+                    } else {
+                        Coefficients::ZERO
+                    };
+                    let step = EtdStep::with_link_damping(&self.params, &c, len, coupling, damping);
+                    step.step(&self.params, &shifted, u, &s0.linearised(damping, x[mechanics::LINK_SPEED]))
+                }
             };
             x_new[mechanics::MOTOR_ANGLE] += offset;
             if err <= 1.0 {

@@ -469,6 +469,17 @@ impl EtdStep {
         EtdStep::from_rows(&half, &doubled(&half), c, h)
     }
 
+    /// The step for the mechanics coupled as `coupling` with `damping` more link damping in its
+    /// linear part (an exponential Rosenbrock step: the friction's slope at the step's start,
+    /// [`friction_linearisation`], taken out of the explicit stages). Built afresh, one matrix
+    /// exponential, for the step it is used in.
+    pub fn with_link_damping(p: &Params, c: &Coefficients, h: f64, coupling: Coupling, damping: f64) -> Self {
+        let (mut a, b) = linear_system_with(p, c, coupling);
+        a[(LINK_SPEED, LINK_SPEED)] -= p.per_link_inertia(damping);
+        let half = phi_blocks(&a, &b, p.per_link_inertia(1.0), 0.5 * h).fixed_rows::<N_STATE>(0).into_owned();
+        EtdStep::from_rows(&half, &doubled(&half), c, h)
+    }
+
     /// The step of length h from the first [`N_STATE`] rows of [`phi_blocks`] at h/2 and h.
     pub fn from_rows(half: &PhiRows, full: &PhiRows, c: &Coefficients, h: f64) -> Self {
         let mut v = [0.0; N_ETD];
@@ -558,6 +569,9 @@ struct StageTorque<'a> {
     cos0: f64,
     amplitude: f64,
     offset: f64,
+    /// The friction's slope the step's linear part carries as link damping (N·m·s/rad; 0 but in a
+    /// linearised step, [`EtdStep::with_link_damping`]): the stages then see n(x) + d·θl'.
+    linearised: f64,
 }
 
 /// Where an exponential Runge–Kutta step starts: the stage torque about the link angle there and
@@ -592,6 +606,14 @@ impl<'a> StepStart<'a> {
     /// n(x): gravity and friction on the link at the step's start, N·m.
     pub fn link_torque(&self) -> f64 {
         self.n
+    }
+
+    /// This start for a step whose linear part carries `damping` of the friction's slope
+    /// ([`EtdStep::with_link_damping`]): its stages see the rest, n(x) + damping·θl'. `link_speed`
+    /// is the start's.
+    pub fn linearised(&self, damping: f64, link_speed: f64) -> Self {
+        let torque = StageTorque { linearised: damping, ..self.torque };
+        StepStart { torque, n: self.n + damping * link_speed }
     }
 
     /// The start of the next step, at the end x1 of this one: gravity's sine and cosine there by
@@ -702,24 +724,34 @@ impl<'a> StageTorque<'a> {
 
     /// Friction alone (gravity's amplitude 0), about θ0.
     fn new_without_gravity(theta0: f64, friction: &'a Friction) -> Self {
-        StageTorque { friction, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0, offset: 0.0 }
+        StageTorque { friction, theta0, sin0: 0.0, cos0: 0.0, amplitude: 0.0, offset: 0.0, linearised: 0.0 }
     }
 
     /// [`StageTorque::at`] at the link angle θ0 itself (offset d = 0: the series give sin d = 0
     /// and cos d = 1 exactly, so this is the same number but for the sign of a zero).
     #[inline(always)]
     fn at_theta0(&self, link_speed: f64) -> f64 {
-        let friction = self.friction.at(link_speed);
+        let friction = self.friction_at(link_speed);
         if self.amplitude == 0.0 {
             return friction;
         }
         friction - self.amplitude * self.sin0
     }
 
+    /// The friction less what the linear part carries of it.
+    #[inline(always)]
+    fn friction_at(&self, speed: f64) -> f64 {
+        let f = self.friction.at(speed);
+        if self.linearised == 0.0 {
+            return f;
+        }
+        f + self.linearised * speed
+    }
+
     /// At the link angle and speed `[θl, θl']`.
     #[inline(always)]
     fn at(&self, [angle, speed]: [f64; 2]) -> f64 {
-        let friction = self.friction.at(speed);
+        let friction = self.friction_at(speed);
         if self.amplitude == 0.0 {
             return friction;
         }
@@ -805,18 +837,36 @@ impl EtdStep {
         if p.coulomb_friction != 0.0 || p.stribeck_friction != 0.0 {
             let zone = SIGN_SATURATION * p.friction_smoothing_velocity;
             let speeds = [x[LINK_SPEED], a[1], b[1], c[1], x4[LINK_SPEED], b3[1]];
-            let near = speeds.iter().any(|v| v.abs() < zone) || speeds.iter().any(|v| v.signum() != speeds[0].signum());
-            let slope = if p.link_drive == LinkDrive::Prescribed {
-                0.0 // the link's speed is held: friction cannot flip it
+            let slope = steepest_friction_slope(p);
+            if torque.linearised != 0.0 {
+                // a linearised step: what the stages still see explicitly is the slope's change
+                // from the start's; it must keep h·|Δslope|/J_l within LINEARISED_SLOPE_LIMIT
+                let h_per_j = p.per_link_inertia(self.length());
+                let off = speeds.iter().any(|&v| {
+                    let change = friction_slope(torque.friction, v, p.friction_smoothing_velocity) - torque.linearised;
+                    let moved = h_per_j * change.abs();
+                    moved.is_nan() || moved > LINEARISED_SLOPE_LIMIT
+                });
+                if off {
+                    return (x4, f64::INFINITY);
+                }
             } else {
-                (p.coulomb_friction + p.stribeck_friction) / (p.friction_smoothing_velocity * p.link_inertia)
-            };
-            if near && self.length() * slope > 0.1 {
-                return (x4, f64::INFINITY);
+                let near =
+                    speeds.iter().any(|v| v.abs() < zone) || speeds.iter().any(|v| v.signum() != speeds[0].signum());
+                if near && self.length() * slope > 0.1 {
+                    return (x4, f64::INFINITY);
+                }
             }
         }
-        let tol = if p.stribeck_friction != 0.0 { STRIBECK_TOLERANCE_FACTOR } else { ETD_ESTIMATE_FACTOR }
-            * p.solver_tolerance;
+        // a linearised step's estimate sees only the remainder's variation: held to the tighter
+        // tolerance as Stribeck friction's is (measured with every near-rest step linearised: the
+        // torque-driven Coulomb regime of tests/physics.rs 8.0e-6 rad at 2·tolerance, 6.9e-7 at
+        // 1/100; it is explicit now, 3.9e-8)
+        let tol = if p.stribeck_friction != 0.0 || torque.linearised != 0.0 {
+            STRIBECK_TOLERANCE_FACTOR
+        } else {
+            ETD_ESTIMATE_FACTOR
+        } * p.solver_tolerance;
         let mut err: f64 = 0.0;
         for i in 0..N_STATE {
             let scale = tol * (1.0 + x[i].abs().max(x4[i].abs()));
@@ -1493,6 +1543,61 @@ fn smooth_sign(s: f64) -> f64 {
         s.tanh()
     }
 }
+
+/// The smoothed friction's steepest slope over the link's inertia, (F_c + F_s)/(v_s J_l), 1/s (0
+/// for a link whose speed is held: friction cannot flip it).
+fn steepest_friction_slope(p: &Params) -> f64 {
+    if p.link_drive == LinkDrive::Prescribed {
+        return 0.0;
+    }
+    (p.coulomb_friction + p.stribeck_friction) / (p.friction_smoothing_velocity * p.link_inertia)
+}
+
+/// The link damping the exponential steps of a sub-step `substep` long take into their linear
+/// part where one starts at link speed `v0` (an exponential Rosenbrock step), or None where the
+/// explicit stages do. Near zero speed a friction F/v_s steep holds explicit stages to
+/// h ≤ v_s J_l/(10 F) ([`EtdStep::step`]): a newton-metre on a light link is microseconds, a
+/// thousand explicit steps per millisecond sub-step while the link sticks (campaign rigs spent
+/// minutes per fit there). Linearised where a sub-step would need more than
+/// [`EXPLICIT_STEPS_BEFORE_LINEARISING`] explicit steps and the link is in the sign's zone; the
+/// explicit path keeps the rest, as before (tests/physics.rs measures both against a fine
+/// reference).
+pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep: f64) -> Option<f64> {
+    if !(p.coulomb_friction != 0.0 || p.stribeck_friction != 0.0) || p.link_drive == LinkDrive::Prescribed {
+        return None;
+    }
+    let vs = p.friction_smoothing_velocity;
+    let explicit_steps = substep * steepest_friction_slope(p) / 0.1;
+    let explicit_is_cheaper = explicit_steps.is_nan() || explicit_steps <= EXPLICIT_STEPS_BEFORE_LINEARISING;
+    if vs.is_nan() || vs <= 0.0 || v0.abs() >= SIGN_SATURATION * vs || explicit_is_cheaper {
+        return None;
+    }
+    let slope = friction_slope(friction, v0, vs);
+    (slope.is_finite() && slope > 0.0).then_some(slope)
+}
+
+/// Explicit steps a sub-step may need before the friction's slope goes into the linear part. A
+/// linearised step builds a matrix exponential of its own and is held to the tighter tolerance,
+/// so it pays only where the explicit steps are many: measured on a 0.52 Hz prescribed sine,
+/// 2 ms steps, J_l = 0.023 kg·m², 10.4 s, the model alone (2026-11-27): 0.2 N·m (87 explicit
+/// steps a sub-step) 7.4 ms explicit, 16.8 ms linearised; 1.7 N·m (739) 432 ms explicit (2.2e6
+/// attempted steps), 71–80 ms linearised (3e4–6e4).
+const EXPLICIT_STEPS_BEFORE_LINEARISING: f64 = 256.0;
+
+/// −dτ_f/dθl' of the friction at `v` (a central difference over a thousandth of the smoothing
+/// speed `vs`), N·m·s/rad: a damping where positive.
+fn friction_slope(friction: &Friction, v: f64, vs: f64) -> f64 {
+    let dv = 1e-3 * vs;
+    -(friction.at(v + dv) - friction.at(v - dv)) / (2.0 * dv)
+}
+
+/// How far a linearised step's stages may move the friction's slope from the one its linear part
+/// carries: h·|Δslope|/J_l at most this (the explicit stages' rule allows 0.1 of the whole slope;
+/// what the linear part does not carry is treated explicitly, and the embedded estimate at the
+/// tighter tolerance decides the rest). With every near-rest step linearised, the torque-driven
+/// Coulomb regime of tests/physics.rs measured 8.0e-6 rad at both 0.1 and 0.5: the tolerance,
+/// not this limit, set its error.
+const LINEARISED_SLOPE_LIMIT: f64 = 0.5;
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
 pub fn link_gravity(p: &Params, link_angle: f64) -> f64 {
