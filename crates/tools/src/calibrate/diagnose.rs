@@ -262,9 +262,8 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
             Effect::FrequencyDependentModulus => settings.extend(MAXWELL_TIME_GRID.iter().map(|&l| (1.0, l))),
             Effect::CoulombFriction | Effect::Backlash => settings.extend([1.0, 5.0].map(|f| (f, f64::NAN))),
             Effect::ThermalLag if !heating => {}
-            // the Stribeck excess is defined over a Coulomb level (BearingFriction's curve); alone,
-            // at a high speed scale, it only mimics Coulomb friction and blocks the real one
-            Effect::StribeckFriction if !fit.spec.effects.contains(&Effect::CoulombFriction) => {}
+            // an excess is ranked only over its base (`Effect::defined_over`); the search pairs them
+            e if e.defined_over().is_some_and(|b| !fit.spec.effects.contains(&b)) => {}
             Effect::StribeckFriction => settings.extend(STRIBECK_VELOCITY_GRID.iter().map(|&v| (1.0, v))),
             // an asymmetry shows only on top of friction the model already has
             Effect::AsymmetricFriction

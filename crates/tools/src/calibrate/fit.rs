@@ -167,6 +167,16 @@ impl Effect {
         }
     }
 
+    /// The effect this one is defined over: the Stribeck excess is BearingFriction's curve above a
+    /// Coulomb level (alone, at a high speed scale, it only mimics Coulomb friction and blocks the
+    /// real one), so it is ranked only once Coulomb friction is in, and paired with it before.
+    pub fn defined_over(self) -> Option<Effect> {
+        match self {
+            Effect::StribeckFriction => Some(Effect::CoulombFriction),
+            _ => None,
+        }
+    }
+
     /// The lighter effect that does much of what this one does on runs that show little more of it,
     /// with fewer parameters: a gravity whose link angle barely moves is a constant torque, and an
     /// asymmetric friction whose viscous levels are alike is (Coulomb and link damping besides) a

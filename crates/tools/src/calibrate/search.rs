@@ -352,13 +352,12 @@ fn try_combination(
         for subset in &subsets {
             let mut effects = kept_effects.clone();
             effects.extend_from_slice(subset);
-            // a Stribeck excess is defined over a Coulomb level; a model an earlier pass refitted
-            // from the same equation error is not refitted again (only the current transmission's
-            // start would differ)
-            let stribeck_alone =
-                effects.contains(&Effect::StribeckFriction) && !effects.contains(&Effect::CoulombFriction);
+            // an excess goes only with its base (`Effect::defined_over`); a model an earlier pass
+            // refitted from the same equation error is not refitted again (only the current
+            // transmission's start would differ)
+            let excess_alone = effects.iter().any(|e| e.defined_over().is_some_and(|b| !effects.contains(&b)));
             let key = (structure, effects);
-            if stribeck_alone || refitted.contains(&key) {
+            if excess_alone || refitted.contains(&key) {
                 continue;
             }
             refitted.push(key);
@@ -1131,6 +1130,9 @@ impl Rig for DeviceRig<'_, '_> {
     }
     fn visible(&self, m: &Judged, e: Effect) -> bool {
         effect_share(&m.fit, self.prob.n_groups, e).is_none_or(|share| share > m.sig.noise_floor)
+    }
+    fn defined_over(&self, e: Effect) -> Option<Effect> {
+        e.defined_over()
     }
     fn lighter(&self, m: &Judged, e: Effect) -> Option<(Effect, Judged)> {
         let lighter = e.lighter_form()?;
