@@ -303,7 +303,7 @@ fn worst_cases(fmu: &Fmu, runs: usize) {
     let cases: &[Case] = &[
         ("h = 1e300, refused before any work", 1e300, &[], 0.0),
         ("100 s of heating in 1e5 sub-steps", 100.0, &[], 8.0),
-        ("stiff friction: the attempt budget", 1.0, &[("spring_stiffness", 1e7), ("coulomb_friction", 1.0)], 0.0),
+        ("stiff spring under 1 N·m friction", 1.0, &[("spring_stiffness", 1e7), ("coulomb_friction", 1.0)], 0.0),
         ("light link, 1e3 N·m friction", 1.0, &[("link_inertia", 1e-9), ("coulomb_friction", 1e3)], 0.0),
     ];
     println!("worst cases of the work budget (one fmi2DoStep each, median of {runs}):");
