@@ -1594,9 +1594,10 @@ fn friction_slope(friction: &Friction, v: f64, vs: f64) -> f64 {
 /// How far a linearised step's stages may move the friction's slope from the one its linear part
 /// carries: h·|Δslope|/J_l at most this (the explicit stages' rule allows 0.1 of the whole slope;
 /// what the linear part does not carry is treated explicitly, and the embedded estimate at the
-/// tighter tolerance decides the rest). With every near-rest step linearised, the torque-driven
-/// Coulomb regime of tests/physics.rs measured 8.0e-6 rad at both 0.1 and 0.5: the tolerance,
-/// not this limit, set its error.
+/// tighter tolerance decides the rest). Measured: with every near-rest step linearised at the
+/// normal tolerance, the torque-driven Coulomb regime of tests/physics.rs gave 8.0e-6 rad both with
+/// this limit at 0.1 and with a cruder speed bound in its place (the tolerance, not the limit, set
+/// its error); the heavy-friction regime, linearised now, holds 2.1e-7 rad with it at 0.5.
 const LINEARISED_SLOPE_LIMIT: f64 = 0.5;
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
