@@ -615,25 +615,20 @@ impl Model {
                 mechanics::StepStart::anchored(&self.params, &x, &mut self.sine_anchor, &friction)
             });
             let linearised = mechanics::friction_linearisation(&self.params, &friction, x[mechanics::LINK_SPEED], key);
-            let (mut x_new, err) = match (coupling == Coupling::Engaged, linearised) {
-                (true, None) => {
-                    let i = self.prepare_etd(t, key, level);
-                    coefficients = self.etd_steps[i].2.step.coefficients();
-                    self.etd_steps[i].2.step.step(&self.params, &shifted, u, s0)
-                }
-                (false, None) => {
+            // engaged: this level's tabulated step, whose coefficients a linearised step takes too
+            let table = (coupling == Coupling::Engaged).then(|| self.prepare_etd(t, key, level));
+            if let Some(i) = table {
+                coefficients = self.etd_steps[i].2.step.coefficients();
+            }
+            let (mut x_new, err) = match (table, linearised) {
+                (Some(i), None) => self.etd_steps[i].2.step.step(&self.params, &shifted, u, s0),
+                (None, None) => {
                     let i = self.contact_etd(len, coupling);
                     self.contact_etd[i].2.step(&self.params, &shifted, u, s0)
                 }
                 // a link at or near rest under friction: its slope in the linear part
-                (engaged, Some(damping)) => {
-                    let c = if engaged {
-                        let i = self.prepare_etd(t, key, level);
-                        coefficients = self.etd_steps[i].2.step.coefficients();
-                        coefficients
-                    } else {
-                        Coefficients::ZERO
-                    };
+                (table, Some(damping)) => {
+                    let c = if table.is_some() { coefficients } else { Coefficients::ZERO };
                     let step = EtdStep::with_link_damping(&self.params, &c, len, coupling, damping);
                     step.step(&self.params, &shifted, u, &s0.linearised(damping, x[mechanics::LINK_SPEED]))
                 }

@@ -1563,10 +1563,8 @@ fn steepest_friction_slope(p: &Params) -> f64 {
 /// explicit path keeps the rest, as before (tests/physics.rs measures both against a fine
 /// reference).
 pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep: f64) -> Option<f64> {
-    if !(p.coulomb_friction != 0.0 || p.stribeck_friction != 0.0) || p.link_drive == LinkDrive::Prescribed {
-        return None;
-    }
     let vs = p.friction_smoothing_velocity;
+    // no Coulomb or Stribeck level, or a held link speed: the steepest slope is 0, no step is needed
     let explicit_steps = substep * steepest_friction_slope(p) / 0.1;
     let explicit_is_cheaper = explicit_steps.is_nan() || explicit_steps <= EXPLICIT_STEPS_BEFORE_LINEARISING;
     if vs.is_nan() || vs <= 0.0 || v0.abs() >= SIGN_SATURATION * vs || explicit_is_cheaper {

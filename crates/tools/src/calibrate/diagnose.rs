@@ -125,7 +125,6 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     let mut runs = Vec::new();
     let mut noise_num = 0.0f64;
     let mut noise_den = 0.0f64;
-    let mut quantum_sq = 0.0f64;
     let mut smooth_sq = 0.0;
     let mut smooth_n = 0.0f64;
     let mut acf: Vec<(usize, f64, f64)> = [1usize, 2, 5, 10, 50].iter().map(|&l| (l, 0.0, 0.0)).collect();
@@ -140,7 +139,6 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
             noise_num += r * r;
             noise_den += 1.0;
         }
-        quantum_sq += n as f64 * super::signal::quantisation_floor(y).powi(2);
         let span = t[n - 1] - t[0];
         for k in 0..n {
             all_e.push(e[k]);
@@ -219,8 +217,7 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     // difference's, without the motion's curvature): quantisation held still is not white, and
     // counting it there would hide structure
     let white_noise = (noise_num / noise_den.max(1.0)).sqrt();
-    let samples = prob.inputs.iter().map(|i| i.time.len()).sum::<usize>().max(1) as f64;
-    let noise_floor = white_noise.max((quantum_sq / samples).sqrt());
+    let noise_floor = white_noise.max(super::signal::pooled_quantisation_floor(prob.measured.iter().map(|y| &y[..])));
     let smooth_rms = (smooth_sq / smooth_n.max(1.0)).sqrt();
     Signatures {
         rmse: fit.rmse(),

@@ -407,7 +407,7 @@ fn calibrate_device(
     // fraction of a count off for as long as it dwells, a slow error no conditioning removes
     // (held-out rig 93: both encoders 2.6e-4 rad a count, the right effects at the truth's own
     // replay floor, flagged at 2.15x the link's alone)
-    let input_floor = motor_quantisation_floor(runs.iter().map(|r| &r.motor[..]));
+    let input_floor = signal::pooled_quantisation_floor(runs.iter().map(|r| &r.motor[..]));
     let far_above_noise = model_rmse > FAR_ABOVE_NOISE * floor.hypot(input_floor);
     outcome.unexplained = !outcome.final_signatures.white() && (box_beats_model || harmonics_left || far_above_noise);
     report["unexplained"] = serde_json::json!(outcome.unexplained);
@@ -474,15 +474,6 @@ fn calibrate_device(
         files.push(("plots/identified.svg".to_string(), report::identified_plot(&report)?.into_bytes()));
     }
     Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
-}
-
-/// The motor encoder's quantisation floor q/√12 over all samples (each run's own count, weighted by
-/// its samples; 0 for a motor angle that is not quantised).
-fn motor_quantisation_floor<'a>(motors: impl IntoIterator<Item = &'a [f64]>) -> f64 {
-    let (sum, n) = motors
-        .into_iter()
-        .fold((0.0, 0usize), |(sum, n), m| (sum + m.len() as f64 * signal::quantisation_floor(m).powi(2), n + m.len()));
-    (sum / n.max(1) as f64).sqrt()
 }
 
 /// The black box must beat the model's rms above the noise by this factor for the leftover
@@ -641,22 +632,4 @@ pub fn run(args: &CalibrateArgs) -> Result<(), Box<dyn std::error::Error>> {
 
 pub fn synth(args: &SynthArgs) -> Result<(), Box<dyn std::error::Error>> {
     synthetic::run(args)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::motor_quantisation_floor;
-
-    #[test]
-    fn the_motor_floor_is_the_encoders_count_weighted_by_samples() {
-        let q = 2.0 * std::f64::consts::PI / 4096.0;
-        let sine = |n: usize| (0..n).map(|k| 0.3 * (k as f64 * 0.01).sin()).collect::<Vec<f64>>();
-        let quantised: Vec<f64> = sine(3000).iter().map(|x| (x / q).round() * q).collect();
-        let smooth = sine(1000);
-        let floor = motor_quantisation_floor([&quantised[..], &smooth[..]]);
-        // three quarters of the samples carry q²/12, the smooth run none
-        let expected = (0.75 * q * q / 12.0).sqrt();
-        assert!((floor - expected).abs() < 1e-3 * expected, "{floor} against {expected}");
-        assert_eq!(motor_quantisation_floor([&smooth[..]]), 0.0);
-    }
 }

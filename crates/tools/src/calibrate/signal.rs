@@ -485,6 +485,14 @@ pub fn quantisation_floor(x: &[f64]) -> f64 {
     quantum(x) / 12f64.sqrt()
 }
 
+/// [`quantisation_floor`] over several signals, each run's q²/12 weighted by its samples.
+pub fn pooled_quantisation_floor<'a>(signals: impl IntoIterator<Item = &'a [f64]>) -> f64 {
+    let (sum, n) = signals
+        .into_iter()
+        .fold((0.0, 0usize), |(sum, n), x| (sum + x.len() as f64 * quantisation_floor(x).powi(2), n + x.len()));
+    (sum / n.max(1) as f64).sqrt()
+}
+
 /// The resolution of a sampled signal: the smallest step it takes between neighbours (an encoder's
 /// count, a logger's last digit; 0 for a constant signal).
 pub fn resolution(x: &[f64]) -> f64 {
@@ -506,6 +514,19 @@ pub fn median_second_difference_noise(x: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_pooled_floor_is_each_count_weighted_by_samples() {
+        let q = 2.0 * std::f64::consts::PI / 4096.0;
+        let sine = |n: usize| (0..n).map(|k| 0.3 * (k as f64 * 0.01).sin()).collect::<Vec<f64>>();
+        let quantised: Vec<f64> = sine(3000).iter().map(|x| (x / q).round() * q).collect();
+        let smooth = sine(1000);
+        let floor = pooled_quantisation_floor([&quantised[..], &smooth[..]]);
+        // three quarters of the samples carry q²/12, the smooth run none
+        let expected = (0.75 * q * q / 12.0).sqrt();
+        assert!((floor - expected).abs() < 1e-3 * expected, "{floor} against {expected}");
+        assert_eq!(pooled_quantisation_floor([&smooth[..]]), 0.0);
+    }
 
     /// A servo's move: from rest, accelerates at `a` for `k_turn` samples, brakes at −a as long,
     /// then holds (most of the record, as a positioning servo's is).
