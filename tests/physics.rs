@@ -572,13 +572,14 @@ fn caches_do_not_change_the_trajectory() {
 /// speed work: 4.8 kN·m of smoothed friction at 0.1 µs sub-steps made every sub-step take 1,024
 /// explicit exponential steps, 1e8 in one doStep). Since the friction's slope goes into the
 /// linear part near rest (mechanics::friction_linearisation) that step completes. At 0.05 µs
-/// sub-steps (8e4 in a 4 ms step) the explicit steps would need some 130 each (short of what
-/// linearising pays for), 1e7 in all: the step must end with the budget's failure, state unchanged.
+/// sub-steps (8e4 in a 4 ms step) 550 N·m of friction holds the explicit steps to some 16 each
+/// (short of what linearising a held link pays for), 1.3e6 in all: the step must end with the
+/// budget's failure, state unchanged.
 #[test]
 fn steep_friction_at_tiny_sub_steps_runs_out_of_budget_instead_of_hanging() {
-    let at = |max_internal_step: f64| {
+    let at = |max_internal_step: f64, coulomb_friction: f64| {
         let p = Params {
-            coulomb_friction: 4773.8,
+            coulomb_friction,
             max_internal_step,
             material_table: thermovia_model::material::MaterialTable::PrintedExperimental,
             ..Params::default()
@@ -588,10 +589,10 @@ fn steep_friction_at_tiny_sub_steps_runs_out_of_budget_instead_of_hanging() {
         m.inputs.motor_torque = 1.0;
         m
     };
-    let mut m = at(1e-7);
+    let mut m = at(1e-7, 4773.8);
     m.step(1e-2).expect("the linearised steps take the fuzzer's step");
     assert!(m.link_angle().is_finite() && m.link_angle().abs() < 1e-3, "the link sticks: {}", m.link_angle());
-    let mut m = at(5e-8);
+    let mut m = at(5e-8, 550.0);
     let before = m.link_angle();
     match m.step(4e-3) {
         Err(thermovia_model::StepFailure::SolverBudget { .. }) => {}

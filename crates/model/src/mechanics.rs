@@ -1558,15 +1558,17 @@ fn steepest_friction_slope(p: &Params) -> f64 {
 /// explicit stages do. Near zero speed a friction F/v_s steep holds explicit stages to
 /// h ≤ v_s J_l/(10 F) ([`EtdStep::step`]): a newton-metre on a light link is microseconds, a
 /// thousand explicit steps per millisecond sub-step while the link sticks (campaign rigs spent
-/// minutes per fit there). Linearised where a sub-step would need more than
-/// [`EXPLICIT_STEPS_BEFORE_LINEARISING`] explicit steps and the link is in the sign's zone; the
-/// explicit path keeps the rest, as before (tests/physics.rs measures both against a fine
-/// reference).
+/// minutes per fit there). Linearised where the link is in the sign's zone and a sub-step would
+/// need more than [`EXPLICIT_STEPS_BEFORE_LINEARISING`] explicit steps, or more than
+/// [`EXPLICIT_STEPS_BEFORE_LINEARISING_HELD`] where the link is held (|θl'| < v_s); the explicit
+/// path keeps the rest (tests/physics.rs measures both against a fine reference).
 pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep: f64) -> Option<f64> {
     let vs = p.friction_smoothing_velocity;
     // no Coulomb or Stribeck level, or a held link speed: the steepest slope is 0, no step is needed
     let explicit_steps = substep * steepest_friction_slope(p) / 0.1;
-    let explicit_is_cheaper = explicit_steps.is_nan() || explicit_steps <= EXPLICIT_STEPS_BEFORE_LINEARISING;
+    let threshold =
+        if v0.abs() < vs { EXPLICIT_STEPS_BEFORE_LINEARISING_HELD } else { EXPLICIT_STEPS_BEFORE_LINEARISING };
+    let explicit_is_cheaper = explicit_steps.is_nan() || explicit_steps <= threshold;
     if vs.is_nan() || vs <= 0.0 || v0.abs() >= SIGN_SATURATION * vs || explicit_is_cheaper {
         return None;
     }
@@ -1581,6 +1583,16 @@ pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep:
 /// steps a sub-step) 7.4 ms explicit, 16.8 ms linearised; 1.7 N·m (739) 432 ms explicit (2.2e6
 /// attempted steps), 71–80 ms linearised (3e4–6e4).
 const EXPLICIT_STEPS_BEFORE_LINEARISING: f64 = 256.0;
+
+/// The same for a link held by its friction (|θl'| < v_s, where the smoothed sign is near its
+/// linear part and the frozen slope stays right for the whole sub-step). A link at rest between
+/// steps of a prescribed motor sits there for seconds: measured on campaign rig 99's 40 °C run
+/// (random steps, 0.23 N·m on 0.019 kg·m², 1 ms steps, 3220 samples, 80 explicit steps a sub-step),
+/// the model alone (2026-11-27): 233 ms and 7.2e5 attempted steps explicit, 96 ms and 1.7e4 with
+/// this at 16; with a 3.7 mrad backlash 750 → 36 ms; the final link angle the same to 2e-9 rad. At 16
+/// for every link in the zone (not only a held one), the torque-driven Coulomb regime of
+/// tests/physics.rs went from 3.9e-8 to 7.0e-7 rad; with the hold condition it stays at 3.9e-8.
+const EXPLICIT_STEPS_BEFORE_LINEARISING_HELD: f64 = 16.0;
 
 /// −dτ_f/dθl' of the friction at `v` (a central difference over a thousandth of the smoothing
 /// speed `vs`), N·m·s/rad: a damping where positive.
