@@ -1560,14 +1560,17 @@ fn steepest_friction_slope(p: &Params) -> f64 {
 /// thousand explicit steps per millisecond sub-step while the link sticks (campaign rigs spent
 /// minutes per fit there). Linearised where the link is in the sign's zone and a sub-step would
 /// need more than [`EXPLICIT_STEPS_BEFORE_LINEARISING`] explicit steps, or more than
-/// [`EXPLICIT_STEPS_BEFORE_LINEARISING_HELD`] where the link is held (|θl'| < v_s); the explicit
+/// [`EXPLICIT_STEPS_BEFORE_LINEARISING_HELD`] where the friction holds the link; the explicit
 /// path keeps the rest (tests/physics.rs measures both against a fine reference).
 pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep: f64) -> Option<f64> {
     let vs = p.friction_smoothing_velocity;
     // no Coulomb or Stribeck level, or a held link speed: the steepest slope is 0, no step is needed
     let explicit_steps = substep * steepest_friction_slope(p) / 0.1;
-    let threshold =
-        if v0.abs() < vs { EXPLICIT_STEPS_BEFORE_LINEARISING_HELD } else { EXPLICIT_STEPS_BEFORE_LINEARISING };
+    let threshold = if v0.abs() < HELD_SPEED * vs {
+        EXPLICIT_STEPS_BEFORE_LINEARISING_HELD
+    } else {
+        EXPLICIT_STEPS_BEFORE_LINEARISING
+    };
     let explicit_is_cheaper = explicit_steps.is_nan() || explicit_steps <= threshold;
     if vs.is_nan() || vs <= 0.0 || v0.abs() >= SIGN_SATURATION * vs || explicit_is_cheaper {
         return None;
@@ -1584,15 +1587,20 @@ pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep:
 /// attempted steps), 71–80 ms linearised (3e4–6e4).
 const EXPLICIT_STEPS_BEFORE_LINEARISING: f64 = 256.0;
 
-/// The same for a link held by its friction (|θl'| < v_s, where the smoothed sign is near its
-/// linear part and the frozen slope stays right for the whole sub-step). A link at rest between
-/// steps of a prescribed motor sits there for seconds: measured on campaign rig 99's 40 °C run
-/// (random steps, 0.23 N·m on 0.019 kg·m², 1 ms steps, 3220 samples, 80 explicit steps a sub-step),
-/// the model alone (2026-11-27): 233 ms and 7.2e5 attempted steps explicit, 96 ms and 1.7e4 with
-/// this at 16; with a 3.7 mrad backlash 750 → 36 ms; the final link angle the same to 2e-9 rad. At 16
-/// for every link in the zone (not only a held one), the torque-driven Coulomb regime of
-/// tests/physics.rs went from 3.9e-8 to 7.0e-7 rad; with the hold condition it stays at 3.9e-8.
+/// The same for a link its friction holds (|θl'| < [`HELD_SPEED`]·v_s), where the frozen slope stays
+/// right for the whole sub-step. A link at rest between steps of a prescribed motor sits there for
+/// seconds. Measured on campaign rig 99's 40 °C run (random steps, 0.23 N·m on 0.019 kg·m², 1 ms
+/// steps, 3220 samples, 80 explicit steps a sub-step), the model alone (2026-11-27): 239 ms and
+/// 7.2e5 attempted steps explicit, 95 ms and 1.5e4 with this at 16; with a 3.7 mrad backlash
+/// 772 → 39 ms; the final link angle the same to 1e-9 rad. At 16 for every link in the zone (not
+/// only a held one), the torque-driven Coulomb regime of tests/physics.rs went from 3.9e-8 to
+/// 7.0e-7 rad (its reversals cross the zone at speed); with the hold condition it is 3.7e-8.
 const EXPLICIT_STEPS_BEFORE_LINEARISING_HELD: f64 = 16.0;
+
+/// A held link creeps at v_s·atanh(τ/F) under a torque τ the friction F holds: below 5 v_s for every
+/// τ up to 0.9999 F. (At 1·v_s, τ ≤ 0.76 F only: tests/physics.rs's held link still took 189
+/// attempted steps per communication step, 18 at 5·v_s.)
+const HELD_SPEED: f64 = 5.0;
 
 /// −dτ_f/dθl' of the friction at `v` (a central difference over a thousandth of the smoothing
 /// speed `vs`), N·m·s/rad: a damping where positive.
