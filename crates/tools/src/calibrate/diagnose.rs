@@ -16,8 +16,18 @@ use nalgebra::DMatrix;
 use super::fit::{Effect, Fit, ModelSpec, Problem, MAXWELL_TIME_GRID};
 
 /// Stribeck velocities tried before the Stribeck excess's own fit (its velocity is not
-/// identifiable while the excess is 0), rad/s.
-pub const STRIBECK_VELOCITY_GRID: [f64; 3] = [0.01, 0.05, 0.2];
+/// identifiable while the excess is 0), as shares of the motion's speed scale
+/// ([`Problem::speed_scale`]): the excess shows only where the link's speeds span its velocity,
+/// so the grid moves with the rig. (It was 0.01, 0.05 and 0.2 rad/s, about 1–20 % of the
+/// paper's bench's 1 rad/s; fresh campaign rig 121 has 0.8 rad/s at 3.1 rad/s.)
+pub const STRIBECK_VELOCITY_SHARES: [f64; 4] = [0.02, 0.06, 0.2, 0.6];
+
+/// The Stribeck velocities tried for `prob`'s runs, rad/s (the paper's bench's scale, 1 rad/s,
+/// where the runs are too short to tell theirs).
+pub fn stribeck_velocity_grid(prob: &Problem) -> [f64; 4] {
+    let scale = prob.speed_scale().unwrap_or(1.0);
+    STRIBECK_VELOCITY_SHARES.map(|share| share * scale)
+}
 
 /// Window of the moving average that exposes low-frequency structure, samples.
 pub const STRUCTURE_WINDOW: usize = 25;
@@ -261,7 +271,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
             Effect::ThermalLag if !heating => {}
             // an excess is ranked only over its base (`Effect::defined_over`); the search pairs them
             e if e.defined_over().is_some_and(|b| !fit.spec.effects.contains(&b)) => {}
-            Effect::StribeckFriction => settings.extend(STRIBECK_VELOCITY_GRID.iter().map(|&v| (1.0, v))),
+            Effect::StribeckFriction => settings.extend(stribeck_velocity_grid(prob).map(|v| (1.0, v))),
             // an asymmetry shows only on top of friction the model already has
             Effect::AsymmetricFriction
                 if !fit.spec.effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::LinkDamping)) => {}

@@ -26,6 +26,21 @@ pub enum Effect {
     ConstantLoad,
 }
 
+/// A stiffness within this factor of its bound is near it (`Problem::stiffness_near_bound`):
+/// a natural frequency within a factor 2.
+pub const NEAR_BOUND: f64 = 4.0;
+
+/// Whether the log-parameter `x` sits on the bound `lo` or `hi` (not logs).
+fn on_bound(x: f64, lo: f64, hi: f64) -> bool {
+    x <= lo.ln() + 1e-9 || x >= hi.ln() - 1e-9
+}
+
+/// The loss factor C·ω/K above which a transmission drags the link through its damper
+/// ([`Problem::transmission_dragging`]): half again the largest of the PCL table's (1.9, at
+/// 50 °C; 0.3–1.6 at 22, 40 and 60 °C), where a fitted transmission has left the material's
+/// behaviour behind. The campaign's rigs that pass end at 0.6 or less; their baselines reach 3e3.
+pub const DRAGGING_LOSS_FACTOR: f64 = 3.0;
+
 /// Relaxation times tried for the Maxwell branch before its own fit (its λ is not identifiable
 /// while K_M = 0), s.
 pub const MAXWELL_TIME_GRID: [f64; 3] = [0.03, 0.1, 0.3];
@@ -506,9 +521,40 @@ impl<'a> Problem<'a> {
 
     /// Whether group g's stiffness or damping in `p` sits on its bound.
     pub fn transmission_at_bound(&self, g: usize, p: &[f64]) -> bool {
-        let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);
-        let on = |x: f64, lo: f64, hi: f64| x <= lo.ln() + 1e-9 || x >= hi.ln() - 1e-9;
-        on(p[2 * g], k_lo, k_hi) || on(p[2 * g + 1], c_lo, c_hi)
+        let (_, (c_lo, c_hi)) = self.transmission_range(g);
+        self.stiffness_at_bound(g, p) || on_bound(p[2 * g + 1], c_lo, c_hi)
+    }
+
+    /// Whether group g's stiffness in `p` sits on its bound: a rigid link or none.
+    pub fn stiffness_at_bound(&self, g: usize, p: &[f64]) -> bool {
+        let ((k_lo, k_hi), _) = self.transmission_range(g);
+        on_bound(p[2 * g], k_lo, k_hi)
+    }
+
+    /// Whether group g's stiffness in `p` is within [`NEAR_BOUND`] of a bound, as the samples
+    /// see it: a natural frequency within a factor 2 of the Nyquist limit (a link as rigid as the
+    /// rate can show) or of the limp end. A fit heading for the bound stops short of it when the
+    /// iterations are capped (fresh rig 114's screening fit: 3 % below the rigid bound).
+    /// -1 near the limp end, +1 near the rigid one, 0 elsewhere.
+    pub fn stiffness_near_bound(&self, g: usize, p: &[f64]) -> i8 {
+        let ((k_lo, k_hi), _) = self.transmission_range(g);
+        if p[2 * g] <= (k_lo * NEAR_BOUND).ln() {
+            -1
+        } else if p[2 * g] >= (k_hi / NEAR_BOUND).ln() {
+            1
+        } else {
+            0
+        }
+    }
+
+    /// Whether group g's transmission in `p` carries the motion through its damper rather than
+    /// its spring: a loss factor C·ω/K above [`DRAGGING_LOSS_FACTOR`] at the table's frequency
+    /// (the runs'). The shape a structure without friction or a load takes to follow the motor
+    /// with a lag (a limp spring, a damper far past the PCL's): like a bound, no start for a refit
+    /// that brings the friction in.
+    pub fn transmission_dragging(&self, g: usize, p: &[f64]) -> bool {
+        let w = 2.0 * std::f64::consts::PI * self.tables[g].frequency_hz;
+        (p[2 * g + 1] - p[2 * g]).exp() * w > DRAGGING_LOSS_FACTOR
     }
 
     /// Lower and upper bounds of every parameter of `spec` (log-parameters for K and C).
@@ -903,6 +949,21 @@ impl<'a> Problem<'a> {
     /// Sets every run's initial link speed.
     pub fn set_initial_speeds(&mut self, speeds: &[f64]) {
         self.inputs.iter_mut().zip(speeds).for_each(|(i, &v)| i.initial_link_speed = v);
+    }
+
+    /// The motion's speed scale, rad/s: √2 × the rms speed of the motor over every run (the
+    /// amplitude × ω of a sine), which the link follows below its resonance. None for runs too
+    /// short to tell.
+    pub fn speed_scale(&self) -> Option<f64> {
+        let (mut sum, mut n) = (0.0, 0usize);
+        for input in &self.inputs {
+            if let Some(v2) = super::signal::mean_square_speed(&input.time, &input.motor) {
+                sum += v2 * input.time.len() as f64;
+                n += input.time.len();
+            }
+        }
+        let scale = (2.0 * sum / n as f64).sqrt();
+        (n > 0 && scale.is_finite() && scale > 0.0).then_some(scale)
     }
 
     pub fn n_samples(&self) -> usize {

@@ -277,7 +277,13 @@ fn record_json(o: &Outcome) -> Value {
         &o.record,
         Effect::name,
         |s: &super::diagnose::Signatures| json!({"structure_ratio": s.structure_ratio}),
-        |d: &(f64, f64)| json!({"structure_before": d.0, "structure_after": d.1}),
+        |d: &super::search::Evidence| {
+            let mut j = json!({"structure_before": d.structure.0, "structure_after": d.structure.1});
+            if let Some(n) = d.newly_near_bound {
+                j["stiffness_newly_near_bound"] = json!(n);
+            }
+            j
+        },
     )
 }
 
@@ -428,10 +434,16 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         &record_json(o),
         |r| format!(" (residual structure {:.1}× white noise)", r["structure_ratio"].as_f64().unwrap_or(f64::NAN)),
         |a| {
+            let newly = a["stiffness_newly_near_bound"].as_u64().unwrap_or(0);
             format!(
-                ", structure {:.1} → {:.1}",
+                ", structure {:.1} → {:.1}{}",
                 a["structure_before"].as_f64().unwrap_or(f64::NAN),
-                a["structure_after"].as_f64().unwrap_or(f64::NAN)
+                a["structure_after"].as_f64().unwrap_or(f64::NAN),
+                if newly > 0 {
+                    format!(", the stiffness taken to or near a bound at {newly} temperatures")
+                } else {
+                    String::new()
+                }
             )
         },
     );

@@ -51,13 +51,22 @@ fn unless_cut_off(prob: &Problem, current: &Fit, current_sig: &Signatures, scree
     (screened, sig)
 }
 
+/// What a device refit's verdict rests on besides BIC: the residual's low-frequency structure over
+/// white noise before and after, and (for a combination) the temperature groups whose stiffness
+/// it took to a bound (`bound_rule`).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Evidence {
+    pub structure: (f64, f64),
+    pub newly_near_bound: Option<usize>,
+}
+
 /// `refit` against `current` (same data): BIC and the structure ratios.
-fn verdict(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Signatures) -> Verdict<(f64, f64)> {
+fn verdict(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Signatures) -> Verdict<Evidence> {
     Verdict {
         keep: earns_its_place(current, sig, refit, refit_sig),
         bic_before: current.bic(),
         bic_after: refit.bic(),
-        detail: (sig.structure_ratio, refit_sig.structure_ratio),
+        detail: Evidence { structure: (sig.structure_ratio, refit_sig.structure_ratio), newly_near_bound: None },
     }
 }
 
@@ -86,6 +95,25 @@ fn screening_problem<'a>(prob: &Problem<'a>, fit: &Fit) -> Option<(Problem<'a>, 
     Some((sprob, f, s))
 }
 
+/// Whether group g's transmission in `p` is no start for a refit: on a bound, or dragging the
+/// link through its damper (`Problem::transmission_dragging`).
+fn no_start(prob: &Problem, g: usize, p: &[f64]) -> bool {
+    prob.transmission_at_bound(g, p) || prob.transmission_dragging(g, p)
+}
+
+/// Records in `verdict` the temperature groups whose stiffness `refit` puts at or near a bound
+/// that `current` had it away from (`Problem::stiffness_near_bound`), and keeps it only where there are none.
+fn bound_rule(prob: &Problem, current: &Fit, refit: &Fit, verdict: &mut Verdict<Evidence>) {
+    let newly = (0..prob.n_groups)
+        .filter(|&g| {
+            let side = prob.stiffness_near_bound(g, &refit.p);
+            side != 0 && side != prob.stiffness_near_bound(g, &current.p)
+        })
+        .count();
+    verdict.detail.newly_near_bound = Some(newly);
+    verdict.keep &= newly == 0;
+}
+
 /// Whether some temperature group's stiffness or damping sits on its bound.
 pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
     (0..prob.n_groups).any(|g| prob.transmission_at_bound(g, &fit.p))
@@ -93,13 +121,13 @@ pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
 
 /// A round of the device's search: the screened residual's signatures, the ranking, the refits
 /// with (structure ratio before, after).
-pub type Round = super::stepwise::Round<Effect, Signatures, (f64, f64)>;
+pub type Round = super::stepwise::Round<Effect, Signatures, Evidence>;
 /// An effect set refitted at once, with (structure ratio before, after).
-pub type CombinationAttempt = Attempt<Effect, (f64, f64)>;
+pub type CombinationAttempt = Attempt<Effect, Evidence>;
 
 pub struct Outcome {
     /// Rounds, combinations, the backward check and the budget (`stepwise::search`).
-    pub record: Record<Effect, Signatures, (f64, f64)>,
+    pub record: Record<Effect, Signatures, Evidence>,
     pub baseline: Fit,
     pub baseline_signatures: Signatures,
     pub final_fit: Fit,
@@ -369,9 +397,9 @@ fn try_combination(
     if proposals.is_empty() {
         return None;
     }
-    // (the current transmission only when it is off its bounds: a rigid or limp link is no start,
-    // and a stiff one with friction is slow to simulate)
-    let feasible = !at_bound(prob, current);
+    // (the current transmission only when no group is at a bound or dragging: a rigid or limp link
+    // is no start, and a stiff one with friction is slow to simulate)
+    let feasible = !(0..prob.n_groups).any(|g| no_start(prob, g, &current.p));
     let (sprob, scurrent, ssig) = screened(screen, prob, current, sig);
     let t = std::time::Instant::now();
     // Each structure's best subset from every start (a transmission that absorbed an effect, or
@@ -421,6 +449,14 @@ fn try_combination(
     let (screened, screened_sig) = unless_cut_off(sprob, scurrent, ssig, screened);
     let effects = screened.spec.effects.clone();
     let mut attempt = CombinationAttempt { stage, effects, verdict: verdict(scurrent, ssig, &screened, &screened_sig) };
+    // Effects that earn their place only by making the link rigid or its spring vanish fill the
+    // gap that bound leaves, and the report warns of such a fit: a combination that takes some
+    // temperature's stiffness to or near a bound it was away from is not kept (fresh rig 114:
+    // link damping and a 20 mrad backlash on a rigid link in place of the truth's Coulomb friction,
+    // which then no refit could reach; rejected, Coulomb friction alone came next, all within 4 %).
+    // A damping at its bound is not counted: with link damping in, the transmission's own may
+    // rightly go to nothing (fresh rig 125, whose combination that rule would have lost).
+    bound_rule(sprob, scurrent, &screened, &mut attempt.verdict);
     debug(format_args!(
         "combination {:?} screened in {:?}: kept {}",
         attempt.effects,
@@ -445,6 +481,7 @@ fn try_combination(
     attempt.effects = done.spec.effects.clone();
     let s = signatures(prob, &done);
     attempt.verdict = verdict(current, sig, &done, &s);
+    bound_rule(prob, current, &done, &mut attempt.verdict);
     let accepted = attempt.verdict.keep.then_some((done, s));
     Some((attempt, accepted))
 }
@@ -462,11 +499,12 @@ fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Ranked<Effect>], la
     let linearised: Vec<f64> = added.iter().flat_map(|c| c.start.iter().copied()).collect();
     let typical: Vec<f64> = added.iter().flat_map(|c| c.effect.params().iter().map(|p| p.1)).collect();
     let table = prob.table_start();
-    // a group whose transmission stopped at a bound starts from the table's: the bound is where the
-    // structure without the effect went (K → 0 dragging the link like friction, or a rigid link
-    // under gravity), and that start would win every comparison of starts by cost (campaign rig 22)
+    // a group whose transmission stopped at a bound, or drags the link through its damper, starts
+    // from the table's: that is where the structure without the effect went (K → 0 dragging the
+    // link like friction, or a rigid link under gravity), and that start would win every
+    // comparison of starts by cost (campaign rig 22; fresh rigs 92 and 114, K 100× low off the bound)
     let mut here = current.p[..n_t].to_vec();
-    for g in (0..prob.n_groups).filter(|&g| prob.transmission_at_bound(g, &current.p)) {
+    for g in (0..prob.n_groups).filter(|&g| no_start(prob, g, &current.p)) {
         here[2 * g..2 * g + 2].copy_from_slice(&table[2 * g..2 * g + 2]);
     }
     let mut starts = Vec::new();
@@ -984,7 +1022,7 @@ impl DeviceRig<'_, '_> {
 impl Rig for DeviceRig<'_, '_> {
     type Effect = Effect;
     type Model = Judged;
-    type Detail = (f64, f64);
+    type Detail = Evidence;
     type State = Signatures;
 
     fn name(e: Effect) -> &'static str {
@@ -1051,7 +1089,7 @@ impl Rig for DeviceRig<'_, '_> {
             Some(Judged { fit: refit, sig })
         })
     }
-    fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<(f64, f64)> {
+    fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<Evidence> {
         self.with_screen(m, |_, c, s| verdict(c, s, &refit.fit, &refit.sig))
     }
     fn converge(&self, m: &Judged, winner: Judged, round: usize) -> Option<Judged> {

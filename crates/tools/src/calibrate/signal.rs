@@ -312,20 +312,30 @@ pub fn second_difference_noise(x: &[f64]) -> f64 {
 /// rms(x')/(2π rms(x − mean)), x' by differences over ±10 ms (the power-weighted frequency).
 pub fn rms_frequency(t: &[f64], x: &[f64]) -> f64 {
     let n = x.len();
+    let Some(v2) = mean_square_speed(t, x) else { return 0.0 };
     let mean = x.iter().sum::<f64>() / n as f64;
-    let dt = (t[n - 1] - t[0]) / (n - 1).max(1) as f64;
-    let lag = ((0.01 / dt).round() as usize).max(1);
-    if n <= 2 * lag {
-        return 0.0;
-    }
-    let v2: f64 = (lag..n - lag).map(|k| ((x[k + lag] - x[k - lag]) / (t[k + lag] - t[k - lag])).powi(2)).sum::<f64>()
-        / (n - 2 * lag) as f64;
     let x2: f64 = x.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n as f64;
     if x2 <= 0.0 {
         0.0
     } else {
         v2.sqrt() / (2.0 * std::f64::consts::PI * x2.sqrt())
     }
+}
+
+/// The mean of x'² by differences over ±10 ms (a quantised angle's slope from one sample to the
+/// next is mostly its counts); None for a record shorter than that window.
+pub fn mean_square_speed(t: &[f64], x: &[f64]) -> Option<f64> {
+    let n = x.len().min(t.len());
+    if n < 3 {
+        return None;
+    }
+    let dt = (t[n - 1] - t[0]) / (n - 1) as f64;
+    let lag = ((0.01 / dt).round() as usize).max(1);
+    if n <= 2 * lag || !dt.is_finite() || dt <= 0.0 {
+        return None;
+    }
+    let v2 = (lag..n - lag).map(|k| ((x[k + lag] - x[k - lag]) / (t[k + lag] - t[k - lag])).powi(2)).sum::<f64>();
+    Some(v2 / (n - 2 * lag) as f64)
 }
 
 /// Least-squares harmonics of `e` on [t0, t1) at multiples of `w`: returns (DC, [(cos, sin) per harmonic]).
@@ -514,6 +524,21 @@ pub fn median_second_difference_noise(x: &[f64]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A sine's speed scale √(2·mean x'²) is its amplitude × ω at any rate and through a coarse
+    /// encoder's counts (differences over ±10 ms, not from one sample to the next).
+    #[test]
+    fn a_sines_mean_square_speed_gives_amplitude_times_omega_through_its_counts() {
+        let q = 2.0 * std::f64::consts::PI / 2000.0;
+        for (rate, f, a) in [(200.0, 0.3, 0.4), (1000.0, 1.0, 0.2), (5000.0, 4.0, 0.05)] {
+            let t: Vec<f64> = (0..(10.0 * rate) as usize).map(|k| k as f64 / rate).collect();
+            let w = 2.0 * std::f64::consts::PI * f;
+            let x: Vec<f64> = t.iter().map(|&t| (a * (w * t).sin() / q).round() * q).collect();
+            let scale = (2.0 * mean_square_speed(&t, &x).expect("10 s of samples")).sqrt();
+            assert!((scale / (a * w) - 1.0).abs() < 0.03, "{rate} Hz, {f} Hz: {scale} against {}", a * w);
+        }
+        assert_eq!(mean_square_speed(&[0.0, 1e-3], &[0.0, 1.0]), None);
+    }
 
     #[test]
     fn the_pooled_floor_is_each_count_weighted_by_samples() {
