@@ -1564,7 +1564,7 @@ fn steepest_friction_slope(p: &Params) -> f64 {
 /// path keeps the rest (tests/physics.rs measures both against a fine reference).
 pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep: f64) -> Option<f64> {
     let vs = p.friction_smoothing_velocity;
-    // no Coulomb or Stribeck level, or a held link speed: the steepest slope is 0, no step is needed
+    // no Coulomb or Stribeck level, or a prescribed link speed: the steepest slope is 0, no step is needed
     let explicit_steps = substep * steepest_friction_slope(p) / 0.1;
     let threshold = if v0.abs() < HELD_SPEED * vs {
         EXPLICIT_STEPS_BEFORE_LINEARISING_HELD

@@ -521,14 +521,8 @@ impl<'a> Problem<'a> {
 
     /// Whether group g's stiffness or damping in `p` sits on its bound.
     pub fn transmission_at_bound(&self, g: usize, p: &[f64]) -> bool {
-        let (_, (c_lo, c_hi)) = self.transmission_range(g);
-        self.stiffness_at_bound(g, p) || on_bound(p[2 * g + 1], c_lo, c_hi)
-    }
-
-    /// Whether group g's stiffness in `p` sits on its bound: a rigid link or none.
-    pub fn stiffness_at_bound(&self, g: usize, p: &[f64]) -> bool {
-        let ((k_lo, k_hi), _) = self.transmission_range(g);
-        on_bound(p[2 * g], k_lo, k_hi)
+        let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);
+        on_bound(p[2 * g], k_lo, k_hi) || on_bound(p[2 * g + 1], c_lo, c_hi)
     }
 
     /// Whether group g's stiffness in `p` is within [`NEAR_BOUND`] of a bound, as the samples

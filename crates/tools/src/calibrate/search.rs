@@ -53,7 +53,7 @@ fn unless_cut_off(prob: &Problem, current: &Fit, current_sig: &Signatures, scree
 
 /// What a device refit's verdict rests on besides BIC: the residual's low-frequency structure over
 /// white noise before and after, and (for a combination) the temperature groups whose stiffness
-/// it took to a bound (`bound_rule`).
+/// it took to a bound (`combination_verdict`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Evidence {
     pub structure: (f64, f64),
@@ -101,17 +101,26 @@ fn no_start(prob: &Problem, g: usize, p: &[f64]) -> bool {
     prob.transmission_at_bound(g, p) || prob.transmission_dragging(g, p)
 }
 
-/// Records in `verdict` the temperature groups whose stiffness `refit` puts at or near a bound
-/// that `current` had it away from (`Problem::stiffness_near_bound`), and keeps it only where there are none.
-fn bound_rule(prob: &Problem, current: &Fit, refit: &Fit, verdict: &mut Verdict<Evidence>) {
+/// A combination's verdict against `current`: [`verdict`]'s, and kept only where `refit` puts no
+/// temperature group's stiffness at or near a bound that `current` had it away from
+/// (`Problem::stiffness_near_bound`); those groups are counted in the detail.
+fn combination_verdict(
+    prob: &Problem,
+    current: &Fit,
+    sig: &Signatures,
+    refit: &Fit,
+    refit_sig: &Signatures,
+) -> Verdict<Evidence> {
     let newly = (0..prob.n_groups)
         .filter(|&g| {
             let side = prob.stiffness_near_bound(g, &refit.p);
             side != 0 && side != prob.stiffness_near_bound(g, &current.p)
         })
         .count();
-    verdict.detail.newly_near_bound = Some(newly);
-    verdict.keep &= newly == 0;
+    let mut v = verdict(current, sig, refit, refit_sig);
+    v.detail.newly_near_bound = Some(newly);
+    v.keep &= newly == 0;
+    v
 }
 
 /// Whether some temperature group's stiffness or damping sits on its bound.
@@ -120,9 +129,9 @@ pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
 }
 
 /// A round of the device's search: the screened residual's signatures, the ranking, the refits
-/// with (structure ratio before, after).
+/// with their [`Evidence`].
 pub type Round = super::stepwise::Round<Effect, Signatures, Evidence>;
-/// An effect set refitted at once, with (structure ratio before, after).
+/// An effect set refitted at once, with its [`Evidence`].
 pub type CombinationAttempt = Attempt<Effect, Evidence>;
 
 pub struct Outcome {
@@ -448,7 +457,6 @@ fn try_combination(
     }
     let (screened, screened_sig) = unless_cut_off(sprob, scurrent, ssig, screened);
     let effects = screened.spec.effects.clone();
-    let mut attempt = CombinationAttempt { stage, effects, verdict: verdict(scurrent, ssig, &screened, &screened_sig) };
     // Effects that earn their place only by making the link rigid or its spring vanish fill the
     // gap that bound leaves, and the report warns of such a fit: a combination that takes some
     // temperature's stiffness to or near a bound it was away from is not kept (fresh rig 114:
@@ -456,7 +464,8 @@ fn try_combination(
     // which then no refit could reach; rejected, Coulomb friction alone came next, all within 4 %).
     // A damping at its bound is not counted: with link damping in, the transmission's own may
     // rightly go to nothing (fresh rig 125, whose combination that rule would have lost).
-    bound_rule(sprob, scurrent, &screened, &mut attempt.verdict);
+    let verdict = combination_verdict(sprob, scurrent, ssig, &screened, &screened_sig);
+    let mut attempt = CombinationAttempt { stage, effects, verdict };
     debug(format_args!(
         "combination {:?} screened in {:?}: kept {}",
         attempt.effects,
@@ -480,8 +489,7 @@ fn try_combination(
     };
     attempt.effects = done.spec.effects.clone();
     let s = signatures(prob, &done);
-    attempt.verdict = verdict(current, sig, &done, &s);
-    bound_rule(prob, current, &done, &mut attempt.verdict);
+    attempt.verdict = combination_verdict(prob, current, sig, &done, &s);
     let accepted = attempt.verdict.keep.then_some((done, s));
     Some((attempt, accepted))
 }
