@@ -465,7 +465,7 @@ fn try_combination(
     // A damping at its bound is not counted: with link damping in, the transmission's own may
     // rightly go to nothing (fresh rig 125, whose combination that rule would have lost).
     let verdict = combination_verdict(sprob, scurrent, ssig, &screened, &screened_sig);
-    let mut attempt = CombinationAttempt { stage, effects, verdict };
+    let mut attempt = CombinationAttempt { stage, effects, removed: vec![], verdict };
     debug(format_args!(
         "combination {:?} screened in {:?}: kept {}",
         attempt.effects,
@@ -501,7 +501,7 @@ fn try_combination(
 /// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
 /// bounded fit can be absurd); and the equation error with the effects' torques as regressors
 /// (transmission and effects estimated together, so neither absorbs the other).
-fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Ranked<Effect>], law: DampingLaw) -> Vec<Vec<f64>> {
+fn candidate_starts(prob: &Problem, current: &[f64], added: &[&Ranked<Effect>], law: DampingLaw) -> Vec<Vec<f64>> {
     let n_t = 2 * prob.n_groups;
     let closed = prob.closed_form_start(law);
     let linearised: Vec<f64> = added.iter().flat_map(|c| c.start.iter().copied()).collect();
@@ -511,15 +511,15 @@ fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Ranked<Effect>], la
     // from the table's: that is where the structure without the effect went (K → 0 dragging the
     // link like friction, or a rigid link under gravity), and that start would win every
     // comparison of starts by cost (campaign rig 22; fresh rigs 92 and 114, K 100× low off the bound)
-    let mut here = current.p[..n_t].to_vec();
-    for g in (0..prob.n_groups).filter(|&g| no_start(prob, g, &current.p)) {
+    let mut here = current[..n_t].to_vec();
+    for g in (0..prob.n_groups).filter(|&g| no_start(prob, g, current)) {
         here[2 * g..2 * g + 2].copy_from_slice(&table[2 * g..2 * g + 2]);
     }
     let mut starts = Vec::new();
     for transmission in [&here[..], &closed[..]] {
         for effect in [&linearised, &typical] {
             let mut q = transmission.to_vec();
-            q.extend_from_slice(&current.p[n_t..]);
+            q.extend_from_slice(&current[n_t..]);
             q.extend_from_slice(effect);
             starts.push(q);
         }
@@ -527,7 +527,7 @@ fn candidate_starts(prob: &Problem, current: &Fit, added: &[&Ranked<Effect>], la
     let effects: Vec<Effect> = added.iter().map(|c| c.effect).collect();
     if let Some(e) = prob.equation_error(law, &effects).filter(|e| e.repaired.is_empty()) {
         let mut q = e.p[..n_t].to_vec();
-        q.extend_from_slice(&current.p[n_t..]);
+        q.extend_from_slice(&current[n_t..]);
         q.extend_from_slice(&e.p[n_t..]);
         starts.push(q);
     }
@@ -1064,7 +1064,7 @@ impl Rig for DeviceRig<'_, '_> {
     fn refit_with(&self, m: &Judged, added: &[&Ranked<Effect>]) -> Option<Judged> {
         let mut spec = m.fit.spec.clone();
         spec.effects.extend(added.iter().map(|c| c.effect));
-        let mut starts = candidate_starts(self.prob, &m.fit, added, spec.law);
+        let mut starts = candidate_starts(self.prob, &m.fit.p, added, spec.law);
         // an added effect takes the place of the one it stands in for (`Effect::takes_place_of`):
         // both in at once would be one column twice
         let displaced: Vec<Effect> = added.iter().filter_map(|c| c.effect.takes_place_of()).collect();
@@ -1179,6 +1179,29 @@ impl Rig for DeviceRig<'_, '_> {
     }
     fn defined_over(&self, e: Effect) -> Option<Effect> {
         e.defined_over()
+    }
+    fn swap(&self, m: &Judged, out: Effect, c: &Ranked<Effect>) -> Option<(Judged, Verdict<Evidence>)> {
+        // out with the effect the candidate takes the place of, as in `refit_with`
+        let drop: Vec<Effect> = [Some(out), c.effect.takes_place_of()].into_iter().flatten().collect();
+        let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
+        spec.effects.push(c.effect);
+        let starts = candidate_starts(self.prob, &p, &[c], spec.law);
+        self.with_screen(m, |sprob, current, current_sig| {
+            let t = std::time::Instant::now();
+            let screened = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
+            let (refit, sig) = unless_cut_off(sprob, current, current_sig, screened);
+            debug(format_args!(
+                "swap {:?} for {out:?} took {:?}, {} iterations, BIC {:.1} against {:.1}",
+                c.effect,
+                t.elapsed(),
+                refit.iterations,
+                refit.bic(),
+                current.bic()
+            ));
+            // a swap changes the model as a combination does: the bound rule applies
+            let v = combination_verdict(self.prob, current, current_sig, &refit, &sig);
+            Some((Judged { fit: refit, sig }, v))
+        })
     }
     fn lighter(&self, m: &Judged, e: Effect) -> Option<(Effect, Judged)> {
         let lighter = e.lighter_form()?;
