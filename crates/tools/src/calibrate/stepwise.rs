@@ -9,12 +9,12 @@
 //! 2. rounds: the linearised ranking shortlists, the refits decide (where none of the shortlist
 //!    earns its place, the candidates left off it that predict more than the best refit gained are
 //!    refitted too); of the effects that earn their place, the one with the lowest BIC is added;
-//!    when none does, a candidate whose refit
-//!    lowered the BIC without earning its place is swapped in for each effect already in (Miller's
-//!    sequential replacement: a greedy step can take an effect that stands in for the truth's and
-//!    then holds the refit in its valley); when no swap earns its place either, the candidates that
-//!    predict a BIC gain are refitted in pairs (a partial effect is judged against a model that
-//!    lacks its partner); the winner is run to convergence and must earn its place again;
+//!    when none does, a candidate whose refit lowered the BIC without earning its place is swapped
+//!    in for each effect already in (Miller's sequential replacement: a greedy step can take an
+//!    effect that stands in for the truth's and then holds the refit in its valley); when no swap
+//!    earns its place either, the candidates that predict a BIC gain are refitted in pairs (a
+//!    partial effect is judged against a model that lacks its partner); the winner is run to
+//!    convergence and must earn its place again;
 //! 3. the combination again after the rounds (a partial effect found first can hide the rest);
 //! 4. a backward check: an effect whose removal does not cost the BIC margin goes.
 //!
@@ -386,6 +386,34 @@ fn backward_step<R: Rig>(
     None
 }
 
+/// Records a swap or a pair tried in a round; its refit becomes the round's winner where it earned its
+/// place with the lowest BIC so far (`winner`: its index in `combinations`).
+fn record_combination<R: Rig>(
+    rig: &R,
+    combinations: &mut Vec<Attempt<R::Effect, R::Detail>>,
+    attempt: Attempt<R::Effect, R::Detail>,
+    refit: R::Model,
+    accepted: &mut Option<R::Model>,
+    winner: &mut Option<usize>,
+) {
+    let keep = attempt.verdict.keep;
+    combinations.push(attempt);
+    if keep && accepted.as_ref().is_none_or(|x| rig.bic(&refit) < rig.bic(x)) {
+        *accepted = Some(refit);
+        *winner = Some(combinations.len() - 1);
+    }
+}
+
+/// Of the combinations tried from index `from` on, only the round's winner stays marked kept
+/// (earlier rounds' records are final).
+fn only_the_winner_kept<E, D>(combinations: &mut [Attempt<E, D>], from: usize, winner: Option<usize>) {
+    for (k, c) in combinations.iter_mut().enumerate().skip(from) {
+        if Some(k) != winner {
+            c.verdict.keep = false;
+        }
+    }
+}
+
 /// The search from `start` (the rig's baseline).
 #[allow(clippy::type_complexity)]
 pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Effect, R::Model, R::State, R::Detail> {
@@ -482,7 +510,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 }
             }
             // a combination (a swap or a pair) that won this round: its index in `combinations`
-            let mut pair_index = None;
+            let mut winner_index = None;
             // Swaps: a candidate whose refit lowered the BIC without earning its place may be held in
             // the valley of an effect that stands in for it (fresh rigs 121 and 143: a backlash for
             // the Stribeck excess, whose refit beside it gained 13 000 and 2 000 in BIC and removed
@@ -509,25 +537,17 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                             break 'swaps;
                         }
                         let Some((refit, verdict)) = budget.timed(|| rig.swap(&current, out, c)) else { continue };
-                        let keep = verdict.keep;
-                        debug(format_args!("swap {:?} for {:?}: kept {keep}", c.effect, out));
-                        combinations.push(Attempt {
+                        debug(format_args!("swap {:?} for {:?}: kept {}", c.effect, out, verdict.keep));
+                        let attempt = Attempt {
                             stage: "swap after a round",
                             effects: vec![c.effect],
                             removed: vec![out],
                             verdict,
-                        });
-                        if keep && accepted.as_ref().is_none_or(|x| rig.bic(&refit) < rig.bic(x)) {
-                            accepted = Some(refit);
-                            pair_index = Some(combinations.len() - 1);
-                        }
+                        };
+                        record_combination(rig, &mut combinations, attempt, refit, &mut accepted, &mut winner_index);
                     }
                 }
-                for (k, c) in combinations.iter_mut().enumerate().skip(first_swap) {
-                    if Some(k) != pair_index {
-                        c.verdict.keep = false;
-                    }
-                }
+                only_the_winner_kept(&mut combinations, first_swap, winner_index);
             }
             if accepted.is_none() && shortlist > 0 && budget.allows("pairs of candidates") {
                 let pool: Vec<&Ranked<R::Effect>> =
@@ -551,25 +571,16 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     }
                     let Some(refit) = budget.timed(|| rig.refit_with(&current, &[a, b])) else { continue };
                     let verdict = rig.judge(&current, &refit);
-                    let keep = verdict.keep;
-                    debug(format_args!("pair {:?} + {:?}: kept {keep}", a.effect, b.effect));
-                    combinations.push(Attempt {
+                    debug(format_args!("pair {:?} + {:?}: kept {}", a.effect, b.effect, verdict.keep));
+                    let attempt = Attempt {
                         stage: "pair after a round",
                         effects: vec![a.effect, b.effect],
                         removed: vec![],
                         verdict,
-                    });
-                    if keep && accepted.as_ref().is_none_or(|x| rig.bic(&refit) < rig.bic(x)) {
-                        accepted = Some(refit);
-                        pair_index = Some(combinations.len() - 1);
-                    }
+                    };
+                    record_combination(rig, &mut combinations, attempt, refit, &mut accepted, &mut winner_index);
                 }
-                // only this round's winner stays marked kept (earlier rounds' records are final)
-                for (k, c) in combinations.iter_mut().enumerate().skip(first_pair) {
-                    if Some(k) != pair_index {
-                        c.verdict.keep = false;
-                    }
-                }
+                only_the_winner_kept(&mut combinations, first_pair, winner_index);
             }
             let round_number = rounds.len() + 1;
             if let Some(f) = accepted.take() {
@@ -577,7 +588,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 if accepted.is_none() {
                     if let Some(a) = round.attempts.iter_mut().find(|a| a.verdict.keep) {
                         a.verdict.keep = false;
-                    } else if let Some(k) = pair_index {
+                    } else if let Some(k) = winner_index {
                         combinations[k].verdict.keep = false;
                     }
                 }
