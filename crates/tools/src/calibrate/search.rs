@@ -1021,6 +1021,38 @@ impl DeviceRig<'_, '_> {
         f(p, c, s)
     }
 
+    /// `m` without the effects `drop`, with the candidates `added` (and without what they take the
+    /// place of, `Effect::takes_place_of`: both in at once would be one column twice), refitted on
+    /// the screening share from `m`'s values (`candidate_starts`).
+    fn screened_refit(&self, m: &Judged, drop: &[Effect], added: &[&Ranked<Effect>]) -> Option<Judged> {
+        let drop: Vec<Effect> =
+            drop.iter().copied().chain(added.iter().filter_map(|c| c.effect.takes_place_of())).collect();
+        let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
+        spec.effects.extend(added.iter().map(|c| c.effect));
+        let starts = candidate_starts(self.prob, &p, added, spec.law);
+        self.with_screen(m, |sprob, current, current_sig| {
+            let t = std::time::Instant::now();
+            let screened = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
+            // (a pair is a fallback for effects that show only together: run on, two effects find
+            // a valley of their own more often than the truth's; measured on campaign rig 23)
+            let (refit, sig) = if added.len() == 1 {
+                unless_cut_off(sprob, current, current_sig, screened)
+            } else {
+                let sig = signatures(sprob, &screened);
+                (screened, sig)
+            };
+            debug(format_args!(
+                "refit {:?} (without {drop:?}) took {:?}, {} iterations, BIC {:.1} against {:.1}",
+                refit.spec.effects,
+                t.elapsed(),
+                refit.iterations,
+                refit.bic(),
+                current.bic()
+            ));
+            Some(Judged { fit: refit, sig })
+        })
+    }
+
     fn judged(&self, prob: &Problem, fit: Fit) -> Judged {
         let sig = signatures(prob, &fit);
         Judged { fit, sig }
@@ -1062,40 +1094,7 @@ impl Rig for DeviceRig<'_, '_> {
         out
     }
     fn refit_with(&self, m: &Judged, added: &[&Ranked<Effect>]) -> Option<Judged> {
-        let mut spec = m.fit.spec.clone();
-        spec.effects.extend(added.iter().map(|c| c.effect));
-        let mut starts = candidate_starts(self.prob, &m.fit.p, added, spec.law);
-        // an added effect takes the place of the one it stands in for (`Effect::takes_place_of`):
-        // both in at once would be one column twice
-        let displaced: Vec<Effect> = added.iter().filter_map(|c| c.effect.takes_place_of()).collect();
-        // the last offsets first, so each drain leaves the earlier ones where they are
-        for &(o, e) in m.fit.spec.offsets(self.prob.n_groups).iter().rev().filter(|(_, e)| displaced.contains(e)) {
-            spec.effects.retain(|&x| x != e);
-            for q in &mut starts {
-                q.drain(o..o + e.params().len());
-            }
-        }
-        self.with_screen(m, |sprob, current, current_sig| {
-            let t = std::time::Instant::now();
-            let screened = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
-            // (a pair is a fallback for effects that show only together: run on, two effects find
-            // a valley of their own more often than the truth's; measured on campaign rig 23)
-            let (refit, sig) = if added.len() == 1 {
-                unless_cut_off(sprob, current, current_sig, screened)
-            } else {
-                let sig = signatures(sprob, &screened);
-                (screened, sig)
-            };
-            debug(format_args!(
-                "refit {:?} took {:?}, {} iterations, BIC {:.1} against {:.1}",
-                refit.spec.effects,
-                t.elapsed(),
-                refit.iterations,
-                refit.bic(),
-                current.bic()
-            ));
-            Some(Judged { fit: refit, sig })
-        })
+        self.screened_refit(m, &[], added)
     }
     fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<Evidence> {
         self.with_screen(m, |_, c, s| verdict(c, s, &refit.fit, &refit.sig))
@@ -1181,27 +1180,11 @@ impl Rig for DeviceRig<'_, '_> {
         e.defined_over()
     }
     fn swap(&self, m: &Judged, out: Effect, c: &Ranked<Effect>) -> Option<(Judged, Verdict<Evidence>)> {
-        // out with the effect the candidate takes the place of, as in `refit_with`
-        let drop: Vec<Effect> = [Some(out), c.effect.takes_place_of()].into_iter().flatten().collect();
-        let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
-        spec.effects.push(c.effect);
-        let starts = candidate_starts(self.prob, &p, &[c], spec.law);
-        self.with_screen(m, |sprob, current, current_sig| {
-            let t = std::time::Instant::now();
-            let screened = fit_from_best(sprob, spec, starts, SCREEN_ITERATIONS).ok()?;
-            let (refit, sig) = unless_cut_off(sprob, current, current_sig, screened);
-            debug(format_args!(
-                "swap {:?} for {out:?} took {:?}, {} iterations, BIC {:.1} against {:.1}",
-                c.effect,
-                t.elapsed(),
-                refit.iterations,
-                refit.bic(),
-                current.bic()
-            ));
-            // a swap changes the model as a combination does: the bound rule applies
-            let v = combination_verdict(self.prob, current, current_sig, &refit, &sig);
-            Some((Judged { fit: refit, sig }, v))
-        })
+        let refit = self.screened_refit(m, &[out], &[c])?;
+        // a swap changes the model as a combination does: the bound rule applies
+        let v =
+            self.with_screen(m, |_, current, sig| combination_verdict(self.prob, current, sig, &refit.fit, &refit.sig));
+        Some((refit, v))
     }
     fn lighter(&self, m: &Judged, e: Effect) -> Option<(Effect, Judged)> {
         let lighter = e.lighter_form()?;
