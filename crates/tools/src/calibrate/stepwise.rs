@@ -414,6 +414,11 @@ fn only_the_winner_kept<E, D>(combinations: &mut [Attempt<E, D>], from: usize, w
     }
 }
 
+/// Whether two models hold the same effects, in any order.
+fn same_effects<E: PartialEq>(a: &[E], b: &[E]) -> bool {
+    a.len() == b.len() && a.iter().all(|e| b.contains(e))
+}
+
 /// The search from `start` (the rig's baseline).
 #[allow(clippy::type_complexity)]
 pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Effect, R::Model, R::State, R::Detail> {
@@ -427,6 +432,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
     // truth's asymmetric friction, on a 1.9 mrad encoder).
     let below_noise_gone = |current: &mut R::Model, path: &mut Vec<R::Model>, pruned: &mut Vec<Pruned<R::Effect>>| {
         while let Some((p, m)) = backward_step(rig, current, budget, true) {
+            debug(format_args!("{:?} went below the noise beside {:?}", p.effect, rig.effects(&m)));
             pruned.push(p);
             *current = m;
             rig.moved_to(current);
@@ -455,6 +461,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             && (rounds.is_empty() || rig.structure_left(&current))
             && budget.allows("a round of one-at-a-time refits")
         {
+            let effects_before = rig.effects(&current);
             let candidates = rig.rank(&current);
             let mut round = Round { state: rig.state(&current), candidates: candidates.clone(), attempts: vec![] };
             let shortlist = if rig.structure_left(&current) { TRIES_PER_ROUND } else { 0 };
@@ -600,6 +607,12 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     rig.moved_to(&current);
                     path.push(current.clone());
                     below_noise_gone(&mut current, &mut path, &mut pruned);
+                    // a round that ends where it began (its winner went below the noise at once)
+                    // would be run again as it was, to the end of the budget (campaign rig 18 under a
+                    // structure rule tried and not kept: Coulomb friction kept and pruned 45 times)
+                    if same_effects(&rig.effects(&current), &effects_before) {
+                        break;
+                    }
                 }
                 None => break,
             }
@@ -1010,6 +1023,23 @@ mod tests {
         assert_eq!(s.record.rounds[0].candidates[0].effect, 0, "the larger effect ranks first");
         assert_eq!(s.path.len(), 3, "start and two accepted steps");
         assert!(s.record.pruned.is_empty() && s.record.budget_exhausted.is_none());
+    }
+
+    /// An effect that earns its place and then goes below the noise at once (the device's Coulomb
+    /// friction on campaign rig 18's coarse encoder, under a structure rule tried) ends the rounds: run again, the round would
+    /// find it again, to the end of the budget.
+    #[test]
+    fn a_round_whose_winner_goes_below_the_noise_is_not_run_again() {
+        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 1, N)).collect();
+        // x1's share of y is half the noise's variance: its refit gains ~800 in BIC and removes the
+        // whole excess, yet no sample can show it
+        let (r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + 0.7 * NOISE * x[1][i]);
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(s.model.cols, vec![0]);
+        let gone = s.record.pruned.iter().filter(|p| p.effect == 1 && p.below_noise).count();
+        assert_eq!(gone, 1, "x1 came in and went below the noise {gone} times");
+        assert!(s.record.rounds.len() <= 3, "{} rounds", s.record.rounds.len());
+        assert!(s.record.budget_exhausted.is_none());
     }
 
     /// Two columns that explain their difference only together: x0 = 3u + v and x1 = 3u + w, so
