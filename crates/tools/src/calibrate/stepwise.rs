@@ -427,18 +427,24 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
     let mut rounds: Vec<Round<R::Effect, R::State, R::Detail>> = Vec::new();
     let mut combinations: Vec<Attempt<R::Effect, R::Detail>> = Vec::new();
     let mut pruned = Vec::new();
-    // An effect no sample can show goes as soon as a step brings it in: left to the backward check,
-    // a search the budget stops would report it (campaign rig 8: a 9 µrad backlash beside the
-    // truth's asymmetric friction, on a 1.9 mrad encoder).
-    let below_noise_gone = |current: &mut R::Model, path: &mut Vec<R::Model>, pruned: &mut Vec<Pruned<R::Effect>>| {
-        while let Some((p, m)) = backward_step(rig, current, budget, true) {
-            debug(format_args!("{:?} went below the noise beside {:?}", p.effect, rig.effects(&m)));
-            pruned.push(p);
-            *current = m;
-            rig.moved_to(current);
-            path.push(current.clone());
-        }
-    };
+    // A step of the search: `current` becomes `m`, on the path. An effect no sample can show goes
+    // as soon as a step brings it in, each removal a step of its own: left to the backward check, a
+    // search the budget stops would report it (campaign rig 8: a 9 µrad backlash beside the truth's
+    // asymmetric friction, on a 1.9 mrad encoder).
+    let step_to =
+        |current: &mut R::Model, m: R::Model, path: &mut Vec<R::Model>, pruned: &mut Vec<Pruned<R::Effect>>| {
+            let mut next = Some(m);
+            while let Some(m) = next.take() {
+                *current = m;
+                rig.moved_to(current);
+                path.push(current.clone());
+                if let Some((p, m)) = backward_step(rig, current, budget, true) {
+                    debug(format_args!("{:?} went below the noise beside {:?}", p.effect, rig.effects(&m)));
+                    pruned.push(p);
+                    next = Some(m);
+                }
+            }
+        };
     // Several effects at once first: one at a time, each would be judged against a baseline that
     // absorbed the others (and a greedy first step can take a wrong effect that mimics two, such as
     // gravity at an offset for asymmetric friction, and never leave it).
@@ -446,10 +452,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         if let Some((attempt, accepted)) = budget.timed(|| rig.combination(&current, "baseline")) {
             combinations.push(attempt);
             if let Some(m) = accepted {
-                current = m;
-                rig.moved_to(&current);
-                path.push(current.clone());
-                below_noise_gone(&mut current, &mut path, &mut pruned);
+                step_to(&mut current, m, &mut path, &mut pruned);
             }
         }
     }
@@ -611,10 +614,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 rounds.push(round);
                 break;
             };
-            current = rig.adopt(f, round_number);
-            rig.moved_to(&current);
-            path.push(current.clone());
-            below_noise_gone(&mut current, &mut path, &mut pruned);
+            step_to(&mut current, rig.adopt(f, round_number), &mut path, &mut pruned);
             // A winner that goes below the noise as soon as it is in leaves the round where it began:
             // run again, it would win again, to the end of the budget (held-out seed 237: a gravity
             // kept and pruned in every round until the budget ran out, while its asymmetric friction
@@ -632,10 +632,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 if let Some(a) = round.attempts.iter_mut().find(|a| Some(a.effects[0]) == effect) {
                     a.verdict.keep = true;
                 }
-                current = rig.adopt(f, round_number);
-                rig.moved_to(&current);
-                path.push(current.clone());
-                below_noise_gone(&mut current, &mut path, &mut pruned);
+                step_to(&mut current, rig.adopt(f, round_number), &mut path, &mut pruned);
             }
             rounds.push(round);
             if same_effects(&rig.effects(&current), &effects_before) {
@@ -652,10 +649,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         match budget.timed(|| rig.combination(&current, "after the rounds")) {
             Some((attempt, Some(m))) => {
                 combinations.push(attempt);
-                current = m;
-                rig.moved_to(&current);
-                path.push(current.clone());
-                below_noise_gone(&mut current, &mut path, &mut pruned);
+                step_to(&mut current, m, &mut path, &mut pruned);
             }
             Some((attempt, None)) => {
                 combinations.push(attempt);
