@@ -706,6 +706,11 @@ impl<'a> DriveProblem<'a> {
     /// the position noise. An effect below it can still lower the BIC over many samples (a tenth of
     /// the noise, correlated with a controller's dither), but no sample shows it.
     pub fn visible(&self, fit: &DriveFit, effect: DriveEffect) -> bool {
+        self.share_over_noise(fit, effect) > 1.0
+    }
+
+    /// The rms of an effect's linearised share J_e·p_e over the position noise (`visible`).
+    fn share_over_noise(&self, fit: &DriveFit, effect: DriveEffect) -> f64 {
         let cols: Vec<usize> = drive_params(effect)
             .iter()
             .filter(|q| **q != Param::LnStribeckVelocity)
@@ -713,9 +718,9 @@ impl<'a> DriveProblem<'a> {
             .collect();
         let rows = fit.jacobian.nrows();
         if cols.is_empty() || rows == 0 {
-            return true;
+            return f64::INFINITY;
         }
-        super::fit::linearised_share(&fit.jacobian, &fit.p, &cols) > self.position_noise
+        super::fit::linearised_share(&fit.jacobian, &fit.p, &cols) / self.position_noise
     }
 
     /// The declared inertia every run shares (None when any run leaves it to the fit).
@@ -1613,12 +1618,12 @@ impl Rig for DriveRig<'_, '_> {
         let visible = added.iter().all(|&e| self.prob.visible(refit, e));
         let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof)) && visible;
         super::stepwise::debug(format_args!(
-            "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, visible {}, noise {:.3e}, rms {:.3e} -> {:.3e}",
+            "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, share/noise {:?}, noise {:.3e}, rms {:.3e} -> {:.3e}",
             added,
             m.bic(),
             refit.bic(),
             walds,
-            visible,
+            added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect::<Vec<_>>(),
             self.prob.position_noise,
             (m.sse / m.n() as f64).sqrt(),
             (refit.sse / refit.n() as f64).sqrt()
