@@ -701,16 +701,12 @@ impl<'a> DriveProblem<'a> {
         costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map_or(grid[grid.len() / 2], |c| c.0)
     }
 
-    /// Whether an effect of `fit` moves the simulated positions by more than the noise can hide:
-    /// the rms of its linearised share J_e·p_e (its levels; a Stribeck speed only shapes one) above
-    /// the position noise. An effect below it can still lower the BIC over many samples (a tenth of
-    /// the noise, correlated with a controller's dither), but no sample shows it.
-    pub fn visible(&self, fit: &DriveFit, effect: DriveEffect) -> bool {
-        self.share_over_noise(fit, effect) > 1.0
-    }
-
-    /// The rms of an effect's linearised share J_e·p_e over the position noise (`visible`).
-    fn share_over_noise(&self, fit: &DriveFit, effect: DriveEffect) -> f64 {
+    /// How far an effect of `fit` moves the simulated positions against what the noise can hide:
+    /// the rms of its linearised share J_e·p_e (its levels; a Stribeck speed only shapes one) over
+    /// the position noise. An effect is visible above 1; below it, it can still lower the BIC over
+    /// many samples (a tenth of the noise, correlated with a controller's dither), but no sample
+    /// shows it.
+    pub fn share_over_noise(&self, fit: &DriveFit, effect: DriveEffect) -> f64 {
         let cols: Vec<usize> = drive_params(effect)
             .iter()
             .filter(|q| **q != Param::LnStribeckVelocity)
@@ -1666,7 +1662,8 @@ impl Rig for DriveRig<'_, '_> {
                 )
             })
             .collect();
-        let visible = added.iter().all(|&e| self.prob.visible(refit, e));
+        let shares: Vec<f64> = added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect();
+        let visible = shares.iter().all(|&share| share > 1.0);
         let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof)) && visible;
         super::stepwise::debug(format_args!(
             "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, share/noise {:?}, noise {:.3e}, rms {:.3e} -> {:.3e}",
@@ -1674,7 +1671,7 @@ impl Rig for DriveRig<'_, '_> {
             m.bic(),
             refit.bic(),
             walds,
-            added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect::<Vec<_>>(),
+            shares,
             self.prob.position_noise,
             (m.sse / m.n() as f64).sqrt(),
             (refit.sse / refit.n() as f64).sqrt()

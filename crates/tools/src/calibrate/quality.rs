@@ -340,13 +340,18 @@ pub fn refusal(path: &Path, lines: &[usize], column: (usize, &str), x: &[f64], f
 mod tests {
     use super::*;
 
-    /// A jittered sine with white noise, seeded.
-    fn signal(n: usize, dt: f64, f: f64, noise: f64, jitter: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+    /// Uniform draws on [0, 1), seeded (a linear congruential generator's top 53 bits).
+    fn uniforms(seed: u64) -> impl FnMut() -> f64 {
         let mut s = seed;
-        let mut u = move || {
+        move || {
             s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        }
+    }
+
+    /// A jittered sine with white noise, seeded.
+    fn signal(n: usize, dt: f64, f: f64, noise: f64, jitter: f64, seed: u64) -> (Vec<f64>, Vec<f64>) {
+        let mut u = uniforms(seed);
         let t: Vec<f64> = (0..n).map(|k| k as f64 * dt + jitter * dt * (2.0 * u() - 1.0)).collect();
         let x = t
             .iter()
@@ -407,11 +412,7 @@ mod tests {
         // Stamped late, a sample on the move sits 40 rad/s × its timing error off its neighbours'
         // line on the logged times, in a spike's pattern; on the clock it sits on the line
         let (dt, n) = (2.5e-3, 400);
-        let mut s = 191u64;
-        let mut u = move || {
-            s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (s >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut u = uniforms(191);
         let clock: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
         // one stamp 19 % of a period late, on the move
         let mut t = clock.clone();
