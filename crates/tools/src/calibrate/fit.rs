@@ -1333,19 +1333,23 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
             p[asymmetry] = p[asymmetry].clamp(-bound, bound);
         }
     };
-    let m = minimize(
-        &LeastSquares {
-            simulate: &|p| prob.outputs(&spec, p),
-            residual: &|out| prob.residual(out),
-            jacobian: &|p, out| prob.jacobian(&spec, p, out),
-            clamp: &clamp,
-            negligible: &|j, old, new| (new - old).abs() <= 1e-6 * typical[j].max(old.abs()),
-            relative_tolerance: 1e-6,
-            broyden: true,
-        },
-        p0,
-        max_iter,
-    )?;
+    let ls = LeastSquares {
+        simulate: &|p| prob.outputs(&spec, p),
+        residual: &|out| prob.residual(out),
+        jacobian: &|p, out| prob.jacobian(&spec, p, out),
+        clamp: &clamp,
+        negligible: &|j, old, new| (new - old).abs() <= 1e-6 * typical[j].max(old.abs()),
+        relative_tolerance: 1e-6,
+        broyden: true,
+    };
+    let mut m = minimize(&ls, p0, max_iter)?;
+    if let Some(p) = torque_scale_probe(prob, &spec, &m.p, m.cost, &clamp) {
+        if let Ok(again) = minimize(&ls, p, max_iter) {
+            if again.cost < m.cost {
+                m = again;
+            }
+        }
+    }
     let n = m.residual.len();
     let covariance = block_sandwich(&m.jacobian, &m.residual, &prob.lengths());
     Ok(Fit {
@@ -1359,6 +1363,78 @@ pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_it
         covariance,
         iterations: m.iterations,
     })
+}
+
+/// Every torque of the model times one factor s: the transmission's K and C, and each effect
+/// parameter measured in N·m (per radian, per rad/s or alone); widths, times and speeds stay.
+/// Driven well below its natural frequency the link barely feels its inertia, the one torque
+/// not in p, so every such s moves the link almost alike: a long curved valley (K and C are
+/// logarithms, the effects' torques are not) along which Levenberg–Marquardt creeps and stops
+/// (fresh rig 144: K, C, gravity and friction all 27× the truth's, 16× the noise floor).
+fn scaled_torques(spec: &ModelSpec, n_groups: usize, p: &[f64], s: f64) -> Vec<f64> {
+    let mut q = p.to_vec();
+    for x in &mut q[..2 * n_groups] {
+        *x += s.ln();
+    }
+    for (o, e) in spec.offsets(n_groups) {
+        for (j, (name, _, _)) in e.params().iter().enumerate() {
+            if name.contains("_nm") {
+                q[o + j] *= s;
+            }
+        }
+    }
+    q
+}
+
+/// The best point along [`scaled_torques`]' valley from a converged `p` (cost `cost`), when one
+/// is cheaper: factors 4^±1 first (two simulations where the valley's floor is here), then on
+/// by 4 while the cost falls and every K and C stays within its bounds, and a factor 2 either
+/// side of the best. None when no factor helps.
+fn torque_scale_probe(
+    prob: &Problem,
+    spec: &ModelSpec,
+    p: &[f64],
+    cost: f64,
+    clamp: &dyn Fn(&mut [f64]),
+) -> Option<Vec<f64>> {
+    let n_t = 2 * prob.n_groups;
+    // a factor that would take a transmission past its bounds leaves the valley (a rigid or limp
+    // link is another model, whose effects the clamp would leave scaled alone)
+    let at = |s: f64| {
+        let mut q = scaled_torques(spec, prob.n_groups, p, s);
+        let unclamped = q[..n_t].to_vec();
+        clamp(&mut q);
+        let c = if q[..n_t] != unclamped[..] {
+            f64::INFINITY
+        } else {
+            prob.outputs(spec, &q).map(|o| sse(&prob.residual(&o))).unwrap_or(f64::INFINITY)
+        };
+        (c, s, q)
+    };
+    let mut best: Option<(f64, f64, Vec<f64>)> = None;
+    for step in [4.0, 0.25] {
+        let mut s = step;
+        for _ in 0..4 {
+            let here = at(s);
+            if here.0 >= best.as_ref().map_or(cost, |b| b.0) {
+                break;
+            }
+            best = Some(here);
+            s *= step;
+        }
+        if best.is_some() {
+            break;
+        }
+    }
+    let (mut c, s, mut q) = best?;
+    for f in [0.5, 2.0] {
+        let here = at(s * f);
+        if here.0 < c {
+            (c, q) = (here.0, here.2);
+        }
+    }
+    super::stepwise::debug(format_args!("torque scale probe: ×{s:.3} lowers the cost {cost:.4e} → {c:.4e}"));
+    Some(q)
 }
 
 /// Whether a run's motor angle is one sinusoid at its frequency (the hysteretic law and the
