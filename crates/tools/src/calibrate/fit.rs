@@ -1426,13 +1426,15 @@ fn torque_scale_probe(
             break;
         }
     }
-    let (mut c, s, mut q) = best?;
+    let mut best = best?;
+    let grid = best.1;
     for f in [0.5, 2.0] {
-        let here = at(s * f);
-        if here.0 < c {
-            (c, q) = (here.0, here.2);
+        let here = at(grid * f);
+        if here.0 < best.0 {
+            best = here;
         }
     }
+    let (c, s, q) = best;
     super::stepwise::debug(format_args!("torque scale probe: ×{s:.3} lowers the cost {cost:.4e} → {c:.4e}"));
     Some(q)
 }
