@@ -107,13 +107,21 @@ impl Signatures {
 
 /// Pearson correlation of two equally long series (0 when either is constant).
 pub(crate) fn corr(a: &[f64], b: &[f64]) -> f64 {
-    let n = a.len() as f64;
-    let (ma, mb) = (a.iter().sum::<f64>() / n, b.iter().sum::<f64>() / n);
+    weighted_corr(a, b, None)
+}
+
+/// Pearson's correlation of `a` and `b` with each pair weighted by `w` (every weight 1 for None);
+/// 0 where either is constant.
+pub(crate) fn weighted_corr(a: &[f64], b: &[f64], w: Option<&[f64]>) -> f64 {
+    let weight = |i: usize| w.map_or(1.0, |w| w[i]);
+    let total: f64 = (0..a.len()).map(weight).sum();
+    let mean = |x: &[f64]| x.iter().enumerate().map(|(i, x)| x * weight(i)).sum::<f64>() / total;
+    let (ma, mb) = (mean(a), mean(b));
     let (mut sab, mut saa, mut sbb) = (0.0, 0.0, 0.0);
-    for (x, y) in a.iter().zip(b) {
-        sab += (x - ma) * (y - mb);
-        saa += (x - ma).powi(2);
-        sbb += (y - mb).powi(2);
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        sab += weight(i) * (x - ma) * (y - mb);
+        saa += weight(i) * (x - ma).powi(2);
+        sbb += weight(i) * (y - mb).powi(2);
     }
     if saa <= 0.0 || sbb <= 0.0 {
         0.0

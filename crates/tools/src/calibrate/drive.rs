@@ -21,7 +21,7 @@ use serde_json::{json, Map, Value};
 use thermovia_importer::{HarnessError, Instance};
 
 use super::data::{Axis, DriveKind, Run};
-use super::diagnose::corr;
+use super::diagnose::{corr, weighted_corr};
 use super::fit::spd_inverse;
 use super::sim::Simulator;
 use super::stepwise::{Budget, Ranked, Record, Rig, Verdict, BIC_MARGIN};
@@ -1228,15 +1228,7 @@ impl InverseModel {
         if residual.is_empty() || total <= 0.0 {
             return None;
         }
-        let mean = |x: &[f64]| x.iter().zip(&w2).map(|(x, w)| x * w).sum::<f64>() / total;
-        let (mr, ms) = (mean(&residual), mean(&sign));
-        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
-        for ((r, s), w) in residual.iter().zip(&sign).zip(&w2) {
-            sxy += w * (r - mr) * (s - ms);
-            sxx += w * (r - mr).powi(2);
-            syy += w * (s - ms).powi(2);
-        }
-        Some(if sxx > 0.0 && syy > 0.0 { sxy / (sxx * syy).sqrt() } else { 0.0 })
+        Some(weighted_corr(&residual, &sign, Some(&w2)))
     }
 
     /// A level's typical size in the equations (to compare how negative two levels are).

@@ -1010,6 +1010,11 @@ impl<'a> Problem<'a> {
         self.measured.iter().zip(out).flat_map(|(y, m)| y.iter().zip(m).map(|(a, b)| a - b)).collect()
     }
 
+    /// Sum of squared residuals at `p` (infinite when the FMU cannot simulate it).
+    pub fn cost(&self, spec: &ModelSpec, p: &[f64]) -> f64 {
+        self.outputs(spec, p).map(|o| sse(&self.residual(&o))).unwrap_or(f64::INFINITY)
+    }
+
     /// ∂ŷ/∂p by forward differences (only local columns are simulated; others are zero).
     pub fn jacobian(&self, spec: &ModelSpec, p: &[f64], base: &[Vec<f64>]) -> Option<DMatrix<f64>> {
         // forward steps (backward at an upper bound), so every trial stays inside the bounds
@@ -1404,11 +1409,7 @@ fn torque_scale_probe(
         let mut q = scaled_torques(spec, prob.n_groups, p, s);
         let unclamped = q[..n_t].to_vec();
         clamp(&mut q);
-        let c = if q[..n_t] != unclamped[..] {
-            f64::INFINITY
-        } else {
-            prob.outputs(spec, &q).map(|o| sse(&prob.residual(&o))).unwrap_or(f64::INFINITY)
-        };
+        let c = if q[..n_t] != unclamped[..] { f64::INFINITY } else { prob.cost(spec, &q) };
         (c, s, q)
     };
     let mut best: Option<(f64, f64, Vec<f64>)> = None;

@@ -363,9 +363,7 @@ fn calibrate_device(
     if let Some(h) = held_prob.as_ref().filter(|h| laws.undecided && h.sinusoidal().iter().all(|&s| s)) {
         let mut other = outcome.final_fit.spec.clone();
         other.law = fit::DampingLaw::Hysteretic;
-        let sse = |spec: &fit::ModelSpec| {
-            h.outputs(spec, &outcome.final_fit.p).map_or(f64::INFINITY, |o| h.residual(&o).iter().map(|e| e * e).sum())
-        };
+        let sse = |spec: &fit::ModelSpec| h.cost(spec, &outcome.final_fit.p);
         let (v, hy) = (sse(&outcome.final_fit.spec), sse(&other));
         notes.push(format!(
             "the fitting runs have one frequency per temperature, so the damping law cannot be chosen from them; the \

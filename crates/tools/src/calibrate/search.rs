@@ -204,16 +204,11 @@ pub fn baseline_starts(prob: &Problem, law: DampingLaw) -> Vec<(&'static str, Ve
     starts
 }
 
-/// Sum of squared residuals at `p` (infinite when the FMU cannot simulate it).
-fn cost(prob: &Problem, spec: &ModelSpec, p: &[f64]) -> f64 {
-    prob.outputs(spec, p).map(|o| prob.residual(&o).iter().map(|x| x * x).sum::<f64>()).unwrap_or(f64::INFINITY)
-}
-
 /// Levenberg–Marquardt from the cheapest of several starts (each simulated once).
 fn fit_from_best(prob: &Problem, spec: ModelSpec, starts: Vec<Vec<f64>>, max_iter: usize) -> Result<Fit, String> {
     let p0 = starts
         .into_iter()
-        .map(|p| (cost(prob, &spec, &p), p))
+        .map(|p| (prob.cost(&spec, &p), p))
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, p)| p)
         .ok_or("no start")?;
