@@ -88,7 +88,19 @@ fn metadata_beyond_what_a_rig_or_its_log_can_be_is_refused_at_its_line() {
     parse_run(Path::new("ok.csv"), &GOOD.replace("# frequency_hz=0.5", "# frequency_hz=499")).unwrap();
     let e = err(&GOOD.replace("# source=test", "# link_inertia_kgm2=1e300"));
     assert_eq!(e.line, Some(2), "{e}");
-    assert!(e.to_string().contains("link_inertia_kgm2=1e300 is above 1e6"), "{e}");
+    assert!(e.to_string().contains("link_inertia_kgm2=1e300 is above 1e3"), "{e}");
+    // below the FMU's smallest inertia: refused here, not by the FMU in the middle of a fit
+    let e = err(&GOOD.replace("# source=test", "# link_inertia_kgm2=1e-30"));
+    assert_eq!(e.line, Some(2), "{e}");
+    assert!(e.to_string().contains("link_inertia_kgm2=1e-30 is below 1e-9"), "{e}");
+    parse_run(Path::new("ok.csv"), &GOOD.replace("# source=test", "# link_inertia_kgm2=1e-9")).unwrap();
+}
+
+/// A byte-order mark (as Windows tools write) before the first line is not part of its text.
+#[test]
+fn a_byte_order_mark_is_read_past() {
+    let r = parse_run(Path::new("bom.csv"), &format!("\u{feff}{GOOD}")).unwrap();
+    assert_eq!((r.time.len(), r.temperature_c[0]), (4, 40.0));
 }
 
 #[test]
@@ -295,6 +307,42 @@ fn a_gap_splits_the_run_and_is_listed() {
     assert_eq!(runs[1].gaps.len(), 1);
     assert_eq!(runs[1].gaps[0].line, 1005, "the first sample after the gap");
     assert!(runs[1].name().contains("segment 2 of 2"), "{}", runs[1].name());
+}
+
+/// A position that jumps faster than the FMU's speed range (a unit slip, a corrupt stretch) is
+/// refused at its line and column as the file is read, not by the FMU in the middle of a fit.
+#[test]
+fn a_jump_beyond_the_fmus_speed_range_is_refused_at_its_line() {
+    let good = sine_run(2000, 1000.0, even(1000.0));
+    let shifted: Vec<String> = good
+        .lines()
+        .enumerate()
+        .map(|(i, l)| {
+            let mut cells: Vec<String> = l.split(',').map(String::from).collect();
+            if i >= 504 {
+                cells[2] = format!("{}", cells[2].parse::<f64>().unwrap() + 50.0);
+            }
+            cells.join(",")
+        })
+        .collect();
+    let e = err(&(shifted.join("\n") + "\n"));
+    assert_eq!((e.line, e.column.as_ref().map(|c| c.0)), (Some(505), Some(3)), "{e}");
+    assert!(e.message.contains("a speed beyond the FMU's ±1e4 per second"), "{e}");
+}
+
+/// A run whose gaps leave no stretch long enough to fit is refused by name, never passed on empty
+/// (it reached the fit as no samples and panicked there).
+#[test]
+fn a_run_that_gaps_leave_without_a_segment_is_refused() {
+    let d = tmp("calib-data-gap-all");
+    // 3 samples every 50 ms at 1 kHz: every stretch between gaps is 3 samples long
+    let text = sine_run(3000, 1000.0, even(1000.0));
+    // the four lines of metadata and header, then the data's lines 50–52, 100–102, …
+    let kept: Vec<&str> = text.lines().enumerate().filter(|(i, _)| *i < 4 || i % 50 < 3).map(|(_, l)| l).collect();
+    std::fs::write(d.join("sparse.csv"), kept.join("\n") + "\n").unwrap();
+    let e = read_inputs(&[d.join("sparse.csv")]).unwrap_err();
+    assert!(e.to_string().contains("sparse.csv") && e.to_string().contains("no segment to fit"), "{e}");
+    assert!(e.to_string().contains("at most 3 samples"), "{e}");
 }
 
 /// Timestamps that jitter around a uniform clock while the samples were taken on it: the clock is

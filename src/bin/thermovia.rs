@@ -181,6 +181,20 @@ impl thermovia_tools::output::Progress for Bar {
 }
 
 fn main() {
+    // A panic is a bug, never an answer to bad input (those are errors naming file and line); if one
+    // is left, the user gets one line to report, and RUST_BACKTRACE=1 gives the developer the rest.
+    if std::env::var_os("RUST_BACKTRACE").is_none() {
+        std::panic::set_hook(Box::new(|info| {
+            let at = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+            let what = info
+                .payload()
+                .downcast_ref::<&str>()
+                .map(|s| s.to_string())
+                .or_else(|| info.payload().downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic".into());
+            eprintln!("thermovia: internal error (a bug: please report it with the input): {what}{at}");
+        }));
+    }
     let cli = parse_command_line();
     let result: Result<(), Box<dyn std::error::Error>> = match &cli.command {
         Command::Sweep(a) => {

@@ -216,6 +216,8 @@ pub fn parse_run(path: &Path, text: &str) -> Result<Run, DataError> {
 
 /// Parses one run from its text (`path` only names it in errors).
 pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<Run, DataError> {
+    // a byte-order mark (Windows tools write one) is not part of the first line's text
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     // the metadata decides which columns the file must have: read it first (with the header's names)
     let head_table = thermovia_importer::table::parse(path, text, thermovia_importer::table::Columns::Named(&[])).ok();
     let head = head_table.as_ref().map(|t| t.meta.clone()).unwrap_or_default();
@@ -291,7 +293,7 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
     let mut repairs = Vec::new();
     let mut table_columns = table.columns;
     {
-        use super::quality::{check_range, find_corrupt, refusal, repair, Quantity, Repair};
+        use super::quality::{check_range, check_speed, find_corrupt, refusal, repair, Quantity, Repair};
         let position = if axis == Axis::Rotary { Quantity::Angle } else { Quantity::Position };
         let kinds = [
             None,
@@ -313,20 +315,22 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
                 continue;
             }
             let found = find_corrupt(&time, x, *q);
-            if found.is_empty() {
-                continue;
+            if !found.is_empty() {
+                if !options.repair_samples {
+                    return Err(refusal(path, &lines, (at + 1, name), x, &found));
+                }
+                repairs.extend(found.iter().map(|f| Repair {
+                    line: lines[f.index],
+                    column: name.to_string(),
+                    kind: f.kind,
+                    value: f.value,
+                    replaced_by: f.repaired,
+                }));
+                repair(x, &found);
             }
-            if !options.repair_samples {
-                return Err(refusal(path, &lines, (at + 1, name), x, &found));
+            if slot != 3 {
+                check_speed(path, &lines, (at + 1, name), &time, x)?;
             }
-            repairs.extend(found.iter().map(|f| Repair {
-                line: lines[f.index],
-                column: name.to_string(),
-                kind: f.kind,
-                value: f.value,
-                replaced_by: f.repaired,
-            }));
-            repair(x, &found);
         }
     }
     let has_temperature_column = table_columns[3].is_some();
@@ -415,13 +419,25 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
     let half_rate = format!("half the sample rate ({} Hz)", thermovia_importer::table::compact(nyquist));
     for (key, most, what) in [
         ("frequency_hz", nyquist, half_rate.as_str()),
-        (inertia_key, 1e6, "1e6"),
+        (inertia_key, INERTIA_RANGE.1, "1e3 (the FMU's largest inertia or mass)"),
         ("link_mass_kg", 1e6, "1e6"),
         ("link_length_m", 1e6, "1e6"),
         ("motor_amplitude_rad", 1e6, "1e6"),
     ] {
         if let Some(v) = run.meta.get(key) {
             match v.parse::<f64>() {
+                Ok(x) if key == inertia_key && x.is_finite() && x > 0.0 && x < INERTIA_RANGE.0 => {
+                    return Err(meta_error(
+                        path,
+                        text,
+                        key,
+                        format!(
+                            "metadata {key}={} is below 1e-9 (the FMU's smallest inertia or mass): a typo or a unit \
+                             slip, not this rig",
+                            thermovia_importer::table::compact(x)
+                        ),
+                    ))
+                }
                 Ok(x) if x.is_finite() && x > 0.0 && x <= most => {}
                 Ok(x) if x.is_finite() && x > 0.0 => {
                     return Err(meta_error(
@@ -638,6 +654,10 @@ pub fn dominant_frequency(t: &[f64], x: &[f64]) -> Option<f64> {
     Some(0.5 * (a + b))
 }
 
+/// The FMU's `link_inertia` range (kg·m², or kg on a linear axis): a declared inertia outside it is
+/// refused as the file is read, before the FMU would refuse it mid-fit.
+const INERTIA_RANGE: (f64, f64) = (1e-9, 1e3);
+
 /// Reads every input, refusing corrupt samples; the first error stops everything.
 pub fn read_inputs(inputs: &[PathBuf]) -> Result<Vec<Run>, DataError> {
     read_inputs_with(inputs, ReadOptions::default())
@@ -648,7 +668,21 @@ pub fn read_inputs(inputs: &[PathBuf]) -> Result<Vec<Run>, DataError> {
 pub fn read_inputs_with(inputs: &[PathBuf], options: ReadOptions) -> Result<Vec<Run>, DataError> {
     let mut runs = Vec::new();
     for f in expand_inputs(inputs)? {
-        runs.extend(split_at_gaps(read_run_with(&f, options)?).into_iter().map(choose_time_base));
+        let run = read_run_with(&f, options)?;
+        let longest = super::quality::stretches(&run.time).iter().map(|(a, b)| b - a).max().unwrap_or(0);
+        let segments = split_at_gaps(run);
+        if segments.is_empty() {
+            return Err(file_error(
+                &f,
+                format!(
+                    "no segment to fit: gaps (intervals over {} median sample periods) cut the run into stretches \
+                     of at most {longest} samples, and a segment needs {}",
+                    super::quality::GAP_PERIODS,
+                    super::quality::MIN_SEGMENT_SAMPLES
+                ),
+            ));
+        }
+        runs.extend(segments.into_iter().map(choose_time_base));
     }
     Ok(runs)
 }

@@ -5,7 +5,7 @@
 use super::signal::smooth;
 use nalgebra::{DMatrix, DVector};
 
-use super::sim::{EffectValues, RunModel, SimInput, Simulator, TransmissionTable};
+use super::sim::{EffectValues, RunModel, SimInput, Simulator, TransmissionTable, STANDARD_GRAVITY};
 
 /// The effect library (names as in interfaces.md).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -559,7 +559,17 @@ impl<'a> Problem<'a> {
             lower.extend([Some(k_lo.ln()), Some(c_lo.ln())]);
             upper.extend([Some(k_hi.ln()), Some(c_hi.ln())]);
         }
-        let plausible = self.plausible_limits(spec);
+        let mut plausible = self.plausible_limits(spec);
+        // the FMU refuses a gravity_link_mass above its declared maximum: the gravity's components
+        // stay where their norm m·g·d cannot pass it, on every run's centre-of-mass distance
+        if let Some(limit) = self.gravity_torque_limit() {
+            let names = spec.effects.iter().flat_map(|e| e.params().iter().map(move |p| (*e, p.0)));
+            for (lim, (e, _)) in plausible.iter_mut().zip(names) {
+                if e == Effect::Gravity {
+                    *lim = Some(lim.map_or(limit, |l| l.min(limit)));
+                }
+            }
+        }
         // a signed parameter is bounded both ways by its plausible size
         lower.extend(spec.effect_lower().into_iter().zip(&plausible).map(|(lo, lim)| lo.or(lim.map(|l| -l))));
         upper.extend(spec.effect_upper().into_iter().zip(&plausible).map(|(hi, lim)| match (hi, lim) {
@@ -567,6 +577,14 @@ impl<'a> Problem<'a> {
             (h, l) => h.or(*l),
         }));
         (lower, upper)
+    }
+
+    /// The largest size of each gravity component (a, b) whose norm m·g·d the FMU accepts on every
+    /// run: its `gravity_link_mass` maximum × g × the shortest centre-of-mass distance, over √2.
+    fn gravity_torque_limit(&self) -> Option<f64> {
+        let max_kg: f64 = self.sim.fmu.variable("gravity_link_mass").ok()?.max.as_deref()?.parse().ok()?;
+        let d = self.inputs.iter().map(|i| i.com_distance).fold(f64::INFINITY, f64::min);
+        (d.is_finite() && max_kg.is_finite()).then(|| max_kg * STANDARD_GRAVITY * d / std::f64::consts::SQRT_2)
     }
 
     /// [ln K, ln C] of group g clamped into its range.
@@ -1143,8 +1161,8 @@ fn lm_solve(a: &DMatrix<f64>, g: &DVector<f64>, mu: f64) -> DVector<f64> {
 /// Pseudo-inverse of a symmetric positive semi-definite matrix with diagonal scaling.
 pub fn spd_inverse(a: &DMatrix<f64>) -> DMatrix<f64> {
     let n = a.nrows();
-    if a.iter().any(|x| !x.is_finite()) {
-        // nalgebra's SVD panics on a NaN: a matrix without finite information gives none (zero)
+    if n == 0 || a.iter().any(|x| !x.is_finite()) {
+        // nalgebra's SVD panics on an empty matrix and on a NaN: a matrix without finite information gives none (zero)
         return DMatrix::zeros(n, n);
     }
     let (s, d) = diagonally_scaled(a);

@@ -255,7 +255,15 @@ fn over_budget(
         )
         .into()
     } else {
-        e
+        with_fmu_reason(e.to_string(), sim).into()
+    }
+}
+
+/// A fit's "could not simulate" error with the FMU's own reason for its latest failure.
+fn with_fmu_reason(e: String, sim: &sim::Simulator) -> String {
+    match sim.last_failure() {
+        Some(why) if e.contains("could not simulate") && !e.contains(&why) => format!("{e}: {why}"),
+        _ => e,
     }
 }
 

@@ -119,6 +119,31 @@ pub fn check_range(
     }
 }
 
+/// The FMU's speed range (its `motor_speed_command`, rad/s or m/s): a position that moves faster
+/// between two samples is a unit slip or a corrupt sample, and the FMU would refuse it mid-fit.
+pub const SPEED_LIMIT: f64 = 1e4;
+
+/// Refuses the first pair of samples of a measured position that moves faster than
+/// [`SPEED_LIMIT`], at the later sample's line (checked after spikes and wraps are found, so a
+/// wrap is named as one).
+pub fn check_speed(path: &Path, lines: &[usize], column: (usize, &str), t: &[f64], x: &[f64]) -> Result<(), DataError> {
+    let fast = (1..x.len().min(t.len())).find(|&k| (x[k] - x[k - 1]).abs() > SPEED_LIMIT * (t[k] - t[k - 1]));
+    match fast {
+        None => Ok(()),
+        Some(k) => Err(DataError {
+            file: path.to_path_buf(),
+            line: lines.get(k).copied(),
+            column: Some((column.0, column.1.to_string())),
+            message: format!(
+                "{} after {} in {} s is a speed beyond the FMU's ±1e4 per second: a unit slip or a corrupt sample",
+                short(x[k]),
+                short(x[k - 1]),
+                short(t[k] - t[k - 1])
+            ),
+        }),
+    }
+}
+
 /// Median of a copy of `v` (0 when empty).
 pub fn median(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {

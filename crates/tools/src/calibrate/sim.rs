@@ -269,6 +269,9 @@ pub struct Simulator {
     /// Past this instant every simulation fails at once: the backstop that bounds a whole
     /// calibration's wall time (`--search-budget`), whatever fit is running.
     deadline: Mutex<Option<std::time::Instant>>,
+    /// Why the latest simulation failed: the fit's own error ("could not simulate …") says only
+    /// that one did, and a user needs the FMU's reason (an input out of range, a solver stall).
+    last_failure: Mutex<Option<String>>,
 }
 
 /// The message of a simulation refused past the deadline.
@@ -277,7 +280,13 @@ pub const DEADLINE_PASSED: &str = "the calibration's time budget ran out (--sear
 impl Simulator {
     pub fn new(fmu: Fmu, threads: usize) -> Result<Self, HarnessError> {
         let instances = (0..threads.max(1)).map(|_| fmu.instantiate(None).map(Mutex::new)).collect::<Result<_, _>>()?;
-        Ok(Simulator { fmu, instances, simulations: AtomicUsize::new(0), deadline: Mutex::new(None) })
+        Ok(Simulator {
+            fmu,
+            instances,
+            simulations: AtomicUsize::new(0),
+            deadline: Mutex::new(None),
+            last_failure: Mutex::new(None),
+        })
     }
 
     /// Every simulation started after `at` fails with [`DEADLINE_PASSED`], and one running then
@@ -366,6 +375,17 @@ impl Simulator {
         // `simulate` refuses a job already past the deadline at its first step, and stops one that
         // reaches it
         let until = self.deadline();
-        self.map(jobs, |inst, (run, model)| simulate(inst, &inputs[*run], model, until).map_err(|e| e.to_string()))
+        self.map(jobs, |inst, (run, model)| {
+            simulate(inst, &inputs[*run], model, until).map_err(|e| {
+                let why = e.to_string();
+                *self.last_failure.lock().unwrap_or_else(|p| p.into_inner()) = Some(why.clone());
+                why
+            })
+        })
+    }
+
+    /// The reason the latest failed simulation gave, if any failed.
+    pub fn last_failure(&self) -> Option<String> {
+        self.last_failure.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 }
