@@ -96,6 +96,17 @@ fn metadata_beyond_what_a_rig_or_its_log_can_be_is_refused_at_its_line() {
     parse_run(Path::new("ok.csv"), &GOOD.replace("# source=test", "# link_inertia_kgm2=1e-9")).unwrap();
 }
 
+/// Times logged in milliseconds under `time_s` make a 1 Hz swing a 1 mHz one, below the FMU's
+/// lowest excitation frequency: refused as the file is read, with the unit slip named.
+#[test]
+fn a_run_slower_than_the_fmus_lowest_frequency_is_refused() {
+    let ms = sine_run(2000, 1000.0, |k| k as f64).replace("# frequency_hz=0.5\n", "");
+    let e = err(&ms);
+    assert!(e.message.contains("below the FMU's 1e-3 Hz: are the times in seconds?"), "{e}");
+    let e = err(&GOOD.replace("# frequency_hz=0.5", "# frequency_hz=1e-4"));
+    assert_eq!(e.line, Some(3), "a declared frequency is named at its line: {e}");
+}
+
 /// A byte-order mark (as Windows tools write) before the first line is not part of its text.
 #[test]
 fn a_byte_order_mark_is_read_past() {

@@ -570,8 +570,26 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
             })?
         }
     }
+    if run.frequency_hz < LOWEST_FREQUENCY_HZ {
+        let what = format!(
+            "the excitation frequency {} Hz ({}) is below the FMU's 1e-3 Hz: are the times in seconds? (the run \
+             spans {} s)",
+            super::quality::short(run.frequency_hz),
+            if run.frequency_declared { "declared" } else { "measured from the motor angle" },
+            super::quality::short(run.time[run.time.len() - 1] - run.time[0])
+        );
+        return Err(if run.frequency_declared {
+            meta_error(path, text, "frequency_hz", what)
+        } else {
+            file_error(path, what)
+        });
+    }
     Ok(run)
 }
+
+/// The FMU's lowest `excitation_frequency` (its hysteretic law's C = K''/ω grows without bound as
+/// ω falls): a slower run is refused as it is read, not by the FMU in the middle of a fit.
+const LOWEST_FREQUENCY_HZ: f64 = 1e-3;
 
 /// The first required column missing from `header` and the header cell closest to its name (by
 /// the importer's did-you-mean, the one `thermovia simulate` uses for variable names), among the
