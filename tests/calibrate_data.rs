@@ -107,6 +107,22 @@ fn a_run_slower_than_the_fmus_lowest_frequency_is_refused() {
     assert_eq!(e.line, Some(3), "a declared frequency is named at its line: {e}");
 }
 
+/// A run named twice (a file and its folder) is refused, as its samples would count twice; a folder
+/// of sub-folders says which of them hold runs.
+#[test]
+fn a_run_named_twice_is_refused_and_sub_folders_are_named() {
+    use thermovia_tools::calibrate::data::expand_inputs;
+    let d = tmp("calib-data-twice");
+    std::fs::write(d.join("a.csv"), GOOD).unwrap();
+    let e = expand_inputs(&[d.clone(), d.join("a.csv")]).unwrap_err();
+    assert!(e.to_string().contains("named twice"), "{e}");
+    let top = tmp("calib-data-nested");
+    std::fs::create_dir_all(top.join("day1")).unwrap();
+    std::fs::write(top.join("day1").join("a.csv"), GOOD).unwrap();
+    let e = expand_inputs(std::slice::from_ref(&top)).unwrap_err();
+    assert!(e.to_string().contains("sub-folders are not searched") && e.to_string().contains("day1"), "{e}");
+}
+
 /// A byte-order mark (as Windows tools write) before the first line is not part of its text.
 #[test]
 fn a_byte_order_mark_is_read_past() {

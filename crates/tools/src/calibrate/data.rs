@@ -152,11 +152,41 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
                 .collect();
             files.sort();
             if files.is_empty() {
-                return Err(file_error(p, "the folder holds no .csv run files".into()));
+                // sub-folders are not searched (a folder is one rig's runs): say where runs are
+                let mut below: Vec<String> = std::fs::read_dir(p)
+                    .into_iter()
+                    .flatten()
+                    .filter_map(|e| e.ok().map(|e| e.path()))
+                    .filter(|d| {
+                        d.is_dir()
+                            && std::fs::read_dir(d).into_iter().flatten().any(|f| {
+                                f.is_ok_and(|f| f.path().extension().is_some_and(|x| x.eq_ignore_ascii_case("csv")))
+                            })
+                    })
+                    .map(|d| d.display().to_string())
+                    .collect();
+                below.sort();
+                let hint = if below.is_empty() {
+                    String::new()
+                } else {
+                    format!(" (sub-folders are not searched; these hold runs: {})", below.join(", "))
+                };
+                return Err(file_error(p, format!("the folder holds no .csv run files{hint}")));
             }
             out.extend(files);
         } else {
             out.push(p.clone());
+        }
+    }
+    // the same run twice would count its samples twice: every uncertainty too small
+    let mut seen = std::collections::HashMap::new();
+    for f in &out {
+        let key = std::fs::canonicalize(f).unwrap_or_else(|_| f.clone());
+        if let Some(first) = seen.insert(key, f.clone()) {
+            return Err(file_error(
+                f,
+                format!("this run is named twice (also as {}): its samples would count twice", first.display()),
+            ));
         }
     }
     if out.is_empty() {
