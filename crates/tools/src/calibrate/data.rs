@@ -145,24 +145,14 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
     let mut out = Vec::new();
     for p in inputs {
         if p.is_dir() {
-            let mut files: Vec<PathBuf> = std::fs::read_dir(p)
-                .map_err(|e| file_error(p, format!("cannot list the folder: {e}")))?
-                .filter_map(|e| e.ok().map(|e| e.path()))
-                .filter(|f| f.extension().is_some_and(|x| x.eq_ignore_ascii_case("csv")))
-                .collect();
-            files.sort();
+            let files = csv_files(p).map_err(|e| file_error(p, format!("cannot list the folder: {e}")))?;
             if files.is_empty() {
                 // sub-folders are not searched (a folder is one rig's runs): say where runs are
                 let mut below: Vec<String> = std::fs::read_dir(p)
                     .into_iter()
                     .flatten()
                     .filter_map(|e| e.ok().map(|e| e.path()))
-                    .filter(|d| {
-                        d.is_dir()
-                            && std::fs::read_dir(d).into_iter().flatten().any(|f| {
-                                f.is_ok_and(|f| f.path().extension().is_some_and(|x| x.eq_ignore_ascii_case("csv")))
-                            })
-                    })
+                    .filter(|d| d.is_dir() && csv_files(d).is_ok_and(|f| !f.is_empty()))
                     .map(|d| d.display().to_string())
                     .collect();
                 below.sort();
@@ -198,6 +188,16 @@ pub fn expand_inputs(inputs: &[PathBuf]) -> Result<Vec<PathBuf>, DataError> {
         });
     }
     Ok(out)
+}
+
+/// The `.csv` files directly in `dir`, sorted.
+fn csv_files(dir: &Path) -> std::io::Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|f| f.extension().is_some_and(|x| x.eq_ignore_ascii_case("csv")))
+        .collect();
+    files.sort();
+    Ok(files)
 }
 
 fn file_error(file: &Path, message: String) -> DataError {
@@ -443,45 +443,37 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         Axis::Rotary => "link_inertia_kgm2",
         Axis::Linear => "inertia_kg",
     };
-    // positive, and physical: an inertia, mass or length within the FMU's input ranges' ±1e6, an
-    // amplitude within the positions', a frequency below half the sample rate (the log cannot carry more)
+    // positive, and physical: an inertia within the FMU's range, a mass or length within its input
+    // ranges' ±1e6, an amplitude within the positions', a frequency below half the sample rate (the log
+    // cannot carry more). Each key: (least, what it is) where more than positive is asked, (most, what).
     let nyquist = 0.5 / super::quality::median_period(&run.time).max(f64::MIN_POSITIVE);
     let half_rate = format!("half the sample rate ({} Hz)", thermovia_importer::table::compact(nyquist));
-    for (key, most, what) in [
-        ("frequency_hz", nyquist, half_rate.as_str()),
-        (inertia_key, INERTIA_RANGE.1, "1e3 (the FMU's largest inertia or mass)"),
-        ("link_mass_kg", 1e6, "1e6"),
-        ("link_length_m", 1e6, "1e6"),
-        ("motor_amplitude_rad", 1e6, "1e6"),
+    let inertia_least = (INERTIA_RANGE.0, "1e-9 (the FMU's smallest inertia or mass)");
+    for (key, least, most, what) in [
+        ("frequency_hz", None, nyquist, half_rate.as_str()),
+        (inertia_key, Some(inertia_least), INERTIA_RANGE.1, "1e3 (the FMU's largest inertia or mass)"),
+        ("link_mass_kg", None, 1e6, "1e6"),
+        ("link_length_m", None, 1e6, "1e6"),
+        ("motor_amplitude_rad", None, 1e6, "1e6"),
     ] {
-        if let Some(v) = run.meta.get(key) {
-            match v.parse::<f64>() {
-                Ok(x) if key == inertia_key && x.is_finite() && x > 0.0 && x < INERTIA_RANGE.0 => {
-                    return Err(meta_error(
-                        path,
-                        text,
-                        key,
-                        format!(
-                            "metadata {key}={} is below 1e-9 (the FMU's smallest inertia or mass): a typo or a unit \
-                             slip, not this rig",
-                            thermovia_importer::table::compact(x)
-                        ),
-                    ))
-                }
-                Ok(x) if x.is_finite() && x > 0.0 && x <= most => {}
-                Ok(x) if x.is_finite() && x > 0.0 => {
-                    return Err(meta_error(
-                        path,
-                        text,
-                        key,
-                        format!(
-                            "metadata {key}={} is above {what}: a typo or a unit slip, not this rig",
-                            thermovia_importer::table::compact(x)
-                        ),
-                    ))
-                }
-                _ => return Err(meta_error(path, text, key, format!("metadata {key}={v:?} is not a positive number"))),
-            }
+        let Some(v) = run.meta.get(key) else { continue };
+        let x = match v.parse::<f64>() {
+            Ok(x) if x.is_finite() && x > 0.0 => x,
+            _ => return Err(meta_error(path, text, key, format!("metadata {key}={v:?} is not a positive number"))),
+        };
+        let beyond = match least {
+            Some((lo, lo_what)) if x < lo => Some(format!("below {lo_what}")),
+            _ if x > most => Some(format!("above {what}")),
+            _ => None,
+        };
+        if let Some(beyond) = beyond {
+            let shown = thermovia_importer::table::compact(x);
+            return Err(meta_error(
+                path,
+                text,
+                key,
+                format!("metadata {key}={shown} is {beyond}: a typo or a unit slip, not this rig"),
+            ));
         }
     }
     if axis == Axis::Linear && run.meta.contains_key("link_inertia_kgm2") {
