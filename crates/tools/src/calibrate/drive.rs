@@ -876,9 +876,9 @@ fn modulating(s: f64) -> (f64, f64, f64) {
 /// The windows of one run at half-widths from 8 sample periods to a quarter of the run, each scale
 /// a factor 2 apart, stepped by half a width: short windows carry the inertia (fast changes), long
 /// ones average the noise. Only sign q̇ and the direction-wise speeds use a differentiated position:
-/// `v`, the run's speed from `signal::derivatives`; `tau`, its applied torque. Returns the windows
-/// and how many scales they span.
-fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], stribeck_grid: &[f64]) -> (Vec<Window>, usize) {
+/// `v`, the run's speed from `signal::derivatives`; `tau`, its applied torque; `v_floor`, its
+/// `sign_floor`. Returns the windows and how many scales they span.
+fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid: &[f64]) -> (Vec<Window>, usize) {
     let (t, q) = (&inp.time, &inp.motor);
     let n = t.len();
     if n < 32 {
@@ -887,7 +887,6 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], stribeck_grid: &[f64]) -> (
     let load: Vec<f64> = (0..n).map(|k| tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain)).collect();
     let period = super::quality::median_period(t);
     let span = t[n - 1] - t[0];
-    let v_floor = sign_floor(inp);
     let (mut out, mut scales) = (Vec::new(), 0);
     let mut h = 8.0 * period;
     while h <= 0.25 * span {
@@ -962,10 +961,10 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], stribeck_grid: &[f64]) -> (
     (out, scales)
 }
 
-/// A speed the position noise cannot fake over the derivative's smoothing (±10 samples): below
-/// it, the sign of a run's speed is unknown.
-fn sign_floor(inp: &DriveInput) -> f64 {
-    3.0 * super::signal::second_difference_noise(&inp.motor) / (8.0 * super::quality::median_period(&inp.time))
+/// A speed a run's position noise `sigma_q` (its second-difference estimate) cannot fake over the
+/// derivative's smoothing (±10 samples): below it, the sign of the run's speed is unknown.
+fn sign_floor(inp: &DriveInput, sigma_q: f64) -> f64 {
+    3.0 * sigma_q / (8.0 * super::quality::median_period(&inp.time))
 }
 
 /// Stribeck speeds the equation error tries (the level is linear; the speed is the grid's best, to
@@ -977,7 +976,9 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     // below a speed whose sign the noise hides in some run (an excess there is the sign's error)
     let speeds: Vec<Vec<f64>> = inputs.iter().map(|inp| derivatives(&inp.time, &inp.motor).0).collect();
     let top = speeds.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
-    let floor = inputs.iter().map(sign_floor).fold(0.0f64, f64::max);
+    let sigma_q: Vec<f64> = inputs.iter().map(|inp| super::signal::second_difference_noise(&inp.motor)).collect();
+    let floors: Vec<f64> = inputs.iter().zip(&sigma_q).map(|(inp, &s)| sign_floor(inp, s)).collect();
+    let floor = floors.iter().copied().fold(0.0f64, f64::max);
     let stribeck_grid: Vec<f64> = (0..STRIBECK_GRID)
         .map(|i| 0.5 * top * 0.02f64.powf(i as f64 / (STRIBECK_GRID - 1) as f64))
         .filter(|v| *v > 0.0 && *v >= floor)
@@ -985,11 +986,10 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     let mut ws = Vec::new();
     let (mut q_var, mut tau_var, mut count) = (0.0, 0.0, 0.0);
     let mut scales = 1usize;
-    for (inp, v) in inputs.iter().zip(&speeds) {
+    for (((inp, v), &sigma_q), &v_floor) in inputs.iter().zip(&speeds).zip(&sigma_q).zip(&floors) {
         let tau = inp.applied_torque();
-        let (w, run_scales) = windows(inp, &tau, v, &stribeck_grid);
+        let (w, run_scales) = windows(inp, &tau, v, v_floor, &stribeck_grid);
         scales = scales.max(run_scales);
-        let sigma_q = super::signal::second_difference_noise(&inp.motor);
         // the torque's own noise: the median second difference (robust to the steps of a drive)
         let sigma_tau = super::signal::median_second_difference_noise(&tau);
         q_var += sigma_q * sigma_q * w.len() as f64;
@@ -2463,20 +2463,21 @@ mod tests {
     fn a_stribeck_speed_at_the_end_of_the_grid_is_refused_one_inside_it_is_estimated() {
         use Param::{ConstantLoad, Coulomb, LnInertia, LnStribeckVelocity, Stribeck, Viscous};
         let spec = [LnInertia, Viscous, ConstantLoad, Coulomb, Stribeck, LnStribeckVelocity];
+        let floor_of = |inp: &DriveInput| sign_floor(inp, super::super::signal::second_difference_noise(&inp.motor));
         let inp = sine_driven_servo((5e-3, 4.0), 1e-3, 1e5);
         let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
         let ee = iv.parameters(&spec, None).expect("a Stribeck excess inside the grid is estimated");
         let (fs, vst) = (ee.p[4], ee.p[5].exp());
         assert!((fs - 5e-3).abs() < 0.1 * 5e-3 && (vst - 4.0).abs() < 0.1 * 4.0, "Fs {fs}, v_st {vst}");
         // an excess that lives below every speed of the grid
-        let inp = sine_driven_servo((5e-3, 0.2 * sign_floor(&inp)), 1e-3, 1e5);
+        let inp = sine_driven_servo((5e-3, 0.2 * floor_of(&inp)), 1e-3, 1e5);
         let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
         assert!(iv.parameters(&spec, None).is_none(), "grid {:?}", iv.stribeck_grid);
         // a coarse encoder read at 5 kHz: the noise hides the sign below about 3 rad/s, above a
         // fiftieth of the top speed, and the grid starts there
         let inp = sine_driven_servo((5e-3, 4.0), 2e-4, 1e3);
         let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
-        let (floor, lowest) = (sign_floor(&inp), iv.stribeck_grid.last().copied().unwrap_or(f64::INFINITY));
+        let (floor, lowest) = (floor_of(&inp), iv.stribeck_grid.last().copied().unwrap_or(f64::INFINITY));
         assert!(lowest >= floor && floor > lowest / 1.1, "floor {floor}, grid {:?}", iv.stribeck_grid);
     }
 
