@@ -22,7 +22,7 @@ use thermovia_importer::{HarnessError, Instance};
 
 use super::data::{Axis, DriveKind, Run};
 use super::diagnose::{corr, weighted_corr};
-use super::fit::spd_inverse;
+use super::fit::{cluster_sandwich, spd_inverse};
 use super::sim::Simulator;
 use super::stepwise::{Budget, Ranked, Record, Rig, Verdict, BIC_MARGIN};
 
@@ -425,10 +425,6 @@ impl DriveFit {
         Some((self.p[i], self.covariance[(i, i)].max(0.0).sqrt()))
     }
 }
-
-/// Contiguous blocks per set for the sandwich covariance: residual correlation inside a block is
-/// kept whole, blocks are taken as independent.
-pub const COVARIANCE_BLOCKS: usize = 20;
 
 impl<'a> DriveProblem<'a> {
     pub fn new(sim: &'a Simulator, runs: &[Run], group: Vec<usize>, n_groups: usize) -> Self {
@@ -835,11 +831,24 @@ pub struct EquationError {
     pub bic: f64,
     cols: Vec<Param>,
     cov: DMatrix<f64>,
+    /// The same coefficients' cluster sandwich over blocks of windows in time.
+    sandwich: DMatrix<f64>,
     beta: Vec<f64>,
 }
 
+/// One weighted least squares of the windows: coefficients, weighted SSE, the covariance from
+/// the noise the windows share, and the cluster sandwich over time blocks.
+#[derive(Clone)]
+struct Solved {
+    beta: Vec<f64>,
+    sse: f64,
+    cov: DMatrix<f64>,
+    sandwich: DMatrix<f64>,
+}
+
 impl EquationError {
-    /// Wald statistic of an effect's levels (θᵀ Σ⁻¹ θ over the effect's linear parameters).
+    /// Wald statistic of an effect's levels (θᵀ Σ⁻¹ θ over the effect's linear parameters), the
+    /// smaller of the shared-noise covariance's and the cluster sandwich's.
     pub fn wald(&self, effect: DriveEffect) -> f64 {
         let idx: Vec<usize> =
             drive_params(effect).iter().filter_map(|q| self.cols.iter().position(|c| c == q)).collect();
@@ -847,8 +856,14 @@ impl EquationError {
             return 0.0;
         }
         let th = DVector::from_iterator(idx.len(), idx.iter().map(|&i| self.beta[i]));
-        let s = DMatrix::from_fn(idx.len(), idx.len(), |a, b| self.cov[(idx[a], idx[b])]);
-        s.try_inverse().map_or(0.0, |inv| (th.transpose() * inv * &th)[(0, 0)])
+        let wald_with = |cov: &DMatrix<f64>| {
+            let s = DMatrix::from_fn(idx.len(), idx.len(), |a, b| cov[(idx[a], idx[b])]);
+            s.try_inverse().map(|inv| (th.transpose() * inv * &th)[(0, 0)])
+        };
+        // the shared noise counts the sensor's noise only; the sandwich also sees the equation's
+        // own model error (a sign read from noise near a reversal), correlated in time
+        let white = wald_with(&self.cov).unwrap_or(0.0);
+        wald_with(&self.sandwich).map_or(white, |sandwich| white.min(sandwich))
     }
 }
 
@@ -863,6 +878,9 @@ struct Window {
     /// Σ(φ'' Δt)² and Σ(φ Δt)², over (∫φ dt)²: how position and torque noise enter the equation.
     q_noise: f64,
     tau_noise: f64,
+    /// The block of its run the window's centre falls in (blocks as wide as the run's widest
+    /// window): the sandwich covariance's clusters.
+    block: usize,
 }
 
 /// The modulating function φ(s) = (1 − s²)³ on s ∈ [−1, 1] with its first two derivatives in s:
@@ -888,6 +906,10 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
     let period = super::quality::median_period(t);
     let span = t[n - 1] - t[0];
     let (mut out, mut scales) = (Vec::new(), 0);
+    let mut widest = 8.0 * period;
+    while 2.0 * widest <= 0.25 * span {
+        widest *= 2.0;
+    }
     let mut h = 8.0 * period;
     while h <= 0.25 * span {
         scales += 1;
@@ -951,6 +973,7 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
                         rhs: rhs / w_int,
                         q_noise: qn / (w_int * w_int),
                         tau_noise: tn / (w_int * w_int),
+                        block: ((centre - t[0]) / (2.0 * widest)) as usize,
                     });
                 }
             }
@@ -988,8 +1011,13 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     let mut scales = 1usize;
     for (((inp, v), &sigma_q), &v_floor) in inputs.iter().zip(&speeds).zip(&sigma_q).zip(&floors) {
         let tau = inp.applied_torque();
-        let (w, run_scales) = windows(inp, &tau, v, v_floor, &stribeck_grid);
+        let (mut w, run_scales) = windows(inp, &tau, v, v_floor, &stribeck_grid);
         scales = scales.max(run_scales);
+        // each run's blocks are clusters of their own
+        let first_block = ws.iter().map(|w: &Window| w.block + 1).max().unwrap_or(0);
+        for x in &mut w {
+            x.block += first_block;
+        }
         // the torque's own noise: the median second difference (robust to the steps of a drive)
         let sigma_tau = super::signal::median_second_difference_noise(&tau);
         q_var += sigma_q * sigma_q * w.len() as f64;
@@ -1020,8 +1048,8 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
         stribeck_grid,
     };
     use Param::{ConstantLoad, Coulomb, LnInertia, Viscous};
-    let b3 = iv.solve_cols(&[LnInertia, Viscous, ConstantLoad], &[], 0)?.0;
-    let b4 = iv.solve_cols(&[LnInertia, Viscous, ConstantLoad, Coulomb], &[], 0)?.0;
+    let b3 = iv.solve_cols(&[LnInertia, Viscous, ConstantLoad], &[], 0)?.beta;
+    let b4 = iv.solve_cols(&[LnInertia, Viscous, ConstantLoad, Coulomb], &[], 0)?.beta;
     let ws = &iv.windows;
     // direction-wise: τ + load = M q̈ + Fv± q̇ + Fc± sign q̇ − L, with L fixed at the Coulomb model's
     // (a constant load and the mean of Fc+ − Fc− are not separable from motion that splits evenly)
@@ -1088,10 +1116,10 @@ impl InverseModel {
     }
 
     /// Weighted least squares of the columns `cols` with `fixed` (param, value) moved to the right
-    /// side, reweighted twice by the inertia: (coefficients, weighted SSE, covariance). The
-    /// covariance counts each sample's noise as often as windows share it (two per scale, half
-    /// overlapping, at every scale): the windows' equations are not independent.
-    fn solve_cols(&self, cols: &[Param], fixed: &[(Param, f64)], g: usize) -> Option<(Vec<f64>, f64, DMatrix<f64>)> {
+    /// side, reweighted twice by the inertia. The covariance counts each sample's noise as often as
+    /// windows share it (two per scale, half overlapping, at every scale): the windows' equations
+    /// are not independent. The sandwich takes the residuals' own correlation in time instead.
+    fn solve_cols(&self, cols: &[Param], fixed: &[(Param, f64)], g: usize) -> Option<Solved> {
         let ws = &self.windows;
         let inertia_col = cols.iter().position(|&q| q == Param::LnInertia);
         let mut inertia = 0.0;
@@ -1113,9 +1141,14 @@ impl InverseModel {
             inertia = inertia_col.map_or(0.0, |i| beta[i].abs());
             let dof = ws.len().saturating_sub(cols.len()).max(1) as f64;
             let cov = (x.transpose() * &x).try_inverse()? * (sse / dof * self.sharing);
-            out = Some((beta.iter().copied().collect(), sse, cov));
+            out =
+                Some((x, y, Solved { beta: beta.iter().copied().collect(), sse, cov, sandwich: DMatrix::zeros(0, 0) }));
         }
-        out
+        let (x, y, mut solved) = out?;
+        let residual: Vec<f64> = (&y - &x * DVector::from_column_slice(&solved.beta)).iter().copied().collect();
+        let blocks: Vec<usize> = ws.iter().map(|w| w.block).collect();
+        solved.sandwich = cluster_sandwich(&x, &residual, &blocks);
+        Some(solved)
     }
 
     /// The equation error's parameters for a drive model's `spec` (None when the data do not give
@@ -1149,15 +1182,17 @@ impl InverseModel {
             let grid: Vec<usize> = if has(Param::Stribeck) { (0..self.stribeck_grid.len()).collect() } else { vec![0] };
             // the Stribeck speed: the grid's best among the speeds whose excess comes out ≥ 0
             let stribeck_col = cols.iter().position(|&q| q == Param::Stribeck);
-            let solved: Vec<_> = grid
-                .into_iter()
-                .filter_map(|g| self.solve_cols(&cols, &fixed, g).map(|(b, sse, cov)| (b, sse, cov, g)))
-                .collect();
-            let physical = |s: &(Vec<f64>, f64, DMatrix<f64>, usize)| stribeck_col.is_none_or(|i| s.0[i] >= 0.0);
+            let solved: Vec<(Solved, usize)> =
+                grid.into_iter().filter_map(|g| self.solve_cols(&cols, &fixed, g).map(|s| (s, g))).collect();
+            let physical = |s: &(Solved, usize)| stribeck_col.is_none_or(|i| s.0.beta[i] >= 0.0);
             let best = |only_physical: bool| {
-                solved.iter().filter(|s| !only_physical || physical(s)).min_by(|a, b| a.1.total_cmp(&b.1)).cloned()
+                solved
+                    .iter()
+                    .filter(|s| !only_physical || physical(s))
+                    .min_by(|a, b| a.0.sse.total_cmp(&b.0.sse))
+                    .cloned()
             };
-            let (beta, sse, cov, g) = best(true).or_else(|| best(false))?;
+            let (Solved { beta, sse, cov, sandwich }, g) = best(true).or_else(|| best(false))?;
             // a best speed at either end of the grid is no estimate: the data put the excess at
             // speeds the grid cannot reach (below the sign's floor, above the data's own speeds)
             if stribeck_col.is_some() && (g == 0 || g + 1 >= self.stribeck_grid.len()) {
@@ -1200,7 +1235,7 @@ impl InverseModel {
             let n = (self.windows.len() as f64 / self.sharing).max(2.0);
             let k = p.len() as f64;
             let bic = n * (sse / self.sharing / n).max(f64::MIN_POSITIVE).ln() + k * n.ln();
-            return Some(EquationError { p, cols, cov, beta, bic });
+            return Some(EquationError { p, cols, cov, sandwich, beta, bic });
         }
     }
 
