@@ -1183,7 +1183,9 @@ pub fn block_sandwich(jac: &DMatrix<f64>, r: &[f64], lengths: &[usize]) -> DMatr
     for &len in lengths {
         let b = COVARIANCE_BLOCKS.min(len);
         let first = cluster.last().map_or(0, |c| c + 1);
-        cluster.extend((0..len).map(|t| first + t * b / len));
+        for i in 0..b {
+            cluster.extend(std::iter::repeat_n(first + i, (i + 1) * len / b - i * len / b));
+        }
     }
     cluster_sandwich(jac, r, &cluster)
 }
