@@ -837,13 +837,13 @@ pub struct EquationError {
 }
 
 /// One weighted least squares of the windows: coefficients, weighted SSE, the covariance from
-/// the noise the windows share, and the cluster sandwich over time blocks.
+/// the noise the windows share, and the windows' weights it ended with.
 #[derive(Clone)]
 struct Solved {
     beta: Vec<f64>,
     sse: f64,
     cov: DMatrix<f64>,
-    sandwich: DMatrix<f64>,
+    weight: Vec<f64>,
 }
 
 impl EquationError {
@@ -1126,13 +1126,7 @@ impl InverseModel {
         let mut out = None;
         for _ in 0..3 {
             let weight = self.weights(inertia);
-            let x = DMatrix::from_fn(ws.len(), cols.len(), |i, j| Self::column(&ws[i], cols[j], g) * weight[i]);
-            let y = DVector::from_iterator(
-                ws.len(),
-                ws.iter()
-                    .zip(&weight)
-                    .map(|(w, gw)| (w.rhs - fixed.iter().map(|&(q, v)| v * Self::column(w, q, g)).sum::<f64>()) * gw),
-            );
+            let (x, y) = self.design(cols, fixed, g, &weight);
             let beta = (x.transpose() * &x).try_inverse()? * (x.transpose() * &y);
             if !beta.iter().all(|b| b.is_finite()) {
                 return None;
@@ -1141,14 +1135,32 @@ impl InverseModel {
             inertia = inertia_col.map_or(0.0, |i| beta[i].abs());
             let dof = ws.len().saturating_sub(cols.len()).max(1) as f64;
             let cov = (x.transpose() * &x).try_inverse()? * (sse / dof * self.sharing);
-            out =
-                Some((x, y, Solved { beta: beta.iter().copied().collect(), sse, cov, sandwich: DMatrix::zeros(0, 0) }));
+            out = Some(Solved { beta: beta.iter().copied().collect(), sse, cov, weight });
         }
-        let (x, y, mut solved) = out?;
+        out
+    }
+
+    /// The weighted equations of the columns `cols` with `fixed` (param, value) on the right side.
+    fn design(&self, cols: &[Param], fixed: &[(Param, f64)], g: usize, weight: &[f64]) -> (DMatrix<f64>, DVector<f64>) {
+        let ws = &self.windows;
+        let x = DMatrix::from_fn(ws.len(), cols.len(), |i, j| Self::column(&ws[i], cols[j], g) * weight[i]);
+        let y = DVector::from_iterator(
+            ws.len(),
+            ws.iter()
+                .zip(weight)
+                .map(|(w, gw)| (w.rhs - fixed.iter().map(|&(q, v)| v * Self::column(w, q, g)).sum::<f64>()) * gw),
+        );
+        (x, y)
+    }
+
+    /// A solve's cluster sandwich over the windows' time blocks: the residuals' own correlation in
+    /// time, where the solve's covariance counts the shared sensor noise only. Computed for the
+    /// chosen solve alone, not for every speed of the Stribeck grid.
+    fn sandwich(&self, cols: &[Param], fixed: &[(Param, f64)], g: usize, solved: &Solved) -> DMatrix<f64> {
+        let (x, y) = self.design(cols, fixed, g, &solved.weight);
         let residual: Vec<f64> = (&y - &x * DVector::from_column_slice(&solved.beta)).iter().copied().collect();
-        let blocks: Vec<usize> = ws.iter().map(|w| w.block).collect();
-        solved.sandwich = cluster_sandwich(&x, &residual, &blocks);
-        Some(solved)
+        let blocks: Vec<usize> = self.windows.iter().map(|w| w.block).collect();
+        cluster_sandwich(&x, &residual, &blocks)
     }
 
     /// The equation error's parameters for a drive model's `spec` (None when the data do not give
@@ -1192,7 +1204,8 @@ impl InverseModel {
                     .min_by(|a, b| a.0.sse.total_cmp(&b.0.sse))
                     .cloned()
             };
-            let (Solved { beta, sse, cov, sandwich }, g) = best(true).or_else(|| best(false))?;
+            let (solved, g) = best(true).or_else(|| best(false))?;
+            let (beta, sse) = (&solved.beta, solved.sse);
             // a best speed at either end of the grid is no estimate: the data put the excess at
             // speeds the grid cannot reach (below the sign's floor, above the data's own speeds)
             if stribeck_col.is_some() && (g == 0 || g + 1 >= self.stribeck_grid.len()) {
@@ -1235,7 +1248,8 @@ impl InverseModel {
             let n = (self.windows.len() as f64 / self.sharing).max(2.0);
             let k = p.len() as f64;
             let bic = n * (sse / self.sharing / n).max(f64::MIN_POSITIVE).ln() + k * n.ln();
-            return Some(EquationError { p, cols, cov, sandwich, beta, bic });
+            let sandwich = self.sandwich(&cols, &fixed, g, &solved);
+            return Some(EquationError { p, cols, cov: solved.cov, sandwich, beta: solved.beta, bic });
         }
     }
 
