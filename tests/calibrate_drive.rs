@@ -18,7 +18,21 @@ fn run_calibrate(args: &[&str]) -> Value {
     let fmu_s = fmu.to_str().unwrap().to_string();
     all.extend_from_slice(&["--fmu", &fmu_s, "--no-plots"]);
     let args = CalibrateArgs::from_cli(&all).unwrap();
-    calibrate(&args).unwrap().report
+    let report = calibrate(&args).unwrap().report;
+    // a refit that failed a selection test is never kept (one that passed them all may still lose
+    // to a better refit of its round)
+    for a in rejected_or_kept(&report) {
+        assert!(a["kept"] == false || a["failed"].as_array().unwrap().is_empty(), "{a}");
+    }
+    report
+}
+
+/// Every refit a drive search judged (its rounds' attempts and its combinations; a device's
+/// attempts carry no Wald test).
+fn rejected_or_kept(j: &Value) -> Vec<&Value> {
+    let rounds =
+        j["rounds"].as_array().into_iter().flatten().flat_map(|r| r["attempts"].as_array().into_iter().flatten());
+    rounds.chain(j["combinations"].as_array().into_iter().flatten()).filter(|a| a.get("wald_chi2").is_some()).collect()
 }
 
 fn f(v: &Value) -> f64 {
@@ -41,6 +55,11 @@ fn emps_estimation_and_validation_beat_the_published_parameters_simulated_the_sa
     let val = format!("{ROOT}/data/emps/emps_validation.csv");
     let published = format!("{ROOT}/data/emps/published.json");
     let j = run_calibrate(&[&est, "--validate", &val, "--published", &published]);
+    assert!(
+        rejected_or_kept(&j).iter().any(|a| !a["failed"].as_array().unwrap().is_empty()),
+        "EMPS's search rejects a refit and names the test it failed: {}",
+        j["rounds"]
+    );
     let (est_base, est_final) = (f(&j["baseline"]["relerr_percent"]), f(&j["final"]["relerr_percent"]));
     let (val_base, val_final) =
         (f(&j["validation"]["baseline"]["relerr_percent"]), f(&j["validation"]["final"]["relerr_percent"]));

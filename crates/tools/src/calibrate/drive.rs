@@ -1308,6 +1308,12 @@ pub struct DriveDetail {
     pub held_before: Option<f64>,
     pub held_after: Option<f64>,
     pub wald: f64,
+    /// The limit the smallest Wald χ² had to pass (its effect's degrees of freedom).
+    pub wald_limit: f64,
+    /// The added effects' smallest rms share of the simulated positions over their noise.
+    pub share_over_noise: f64,
+    /// Whether the refit passed each of `SELECTION_TESTS`.
+    pub passed: [bool; 3],
 }
 
 /// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
@@ -1320,6 +1326,10 @@ pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
 }
 
 /// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
+/// The drive judge's tests, in `DriveDetail::passed`'s order: the BIC's fall, the Wald test and
+/// the visibility (the effect's share of the positions above their noise).
+pub const SELECTION_TESTS: [&str; 3] = ["bic", "wald", "visibility"];
+
 pub fn wald_limit(dof: usize) -> f64 {
     if dof <= 1 {
         10.83
@@ -1716,7 +1726,15 @@ impl Rig for DriveRig<'_, '_> {
             .collect();
         let shares: Vec<f64> = added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect();
         let visible = shares.iter().all(|&share| share > 1.0);
-        let keep = refit.bic() < m.bic() - BIC_MARGIN && walds.iter().all(|&(w, dof)| w > wald_limit(dof)) && visible;
+        let lowers_bic = refit.bic() < m.bic() - BIC_MARGIN;
+        let significant = walds.iter().all(|&(w, dof)| w > wald_limit(dof));
+        let keep = lowers_bic && significant && visible;
+        // the Wald statistic nearest its limit, with that limit
+        let (wald_min, limit) = walds
+            .iter()
+            .map(|&(w, dof)| (w, wald_limit(dof)))
+            .min_by(|a, b| (a.0 / a.1).total_cmp(&(b.0 / b.1)))
+            .unwrap_or((f64::INFINITY, wald_limit(1)));
         super::stepwise::debug(format_args!(
             "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, share/noise {:?}, noise {:.3e}, rms {:.3e} -> {:.3e}",
             added,
@@ -1735,7 +1753,10 @@ impl Rig for DriveRig<'_, '_> {
             detail: DriveDetail {
                 held_before: self.held_err(m),
                 held_after: self.held_err(refit),
-                wald: walds.iter().map(|w| w.0).fold(f64::INFINITY, f64::min),
+                wald: wald_min,
+                wald_limit: limit,
+                share_over_noise: shares.iter().copied().fold(f64::INFINITY, f64::min),
+                passed: [lowers_bic, significant, visible],
             },
         }
     }
@@ -2089,8 +2110,20 @@ pub fn report_json(
         "search_budget": record["search_budget"],
         "method": {
             "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
-            "fit": "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)",
-            "selection": format!("an effect is kept when BIC falls by more than {BIC_MARGIN} and its parameters pass a Wald test with the block-sandwich covariance (χ² above the p = 0.001 quantile); the held-out runs (--validate) are simulated after every attempt and reported, never used to choose"),
+            "fit": if o.equation_error {
+                "the equation error (IDIM-LS on the logged torque, `inverse_model`) chooses and estimates; the output error on the positions (Levenberg–Marquardt through the FMU) simulates the result"
+            } else {
+                "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)"
+            },
+            "selection": format!(
+                "an effect is kept when the BIC{} falls by more than {BIC_MARGIN}, its parameters pass a Wald test ({}; χ² above the p = 0.001 quantile) and it moves the simulated positions by more than their noise (rms share over the noise above 1; each attempt's `failed` names the tests it did not pass); the held-out runs (--validate) are simulated after every attempt and reported, never used to choose",
+                if o.equation_error { " of the equation error" } else { "" },
+                if o.equation_error {
+                    "the equation error's coefficients, the smaller χ² of the shared-noise covariance and a cluster sandwich over blocks of windows in time"
+                } else {
+                    "the block-sandwich covariance"
+                }
+            ),
         },
         "seconds": seconds,
         "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
@@ -2146,7 +2179,7 @@ pub fn report_json(
             }
         }
         None => {
-            j["held_out"] = json!("no held-out set was given (--validate): effects were kept on BIC alone and the held-out error was not estimated");
+            j["held_out"] = json!("no held-out set was given (--validate): effects were chosen on the estimation runs alone (BIC, Wald test and visibility; see method.selection) and the held-out error was not estimated");
         }
     }
     if let Some(p) = published {
@@ -2162,7 +2195,11 @@ fn record_json(o: &DriveOutcome) -> Value {
         &o.record,
         DriveEffect::name,
         |_| json!({}),
-        |d: &DriveDetail| json!({"held_out_relerr_before": d.held_before, "held_out_relerr_after": d.held_after, "wald_chi2": d.wald}),
+        |d: &DriveDetail| {
+            json!({"held_out_relerr_before": d.held_before, "held_out_relerr_after": d.held_after, "wald_chi2": d.wald,
+                   "wald_limit": d.wald_limit, "share_over_noise": d.share_over_noise,
+                   "failed": SELECTION_TESTS.iter().zip(d.passed).filter(|(_, passed)| !passed).map(|(name, _)| *name).collect::<Vec<_>>()})
+        },
     )
 }
 
@@ -2402,11 +2439,30 @@ pub fn report_markdown(j: &Value) -> String {
         &record,
         |_| String::new(),
         |a| {
+            let failed: Vec<&str> = a["failed"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .filter_map(|x| x.as_str())
+                .map(|name| match name {
+                    "bic" => "the BIC did not fall by more than its margin",
+                    "wald" => "the Wald test",
+                    _ => "it moves the positions by less than their noise",
+                })
+                .collect();
+            let g = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.3}"));
             format!(
-                ", Wald χ² {}, held-out relerr {} → {} %",
-                f(&a["wald_chi2"]),
+                ", Wald χ² {} (limit {}), {}× the position noise, held-out relerr {} → {} %{}",
+                g(&a["wald_chi2"]),
+                g(&a["wald_limit"]),
+                g(&a["share_over_noise"]),
                 f(&a["held_out_relerr_before"]),
-                f(&a["held_out_relerr_after"])
+                f(&a["held_out_relerr_after"]),
+                match (failed.is_empty(), a["kept"] == true) {
+                    (true, true) => String::new(),
+                    (true, false) => " (passed every test; another refit was chosen)".to_string(),
+                    (false, _) => format!(" (failed: {})", failed.join("; ")),
+                }
             )
         },
     );
