@@ -153,10 +153,11 @@ fn write(dir: &Path, name: &str, text: &str) -> String {
 }
 
 /// A linear axis under a position controller with the EMPS velocity estimate, reference replayed.
-fn closed_loop_file(body: Body, seconds: f64, pulses: bool) -> String {
+fn closed_loop_file(body: Body, seconds: f64, pulses: bool, start_step: f64) -> String {
     let (kp, kd, sat, t) = (2.0e5, 2.0e3, 40.0, 1e-3);
     let n = (seconds / t).round() as usize + 1;
-    let reference = |tt: f64| 0.1 * (1.0 - (std::f64::consts::PI * tt).cos()) + 0.02 * (2.3 * tt).sin() * tt.min(1.0);
+    let reference =
+        |tt: f64| start_step + 0.1 * (1.0 - (std::f64::consts::PI * tt).cos()) + 0.02 * (2.3 * tt).sin() * tt.min(1.0);
     let mut text = String::from(
         "# source=synthetic closed loop (tests/calibrate_drive.rs)\n# axis=linear\n# transmission=rigid\n# drive=reference\n\
          # controller_kp=200000\n# controller_kd=2000\n# controller_saturation=40\n# controller_period_s=0.001\n",
@@ -193,8 +194,8 @@ fn closed_loop_file(body: Body, seconds: f64, pulses: bool) -> String {
 fn reference_drive_on_a_linear_axis_finds_coulomb_friction_and_its_parameters() {
     let truth = Body { m: 20.0, b: 50.0, fc: 8.0, load: -2.0 };
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("drive-reference");
-    let est = write(&dir, "est.csv", &closed_loop_file(truth, 4.0, false));
-    let val = write(&dir, "val.csv", &closed_loop_file(truth, 4.0, true));
+    let est = write(&dir, "est.csv", &closed_loop_file(truth, 4.0, false, 0.0));
+    let val = write(&dir, "val.csv", &closed_loop_file(truth, 4.0, true, 0.0));
     // the controller saturates in the moves (40 N), so the master must reproduce the saturation
     let saturated = std::fs::read_to_string(&est)
         .unwrap()
@@ -220,6 +221,30 @@ fn reference_drive_on_a_linear_axis_finds_coulomb_friction_and_its_parameters() 
     assert_eq!(f(&j["validation"]["load_column"]["applied_gain"]), 1.0);
 }
 
+/// A run logged from a reference step: the controller saturates, then leaves saturation within
+/// the first samples, so a quadratic over them misreads the speed the body starts with (campaign
+/// drive rig 149: 2.9e-4 m/s for a start at rest), and a simulation started there carries the
+/// error until the controller has taken it out. The fit estimates each run's initial speed with
+/// the model instead.
+#[test]
+fn a_reference_drive_fits_the_speed_each_run_starts_with() {
+    let truth = Body { m: 20.0, b: 50.0, fc: 8.0, load: -2.0 };
+    let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("drive-start");
+    let text = closed_loop_file(truth, 4.0, false, 0.002);
+    let est = write(&dir, "est.csv", &text);
+    let run = parse_run(Path::new(&est), &text).unwrap();
+    let (read, _) = thermovia_tools::calibrate::signal::start_speed(&run.time, &run.motor, 11).unwrap();
+    let j = run_calibrate(&[&est]);
+    let row = j["parameters"]["final"].as_array().unwrap().iter().find(|p| p["name"] == "initial_speed[est.csv]");
+    let row = row.unwrap_or_else(|| panic!("no initial speed in {}", j["parameters"]["final"]));
+    let (fitted, se) = (f(&row["value"]), f(&row["std_error"]));
+    // the body starts at rest: the fit's estimate holds 0 within its standard error, the start's
+    // quadratic does not
+    assert!(fitted.abs() < 3.0 * se, "fitted {fitted} ± {se} m/s");
+    assert!(read.abs() > 3.0 * se, "the start's quadratic reads {read} m/s, ± {se}: no misread start to test");
+    assert!((final_param(&j, "coulomb_friction") - 8.0).abs() < 0.05 * 8.0, "{}", j["parameters"]["final"]);
+}
+
 /// Issue 19: without a force log, the held-out load column is applied × the declared drive gain
 /// on the file's word, never × the gain that best fits the held-out positions. The truth's pulses
 /// are 25 N; the file logs them as 10 "volts" with `drive_gain_n_per_v=2.5` and no force column.
@@ -227,9 +252,9 @@ fn reference_drive_on_a_linear_axis_finds_coulomb_friction_and_its_parameters() 
 fn without_a_force_log_the_load_column_takes_the_declared_gain() {
     let truth = Body { m: 20.0, b: 50.0, fc: 8.0, load: -2.0 };
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("drive-declared-gain");
-    let est = write(&dir, "est.csv", &closed_loop_file(truth, 4.0, false));
+    let est = write(&dir, "est.csv", &closed_loop_file(truth, 4.0, false, 0.0));
     let mut volts = String::new();
-    for line in closed_loop_file(truth, 4.0, true).lines() {
+    for line in closed_loop_file(truth, 4.0, true, 0.0).lines() {
         let line = match line.split(',').collect::<Vec<_>>().as_slice() {
             _ if line.starts_with('#') => line.to_string(),
             [t, r, q, _force, _load] if line.starts_with("time_s") => format!("{t},{r},{q},load_force_n"),

@@ -48,6 +48,11 @@ pub enum Param {
     /// friction level of an output-error fit: a contact's friction near rest, and what a controller's
     /// noise-driven dither leaves of it on average, is not a hard sign (see `smoothing_start`).
     LnFrictionSmoothing,
+    /// The speed run `r` starts with, fitted with the model on a rigid drive's output error: a
+    /// quadratic over a run's first samples reads it through the noise and the start's own
+    /// transients (drive rig 149: 2.9e-4 m/s for a start at rest), and the simulation carries that
+    /// error until the controller has taken it out.
+    InitialSpeed(usize),
 }
 
 /// The parameters that carry the friction's sign (and so its smoothing speed).
@@ -88,6 +93,8 @@ pub struct DriveModel {
     pub stribeck_velocity: f64,
     /// The friction sign's tanh smoothing velocity; None: the FMU's default.
     pub friction_smoothing_velocity: Option<f64>,
+    /// The run's initial speed; None: the measured start's (`DriveInput::speed0`).
+    pub speed0: Option<f64>,
 }
 
 /// What drives one simulated run.
@@ -301,14 +308,15 @@ pub fn simulate(
     inst.reset()?;
     let n = inp.time.len();
     let link0 = inp.link.as_ref().map_or(inp.motor[0], |l| l[0]);
+    let speed0 = m.speed0.unwrap_or(inp.speed0);
     let mut params: Vec<(&str, f64)> = vec![
         ("motor_drive", 0.0),
         ("thermal_drive", 1.0),
         ("transmission", if inp.rigid { 1.0 } else { 0.0 }),
         ("initial_motor_angle", inp.motor[0]),
         ("initial_link_angle", link0),
-        ("initial_motor_speed", inp.speed0),
-        ("initial_link_speed", if inp.link.is_some() { inp.link_speed0 } else { inp.speed0 }),
+        ("initial_motor_speed", speed0),
+        ("initial_link_speed", if inp.link.is_some() { inp.link_speed0 } else { speed0 }),
         ("initial_housing_temperature", inp.housing_k[0]),
         ("initial_pcl_temperature", inp.housing_k[0]),
         ("excitation_frequency", inp.frequency_hz),
@@ -338,7 +346,7 @@ pub fn simulate(
         Simulated { motor: Vec::with_capacity(n), link: Vec::with_capacity(n), torque: Vec::with_capacity(n) };
     let mut q = inp.motor[0];
     let mut l = link0;
-    let mut est = inp.controller.map(|c| VelocityEstimator::new(q, inp.speed0, c.period));
+    let mut est = inp.controller.map(|c| VelocityEstimator::new(q, speed0, c.period));
     let mut y = [0.0; 2];
     for k in 0..n {
         super::sim::check_deadline(k, until)?;
@@ -410,6 +418,16 @@ pub struct DriveFit {
 }
 
 impl DriveFit {
+    /// The parameters another problem's runs can be simulated with: the model's, without the
+    /// initial speeds of this problem's runs (held-out runs start from their own measured ones).
+    pub fn transferable(&self) -> (Vec<Param>, Vec<f64>) {
+        self.spec
+            .iter()
+            .zip(&self.p)
+            .filter(|(q, _)| !matches!(q, Param::InitialSpeed(_)))
+            .map(|(q, x)| (*q, *x))
+            .unzip()
+    }
     pub fn n(&self) -> usize {
         self.residual.len()
     }
@@ -471,6 +489,7 @@ impl<'a> DriveProblem<'a> {
             Param::Stribeck => self.force_scale,
             Param::Viscous | Param::AsymViscous => self.force_scale / self.speed_scale,
             Param::ConstantLoad | Param::Coulomb | Param::AsymCoulomb => self.force_scale,
+            Param::InitialSpeed(_) => self.speed_scale,
         }
     }
 
@@ -488,6 +507,7 @@ impl<'a> DriveProblem<'a> {
             stribeck: 0.0,
             stribeck_velocity: 0.05,
             friction_smoothing_velocity: self.friction_smoothing_velocity,
+            speed0: None,
         };
         for (&q, &v) in spec.iter().zip(p) {
             match q {
@@ -507,6 +527,8 @@ impl<'a> DriveProblem<'a> {
                 Param::Stribeck => m.stribeck = v,
                 Param::LnStribeckVelocity => m.stribeck_velocity = v.exp(),
                 Param::LnFrictionSmoothing => m.friction_smoothing_velocity = Some(v.exp()),
+                Param::InitialSpeed(r) if r == run => m.speed0 = Some(v),
+                Param::InitialSpeed(_) => {}
             }
         }
         m
@@ -516,6 +538,7 @@ impl<'a> DriveProblem<'a> {
         match q {
             Param::LnStorage(g) | Param::LnLoss(g) => self.group[run] == g && !self.inputs[run].rigid,
             Param::LnInertia => self.inputs[run].inertia_declared.is_none(),
+            Param::InitialSpeed(r) => r == run,
             _ => true,
         }
     }
@@ -1099,7 +1122,11 @@ impl InverseModel {
             Param::AsymCoulomb => w.row[6] - w.row[7],
             Param::AsymViscous => w.row[4] - w.row[5],
             Param::Stribeck => w.stribeck.get(g).copied().unwrap_or(0.0),
-            Param::LnStribeckVelocity | Param::LnFrictionSmoothing | Param::LnStorage(_) | Param::LnLoss(_) => 0.0,
+            Param::LnStribeckVelocity
+            | Param::LnFrictionSmoothing
+            | Param::LnStorage(_)
+            | Param::LnLoss(_)
+            | Param::InitialSpeed(_) => 0.0,
         }
     }
 
@@ -1484,7 +1511,8 @@ pub const MAX_ITERATIONS: usize = 30;
 /// Simulates held-out runs with a fit's parameters.
 pub fn predict(prob: &DriveProblem, held: &DriveProblem, fit: &DriveFit) -> Option<(Vec<Simulated>, Metrics)> {
     let _ = prob;
-    let sims = held.simulate_all(&fit.spec, &fit.p)?;
+    let (spec, p) = fit.transferable();
+    let sims = held.simulate_all(&spec, &p)?;
     let m = metrics(&held.inputs, &sims);
     Some((sims, m))
 }
@@ -1537,7 +1565,8 @@ pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadC
     }
     let eval = |k: f64| -> Option<(Vec<f64>, f64)> {
         let h = held.with_load_gain(k);
-        let sims = h.simulate_all(&fit.spec, &fit.p)?;
+        let (spec, p) = fit.transferable();
+        let sims = h.simulate_all(&spec, &p)?;
         let m = metrics(&h.inputs, &sims);
         Some((h.residual(&sims), m.relerr_percent))
     };
@@ -1684,8 +1713,11 @@ impl Rig for DriveRig<'_, '_> {
             // over the measured motion): the score test linearises at one speed, and an output-error
             // fit from there can trade the excess for Coulomb friction (drive rig 31: 28 rad/s for 16)
             if c.effect == DriveEffect::StribeckFriction {
-                let without_smoothing: Vec<Param> =
-                    spec.iter().copied().filter(|q| *q != Param::LnFrictionSmoothing).collect();
+                let without_smoothing: Vec<Param> = spec
+                    .iter()
+                    .copied()
+                    .filter(|q| !matches!(q, Param::LnFrictionSmoothing | Param::InitialSpeed(_)))
+                    .collect();
                 if let Some(ee) = iv.parameters(&without_smoothing, prob.declared_inertia()) {
                     let mut q = p.clone();
                     for (x, param) in q.iter_mut().zip(&spec) {
@@ -1827,6 +1859,15 @@ pub fn calibrate(
             p0.extend([0.0, 0.0]);
         }
     }
+    // an output-error fit of a rigid drive fits each run's initial speed with the model (the
+    // equation error needs none: it never simulates from a start)
+    let output_error = !prob.inputs.iter().all(|i| i.rigid && i.drive == DriveKind::MotorTorque);
+    if output_error && prob.inputs.iter().all(|i| i.rigid) {
+        for (r, inp) in prob.inputs.iter().enumerate() {
+            spec.push(Param::InitialSpeed(r));
+            p0.push(inp.speed0);
+        }
+    }
     // A rigid drive on its logged torque runs open loop: the simulated position integrates every
     // error of the torque log and of the model twice, so output error over a whole run is dominated by
     // drift (its optimum wanders to the inertia's bound). The inverse model's equation error has no
@@ -1965,10 +2006,10 @@ pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(
             Param::LnFrictionSmoothing => {
                 ("friction_smoothing_velocity".into(), x.exp(), x.exp() * s, axis.units().1.into())
             }
+            Param::InitialSpeed(r) => (format!("initial_speed[{}]", prob.inputs[r].name), x, s, axis.units().1.into()),
         };
         out.push(row);
     }
-    let _ = prob;
     out
 }
 
