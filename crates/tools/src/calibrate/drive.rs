@@ -1352,11 +1352,11 @@ pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
     (theta.transpose() * spd_inverse(&cov) * &theta)[(0, 0)]
 }
 
-/// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
 /// The drive judge's tests, in `DriveDetail::passed`'s order: the BIC's fall, the Wald test and
 /// the visibility (the effect's share of the positions above their noise).
 pub const SELECTION_TESTS: [&str; 3] = ["bic", "wald", "visibility"];
 
+/// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
 pub fn wald_limit(dof: usize) -> f64 {
     if dof <= 1 {
         10.83
