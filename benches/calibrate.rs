@@ -27,27 +27,18 @@ fn main() {
     .unwrap();
     write_atomically(&data, &files.into_iter().map(|(n, t)| (n, t.into_bytes())).collect::<Vec<_>>()).unwrap();
     let reps: usize = std::env::var("CALIBRATE_BENCH_REPS").ok().and_then(|v| v.parse().ok()).unwrap_or(3);
-    let mut times = Vec::new();
-    for rep in 0..reps {
-        let args =
-            CalibrateArgs::from_cli(&[&data_s, "--out", dir.join("report").to_str().unwrap(), "--no-plots"]).unwrap();
-        let t = std::time::Instant::now();
-        let c = calibrate(&args).unwrap();
-        let s = t.elapsed().as_secs_f64();
-        let added: Vec<_> = c.outcome.as_ref().unwrap().final_fit.spec.effects.iter().map(|e| e.name()).collect();
-        println!(
+    let report = dir.join("report");
+    let median = timed(reps, &[&data_s, "--out", report.to_str().unwrap(), "--no-plots"], |rep, s, c| {
+        let o = c.outcome.as_ref().unwrap();
+        let added: Vec<_> = o.final_fit.spec.effects.iter().map(|e| e.name()).collect();
+        format!(
             "rep {rep}: {s:.2} s, {} samples, baseline RMSE {:.3e}, final {:.3e}, added {added:?}",
-            c.outcome.as_ref().unwrap().baseline.n,
-            c.outcome.as_ref().unwrap().baseline.rmse(),
-            c.outcome.as_ref().unwrap().final_fit.rmse()
-        );
-        times.push(s);
-    }
-    times.sort_by(|a, b| a.partial_cmp(b).unwrap());
-    println!(
-        "calibrate 8 runs x 20 s at 1 kHz with effect search: median {:.2} s over {reps} (target ≤ 5 s)",
-        times[reps / 2]
-    );
+            o.baseline.n,
+            o.baseline.rmse(),
+            o.final_fit.rmse()
+        )
+    });
+    println!("calibrate 8 runs x 20 s at 1 kHz with effect search: median {median:.2} s over {reps} (target ≤ 5 s)");
     rigid_servo(&dir.join("servo"), reps);
     closed_loop_emps(&dir.join("emps"), reps);
 }

@@ -44,8 +44,13 @@ fn added(j: &Value) -> Vec<String> {
 }
 
 fn final_param(j: &Value, name: &str) -> f64 {
+    f(&final_row(j, name)["value"])
+}
+
+/// The final parameters' row of `name`: value, std_error, unit.
+fn final_row<'a>(j: &'a Value, name: &str) -> &'a Value {
     let p = j["parameters"]["final"].as_array().unwrap().iter().find(|p| p["name"] == name);
-    f(&p.unwrap_or_else(|| panic!("no {name} in {}", j["parameters"]["final"]))["value"])
+    p.unwrap_or_else(|| panic!("no {name} in {}", j["parameters"]["final"]))
 }
 
 /// The EMPS benchmark, nothing declared beyond the files: the targets of issues 11 and 19.
@@ -233,10 +238,9 @@ fn a_reference_drive_fits_the_speed_each_run_starts_with() {
     let text = closed_loop_file(truth, 4.0, false, 0.002);
     let est = write(&dir, "est.csv", &text);
     let run = parse_run(Path::new(&est), &text).unwrap();
-    let (read, _) = thermovia_tools::calibrate::signal::start_speed(&run.time, &run.motor, 11).unwrap();
+    let read = thermovia_tools::calibrate::drive::initial_speed(&run.time, &run.motor);
     let j = run_calibrate(&[&est]);
-    let row = j["parameters"]["final"].as_array().unwrap().iter().find(|p| p["name"] == "initial_speed[est.csv]");
-    let row = row.unwrap_or_else(|| panic!("no initial speed in {}", j["parameters"]["final"]));
+    let row = final_row(&j, "initial_speed[est.csv]");
     let (fitted, se) = (f(&row["value"]), f(&row["std_error"]));
     // the body starts at rest: the fit's estimate holds 0 within its standard error, the start's
     // quadratic does not

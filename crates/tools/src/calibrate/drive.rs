@@ -181,7 +181,7 @@ pub fn load_gain(declared: Option<f64>, force_log: Option<f64>) -> (f64, LoadGai
 }
 
 /// Speed at the first sample: the start's quadratic over up to 11 samples (`signal::start_speed`).
-fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
+pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
     super::signal::start_speed(t, x, 11).map_or(0.0, |(v, _)| v)
 }
 
@@ -928,14 +928,11 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
     let load: Vec<f64> = (0..n).map(|k| tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain)).collect();
     let period = super::quality::median_period(t);
     let span = t[n - 1] - t[0];
-    let (mut out, mut scales) = (Vec::new(), 0);
-    let mut widest = 8.0 * period;
-    while 2.0 * widest <= 0.25 * span {
-        widest *= 2.0;
-    }
-    let mut h = 8.0 * period;
-    while h <= 0.25 * span {
-        scales += 1;
+    let mut out = Vec::new();
+    let half_widths: Vec<f64> =
+        std::iter::successors(Some(8.0 * period), |h| Some(2.0 * h)).take_while(|&h| h <= 0.25 * span).collect();
+    let widest = half_widths.last().copied().unwrap_or(8.0 * period);
+    for &h in &half_widths {
         let mut centre = t[0] + h;
         let mut lo = 0;
         while centre + h <= t[n - 1] {
@@ -1002,9 +999,8 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
             }
             centre += h;
         }
-        h *= 2.0;
     }
-    (out, scales)
+    (out, half_widths.len())
 }
 
 /// A speed a run's position noise `sigma_q` (its second-difference estimate) cannot fake over the
@@ -1032,14 +1028,16 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     let mut ws = Vec::new();
     let (mut q_var, mut tau_var, mut count) = (0.0, 0.0, 0.0);
     let mut scales = 1usize;
+    let mut next_block = 0;
     for (((inp, v), &sigma_q), &v_floor) in inputs.iter().zip(&speeds).zip(&sigma_q).zip(&floors) {
         let tau = inp.applied_torque();
         let (mut w, run_scales) = windows(inp, &tau, v, v_floor, &stribeck_grid);
         scales = scales.max(run_scales);
         // each run's blocks are clusters of their own
-        let first_block = ws.iter().map(|w: &Window| w.block + 1).max().unwrap_or(0);
+        let first_block = next_block;
         for x in &mut w {
             x.block += first_block;
+            next_block = next_block.max(x.block + 1);
         }
         // the torque's own noise: the median second difference (robust to the steps of a drive)
         let sigma_tau = super::signal::median_second_difference_noise(&tau);
@@ -1353,8 +1351,13 @@ pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
 }
 
 /// The drive judge's tests, in `DriveDetail::passed`'s order: the BIC's fall, the Wald test and
-/// the visibility (the effect's share of the positions above their noise).
-pub const SELECTION_TESTS: [&str; 3] = ["bic", "wald", "visibility"];
+/// the visibility (the effect's share of the positions above their noise), each with the name the
+/// report's `failed` gives it and the words report.md says when it fails.
+pub const SELECTION_TESTS: [(&str, &str); 3] = [
+    ("bic", "the BIC did not fall by more than its margin"),
+    ("wald", "the Wald test"),
+    ("visibility", "it moves the positions by less than their noise"),
+];
 
 /// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
 pub fn wald_limit(dof: usize) -> f64 {
@@ -1563,9 +1566,9 @@ pub fn diagnose_load_column(held: &DriveProblem, fit: &DriveFit) -> Option<LoadC
     if !held.inputs.iter().any(|i| i.load.as_ref().is_some_and(|l| l.iter().any(|&x| x != 0.0))) {
         return None;
     }
+    let (spec, p) = fit.transferable();
     let eval = |k: f64| -> Option<(Vec<f64>, f64)> {
         let h = held.with_load_gain(k);
-        let (spec, p) = fit.transferable();
         let sims = h.simulate_all(&spec, &p)?;
         let m = metrics(&h.inputs, &sims);
         Some((h.residual(&sims), m.relerr_percent))
@@ -2239,7 +2242,7 @@ fn record_json(o: &DriveOutcome) -> Value {
         |d: &DriveDetail| {
             json!({"held_out_relerr_before": d.held_before, "held_out_relerr_after": d.held_after, "wald_chi2": d.wald,
                    "wald_limit": d.wald_limit, "share_over_noise": d.share_over_noise,
-                   "failed": SELECTION_TESTS.iter().zip(d.passed).filter(|(_, passed)| !passed).map(|(name, _)| *name).collect::<Vec<_>>()})
+                   "failed": SELECTION_TESTS.iter().zip(d.passed).filter(|(_, passed)| !passed).map(|(test, _)| test.0).collect::<Vec<_>>()})
         },
     )
 }
@@ -2484,12 +2487,7 @@ pub fn report_markdown(j: &Value) -> String {
                 .as_array()
                 .into_iter()
                 .flatten()
-                .filter_map(|x| x.as_str())
-                .map(|name| match name {
-                    "bic" => "the BIC did not fall by more than its margin",
-                    "wald" => "the Wald test",
-                    _ => "it moves the positions by less than their noise",
-                })
+                .filter_map(|x| SELECTION_TESTS.iter().find(|test| x.as_str() == Some(test.0)).map(|test| test.1))
                 .collect();
             let g = |v: &Value| v.as_f64().map_or("—".to_string(), |x| format!("{x:.3}"));
             format!(
