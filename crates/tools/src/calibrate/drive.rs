@@ -1016,7 +1016,16 @@ const STRIBECK_GRID: usize = 48;
 pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     // Stribeck speeds from a fiftieth of the data's largest speed up to half of it, 8 % apart, none
     // below a speed whose sign the noise hides in some run (an excess there is the sign's error)
-    let speeds: Vec<Vec<f64>> = inputs.iter().map(|inp| derivatives(&inp.time, &inp.motor).0).collect();
+    // the speeds near each reversal from the positions' own kink (the smoothing spans it)
+    let speeds: Vec<Vec<f64>> = inputs
+        .iter()
+        .map(|inp| {
+            let mut v = derivatives(&inp.time, &inp.motor).0;
+            let noise = super::signal::robust_noise(&inp.time, &inp.motor);
+            super::signal::refine_reversals(&inp.time, &inp.motor, &mut v, noise);
+            v
+        })
+        .collect();
     let top = speeds.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
     let sigma_q: Vec<f64> = inputs.iter().map(|inp| super::signal::second_difference_noise(&inp.motor)).collect();
     let floors: Vec<f64> = inputs.iter().zip(&sigma_q).map(|(inp, &s)| sign_floor(inp, s)).collect();
