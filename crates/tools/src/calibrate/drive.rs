@@ -976,10 +976,50 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
                         }
                     }
                     row[7] -= if neg { p * dt } else { 0.0 };
-                    rhs += load[k] * p * dt;
+                    // the logged torque is held over each sample, as the simulation and a drive
+                    // apply it (Simpson's rule for φ over the interval it is held)
+                    if k < hi {
+                        let (a, b) = (t[k], t[k + 1]);
+                        let (mid, end) = (modulating((0.5 * (a + b) - centre) / h).0, modulating((b - centre) / h).0);
+                        rhs += load[k] * (p + 4.0 * mid + end) / 6.0 * (b - a);
+                    }
                     w_int += p * dt;
                     qn += (ddp / (h * h) * dt).powi(2);
                     tn += (p * dt).powi(2);
+                }
+                // a sign flips inside its sample interval, at the zero the speeds on either side
+                // interpolate to, where the trapezoid would put it at the interval's middle: each
+                // side's value over its own part of the interval (φ linear across it)
+                for k in lo..hi {
+                    if v[k] * v[k + 1] >= 0.0 {
+                        continue;
+                    }
+                    let (a, b) = (t[k], t[k + 1]);
+                    let zero = a + v[k] / (v[k] - v[k + 1]) * (b - a);
+                    let (pa, pz, pb) = (
+                        modulating((a - centre) / h).0,
+                        modulating((zero - centre) / h).0,
+                        modulating((b - centre) / h).0,
+                    );
+                    let flip = |fa: f64, fb: f64| {
+                        fa * 0.5 * (pa + pz) * (zero - a) + fb * 0.5 * (pz + pb) * (b - zero)
+                            - 0.5 * (fa * pa + fb * pb) * (b - a)
+                    };
+                    let (sa, sb) = (v[k].signum(), v[k + 1].signum());
+                    row[3] += flip(sa, sb);
+                    row[6] += flip(f64::from(u8::from(sa > 0.0)), f64::from(u8::from(sb > 0.0)));
+                    row[7] -= flip(f64::from(u8::from(sa < 0.0)), f64::from(u8::from(sb < 0.0)));
+                    for (x, vst) in stribeck.iter_mut().zip(stribeck_grid) {
+                        let excess = |s: f64, speed: f64| {
+                            let r2 = (speed / vst).powi(2);
+                            if r2 < 40.0 {
+                                s * (-r2).exp()
+                            } else {
+                                0.0
+                            }
+                        };
+                        *x += flip(excess(sa, v[k]), excess(sb, v[k + 1]));
+                    }
                 }
                 // the backward speeds' integral from the whole one (which needs no derivative)
                 row[5] = row[1] - row[4];
