@@ -1450,6 +1450,21 @@ fn residual_corr_sign(prob: &DriveProblem, fit: &DriveFit) -> f64 {
     corr(&fit.residual, &s)
 }
 
+/// A fit's parameters with Coulomb friction appended, at the inverse model's (M, Fv, L, Fc).
+fn inverse_coulomb_point(fit: &DriveFit, iv: &InverseModel) -> Vec<f64> {
+    let mut q = fit.p.clone();
+    for (x, param) in q.iter_mut().zip(&fit.spec) {
+        match param {
+            Param::LnInertia if iv.with_coulomb_inertia > 0.0 => *x = iv.with_coulomb_inertia.ln(),
+            Param::Viscous => *x = iv.with_coulomb_viscous.max(0.0),
+            Param::ConstantLoad => *x = iv.with_coulomb_load,
+            _ => {}
+        }
+    }
+    q.push(iv.coulomb.max(0.0));
+    q
+}
+
 fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> Vec<DriveCandidate> {
     let lin = super::stepwise::Linearised::new(&fit.jacobian, &fit.residual);
     let sse_now = lin.sse;
@@ -1496,10 +1511,23 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
             continue;
         }
         let probes = DMatrix::from_fn(fit.n(), cols.len(), |i, j| cols[j][i]);
-        let (sse_aug, beta) = lin.with(&probes);
+        let (mut sse_aug, beta) = lin.with(&probes);
         let mut start = init.clone();
         for (c, &i) in probed.iter().enumerate() {
             start[i] += beta[base + c];
+        }
+        // Coulomb friction is also scored at the inverse model's (M, Fv, L, Fc), simulated: a
+        // baseline whose viscous level has absorbed the friction sits in another valley, where the
+        // linearised gain reads next to nothing (the refit starts from that point too)
+        if let (DriveEffect::CoulombFriction, Some(iv)) = (effect, inverse) {
+            let at = inverse_coulomb_point(fit, iv);
+            if let Some(sims) = prob.simulate_all(&spec, &at) {
+                let sse_iv: f64 = prob.residual(&sims).iter().map(|e| e * e).sum();
+                if sse_iv < sse_aug {
+                    sse_aug = sse_iv;
+                    start = vec![iv.coulomb.max(0.0)];
+                }
+            }
         }
         let score = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
         let predicted_delta_bic = super::stepwise::predicted_delta_bic(
@@ -1747,16 +1775,7 @@ impl Rig for DriveRig<'_, '_> {
             // friction has absorbed the Coulomb level and, through a saturating controller, the score
             // test's start can lie in another valley
             if c.effect == DriveEffect::CoulombFriction {
-                let mut q = m.p.clone();
-                for (x, param) in q.iter_mut().zip(&m.spec) {
-                    match param {
-                        Param::LnInertia if iv.with_coulomb_inertia > 0.0 => *x = iv.with_coulomb_inertia.ln(),
-                        Param::Viscous => *x = iv.with_coulomb_viscous.max(0.0),
-                        Param::ConstantLoad => *x = iv.with_coulomb_load,
-                        _ => {}
-                    }
-                }
-                q.push(iv.coulomb.max(0.0));
+                let q = inverse_coulomb_point(m, iv);
                 if cost(&spec, &q) < cost(&spec, &p) {
                     p = q;
                 }
