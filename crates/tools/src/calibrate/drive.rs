@@ -1516,6 +1516,8 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
         for (c, &i) in probed.iter().enumerate() {
             start[i] += beta[base + c];
         }
+        let projected = ((sse_now - sse_aug) / sse_now.max(1e-300)).max(0.0);
+        let mut at_inverse = false;
         // Coulomb friction is also scored at the inverse model's (M, Fv, L, Fc), simulated: a
         // baseline whose viscous level has absorbed the friction sits in another valley, where the
         // linearised gain reads next to nothing (the refit starts from that point too)
@@ -1526,6 +1528,7 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
                 if sse_iv < sse_aug {
                     sse_aug = sse_iv;
                     start = vec![iv.coulomb.max(0.0)];
+                    at_inverse = true;
                 }
             }
         }
@@ -1538,12 +1541,21 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
         );
         let evidence = match (effect, inverse) {
             (DriveEffect::CoulombFriction, Some(iv)) => format!(
-                "explains {:.1} % of the position residual (FMU sensitivity projected on it; linearised level {:.4}); \
+                "explains {:.1} % of the position residual ({}); \
                  position residual vs sign of speed: corr {:+.2}; inverse model on the measured motion: the force \
                  left after inertia, viscous friction and a constant load correlates with sign(speed) at {:+.2}, \
                  mean {:+.3} moving forward and {:+.3} moving back (a Coulomb level of about {:.3})",
                 100.0 * score,
-                start[0],
+                if at_inverse {
+                    format!(
+                        "simulated at the inverse model's inertia, viscous friction, load and Coulomb level {:.4}; \
+                         the FMU sensitivity projected at the baseline explains {:.1} %",
+                        start[0],
+                        100.0 * projected
+                    )
+                } else {
+                    format!("FMU sensitivity projected on it; linearised level {:.4}", start[0])
+                },
                 residual_corr_sign(prob, fit),
                 iv.corr_sign,
                 iv.mean_positive,

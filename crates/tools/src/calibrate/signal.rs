@@ -499,8 +499,9 @@ const REVERSAL_RISE: f64 = 20.0;
 const REVERSAL_MOST: usize = 400;
 
 /// Two parabolas meeting at rest at t₀ through the samples c + 1 − half ..= c + half:
-/// (rms residual, t₀, acceleration before, after). t₀ is searched over the middle half of the
-/// samples by a grid of 120, then refined once on a grid of 20 around the best.
+/// (rms residual, t₀, acceleration before, after). t₀ is searched within half a window, or a
+/// flicker's spread and one sample, of the change (the wider), by a grid of 120, then refined once
+/// on a grid of 20 around the best.
 fn fit_reversal(t: &[f64], x: &[f64], c: usize, half: usize, spread: usize) -> Option<(f64, f64, f64, f64)> {
     let (lo, hi) = (c + 1 - half, c + half);
     let origin = x[c];
