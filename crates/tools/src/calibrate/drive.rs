@@ -970,10 +970,7 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
                     row[4] += if pos { v[k] } else { 0.0 } * p * dt;
                     row[6] += if pos { p * dt } else { 0.0 };
                     for (x, vst) in stribeck.iter_mut().zip(stribeck_grid) {
-                        let r2 = (v[k] / vst).powi(2);
-                        if r2 < 40.0 {
-                            *x += v[k].signum() * (-r2).exp() * p * dt;
-                        }
+                        *x += stribeck_shape(v[k], *vst) * p * dt;
                     }
                     row[7] -= if neg { p * dt } else { 0.0 };
                     // the logged torque is held over each sample, as the simulation and a drive
@@ -1010,15 +1007,7 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
                     row[6] += flip(f64::from(u8::from(sa > 0.0)), f64::from(u8::from(sb > 0.0)));
                     row[7] -= flip(f64::from(u8::from(sa < 0.0)), f64::from(u8::from(sb < 0.0)));
                     for (x, vst) in stribeck.iter_mut().zip(stribeck_grid) {
-                        let excess = |s: f64, speed: f64| {
-                            let r2 = (speed / vst).powi(2);
-                            if r2 < 40.0 {
-                                s * (-r2).exp()
-                            } else {
-                                0.0
-                            }
-                        };
-                        *x += flip(excess(sa, v[k]), excess(sb, v[k + 1]));
+                        *x += flip(stribeck_shape(v[k], *vst), stribeck_shape(v[k + 1], *vst));
                     }
                 }
                 // the backward speeds' integral from the whole one (which needs no derivative)
@@ -1041,6 +1030,16 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], v_floor: f64, stribeck_grid
         }
     }
     (out, half_widths.len())
+}
+
+/// The Stribeck column's shape at speed `v`: sign(v) exp(−(v/v_st)²), 0 past e⁻⁴⁰.
+fn stribeck_shape(v: f64, vst: f64) -> f64 {
+    let r2 = (v / vst).powi(2);
+    if r2 < 40.0 {
+        v.signum() * (-r2).exp()
+    } else {
+        0.0
+    }
 }
 
 /// A speed a run's position noise `sigma_q` (its second-difference estimate) cannot fake over the

@@ -505,23 +505,25 @@ const REVERSAL_MOST: usize = 400;
 fn fit_reversal(t: &[f64], x: &[f64], c: usize, half: usize, spread: usize) -> Option<(f64, f64, f64, f64)> {
     let (lo, hi) = (c + 1 - half, c + half);
     let origin = x[c];
+    // (1, (t − t₀)²/2 before, (t − t₀)²/2 after): the columns of x₀, a− and a+
+    let row = |k: usize, t0: f64| {
+        let u = 0.5 * (t[k] - t0).powi(2);
+        if t[k] < t0 {
+            nalgebra::Vector3::new(1.0, u, 0.0)
+        } else {
+            nalgebra::Vector3::new(1.0, 0.0, u)
+        }
+    };
     let fit_at = |t0: f64| -> Option<(f64, f64, f64)> {
         let mut a = nalgebra::Matrix3::<f64>::zeros();
         let mut b = nalgebra::Vector3::<f64>::zeros();
-        for k in lo..=hi {
-            let u = 0.5 * (t[k] - t0).powi(2);
-            let row = if t[k] < t0 { nalgebra::Vector3::new(1.0, u, 0.0) } else { nalgebra::Vector3::new(1.0, 0.0, u) };
-            a += row * row.transpose();
-            b += row * (x[k] - origin);
+        for (k, xk) in (lo..=hi).zip(&x[lo..=hi]) {
+            let r = row(k, t0);
+            a += r * r.transpose();
+            b += r * (xk - origin);
         }
         let beta = a.lu().solve(&b)?;
-        let sse: f64 = (lo..=hi)
-            .map(|k| {
-                let u = 0.5 * (t[k] - t0).powi(2);
-                let model = beta[0] + if t[k] < t0 { beta[1] * u } else { beta[2] * u };
-                (x[k] - origin - model).powi(2)
-            })
-            .sum();
+        let sse: f64 = (lo..=hi).map(|k| (x[k] - origin - row(k, t0).dot(&beta)).powi(2)).sum();
         Some((sse, beta[1], beta[2]))
     };
     let reach = (half / 2).max(spread + 1);
