@@ -410,7 +410,8 @@ pub fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
 /// rest, x = x₀ + a±(t − t₀)²/2, over ±`DERIVATIVE_HALF` samples or, where the parabolas rise less
 /// than `REVERSAL_RISE` noise levels over that (a coarse encoder, a slow reversal), over the
 /// samples they need to (up to `REVERSAL_MOST`). Where the fit holds, within twice the noise
-/// `noise`, with one sense of acceleration on both sides (a reversal, not a stop), the speeds there
+/// `noise` or closer than one quintic through the same samples (a log finer than its own motion's
+/// curvature, where no fit holds to the noise), with one sense of acceleration on both sides (a reversal, not a stop), the speeds there
 /// become a±(t − t₀). A change with another within its samples (a drive at rest in its noise) is
 /// left as it was. Returns how many reversals were refined.
 pub fn refine_reversals(t: &[f64], x: &[f64], v: &mut [f64], noise: f64) -> usize {
@@ -470,7 +471,15 @@ pub fn refine_reversals(t: &[f64], x: &[f64], v: &mut [f64], noise: f64) -> usiz
                 break;
             }
             let Some((rms, t0, before, after)) = fit_reversal(t, x, c, half, spread) else { break };
-            if !(rms <= 2.0 * noise && before * sense > 0.0 && after * sense > 0.0) {
+            // within the noise; or, at one clean sign change not yet widened, closer than one
+            // quintic through the same samples: a log finer than its own motion's curvature, where
+            // no fit holds to a noise that small (a flicker or a widening is the noise's case, and
+            // a drive that sticks between its turns fits neither)
+            let holds = rms <= 2.0 * noise
+                || (spread == 1
+                    && half == DERIVATIVE_HALF + 1
+                    && quintic_rms(t, x, c + 1 - half, c + half).is_some_and(|q| rms < q));
+            if !(holds && before * sense > 0.0 && after * sense > 0.0) {
                 break;
             }
             fitted = Some((t0, before, after, half));
@@ -540,6 +549,19 @@ fn fit_reversal(t: &[f64], x: &[f64], c: usize, half: usize, spread: usize) -> O
     let step = (to - from) / 120.0;
     let (sse, t0, before, after) = best_on(coarse.1 - step, coarse.1 + step, 20)?;
     Some(((sse / (hi - lo + 1) as f64).sqrt(), t0, before, after))
+}
+
+/// The rms residual of one least-squares quintic through the samples lo..=hi (None when singular).
+fn quintic_rms(t: &[f64], x: &[f64], lo: usize, hi: usize) -> Option<f64> {
+    let (mid, span) = (0.5 * (t[lo] + t[hi]), 0.5 * (t[hi] - t[lo]));
+    if span <= 0.0 {
+        return None;
+    }
+    let m = hi - lo + 1;
+    let a = nalgebra::DMatrix::from_fn(m, 6, |i, j| ((t[lo + i] - mid) / span).powi(j as i32));
+    let b = nalgebra::DVector::from_iterator(m, (lo..=hi).map(|k| x[k] - x[lo]));
+    let beta = (a.transpose() * &a).lu().solve(&(a.transpose() * &b))?;
+    Some(((&b - &a * beta).norm_squared() / m as f64).sqrt())
 }
 
 /// Slope at t[0] of a least-squares quadratic over the first `n` samples, with its standard error
@@ -750,11 +772,12 @@ mod tests {
     }
 
     /// Near a reversal the refined speeds hold the friction's sign and the speed's size where the
-    /// smoothed derivative's do not: on an even grid, a jittered one and through a coarse encoder
-    /// (whose flat counts read exactly 0 and flicker the sign).
+    /// smoothed derivative's do not: on an even grid, a jittered one, through a coarse encoder
+    /// (whose flat counts read exactly 0 and flicker the sign) and without noise (where no fit holds
+    /// to a noise that small, but two parabolas follow the kink closer than one quintic).
     #[test]
     fn reversals_take_their_speed_from_the_positions_kink() {
-        for (jitter, quantum, sigma) in [(0.0, 0.0, 1e-5), (0.2, 0.0, 1e-5), (0.0, 2e-3, 1e-5)] {
+        for (jitter, quantum, sigma) in [(0.0, 0.0, 1e-5), (0.2, 0.0, 1e-5), (0.0, 2e-3, 1e-5), (0.0, 0.0, 0.0)] {
             let (t, truth, speed) = reversing_rotor(1000.0, jitter, 4.0);
             let noise = normals(11, t.len());
             let x: Vec<f64> = truth
