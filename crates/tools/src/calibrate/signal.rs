@@ -409,10 +409,11 @@ pub fn derivatives(t: &[f64], x: &[f64]) -> (Vec<f64>, Vec<f64>) {
 /// most). Around each sign change of `v`, the positions are fitted by two parabolas meeting at
 /// rest, x = x₀ + a±(t − t₀)²/2, over ±`DERIVATIVE_HALF` samples or, where the parabolas rise less
 /// than `REVERSAL_RISE` noise levels over that (a coarse encoder, a slow reversal), over the
-/// samples they need to (up to `REVERSAL_MOST`). Where the fit holds, within twice the noise
-/// `noise` or closer than one quintic through the same samples (a log finer than its own motion's
-/// curvature, where no fit holds to the noise), with one sense of acceleration on both sides (a reversal, not a stop), the speeds there
-/// become a±(t − t₀). A change with another within its samples (a drive at rest in its noise) is
+/// samples they need to (up to `REVERSAL_MOST`). Where the fit holds (within twice the noise
+/// `noise`; or, at one clean sign change before any widening, closer than one quintic through the
+/// same samples: a log finer than its own motion's curvature, where no fit holds to the noise),
+/// with one sense of acceleration on both sides (a reversal, not a stop), the speeds there become
+/// a±(t − t₀). A change with another within its samples (a drive at rest in its noise) is
 /// left as it was. Returns how many reversals were refined.
 pub fn refine_reversals(t: &[f64], x: &[f64], v: &mut [f64], noise: f64) -> usize {
     let n = x.len().min(t.len()).min(v.len());
