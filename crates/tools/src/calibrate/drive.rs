@@ -917,24 +917,15 @@ fn modulating(s: f64) -> (f64, f64, f64) {
 /// The windows of one run at half-widths from 8 sample periods to a quarter of the run, each scale
 /// a factor 2 apart, stepped by half a width: short windows carry the inertia (fast changes), long
 /// ones average the noise. Only sign q̇ and the direction-wise speeds use a differentiated position:
-/// `v`, the run's speed from `signal::derivatives`; `tau`, its applied torque; `v_floor`, its
-/// `sign_floor`; `v_stick`, the speed below which three samples in a row are a stuck drive
-/// (`at_rest`; 0 for none). A window that rests for more than 5 % of its weight is left out: the
-/// sign column holds only where the drive slides. Returns the windows and how many scales they span.
-fn windows(
-    inp: &DriveInput,
-    tau: &[f64],
-    v: &[f64],
-    v_floor: f64,
-    v_stick: f64,
-    stribeck_grid: &[f64],
-) -> (Vec<Window>, usize) {
+/// `v`, the run's speed from `signal::derivatives`; `tau`, its applied torque; `rest`, its samples at
+/// rest (`at_rest`). A window that rests for more than 5 % of its weight is left out: the sign
+/// column holds only where the drive slides. Returns the windows and how many scales they span.
+fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], rest: &[bool], stribeck_grid: &[f64]) -> (Vec<Window>, usize) {
     let (t, q) = (&inp.time, &inp.motor);
     let n = t.len();
     if n < 32 {
         return (Vec::new(), 0);
     }
-    let rest = at_rest(v, v_floor, v_stick);
     let load: Vec<f64> = (0..n).map(|k| tau[k] + inp.load.as_ref().map_or(0.0, |l| l[k] * inp.load_gain)).collect();
     let period = super::quality::median_period(t);
     let span = t[n - 1] - t[0];
@@ -1082,24 +1073,22 @@ fn sign_floor(inp: &DriveInput, sigma_q: f64) -> f64 {
 /// ±4 %).
 const STRIBECK_GRID: usize = 48;
 
-/// The inverse model's windows over every run, not yet solved: `floors`, each run's speed below
-/// which the noise hides the sign; `sticks`, each run's speed below which three samples in a row
-/// are a stuck drive (`at_rest`).
+/// The inverse model's windows over every run, not yet solved: `rests`, each run's samples at rest
+/// (`at_rest`).
 fn assemble(
     inputs: &[DriveInput],
     speeds: &[Vec<f64>],
     sigma_q: &[f64],
-    floors: &[f64],
-    sticks: &[f64],
+    rests: &[Vec<bool>],
     stribeck_grid: &[f64],
 ) -> Option<InverseModel> {
     let mut ws = Vec::new();
     let (mut q_var, mut tau_var, mut count) = (0.0, 0.0, 0.0);
     let mut scales = 1usize;
     let mut next_block = 0;
-    for ((((inp, v), &sigma_q), &v_floor), &v_stick) in inputs.iter().zip(speeds).zip(sigma_q).zip(floors).zip(sticks) {
+    for (((inp, v), &sigma_q), rest) in inputs.iter().zip(speeds).zip(sigma_q).zip(rests) {
         let tau = inp.applied_torque();
-        let (mut w, run_scales) = windows(inp, &tau, v, v_floor, v_stick, stribeck_grid);
+        let (mut w, run_scales) = windows(inp, &tau, v, rest, stribeck_grid);
         scales = scales.max(run_scales);
         // each run's blocks are clusters of their own
         let first_block = next_block;
@@ -1139,8 +1128,6 @@ fn assemble(
 }
 
 pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
-    // Stribeck speeds from a fiftieth of the data's largest speed up to half of it, 8 % apart, none
-    // below a speed whose sign the noise hides in some run (an excess there is the sign's error)
     // the speeds near each reversal from the positions' own kink (the smoothing spans it)
     let speeds: Vec<Vec<f64>> = inputs
         .iter()
@@ -1155,23 +1142,28 @@ pub fn inverse_model(inputs: &[DriveInput]) -> Option<InverseModel> {
     let sigma_q: Vec<f64> = inputs.iter().map(|inp| super::signal::second_difference_noise(&inp.motor)).collect();
     let floors: Vec<f64> = inputs.iter().zip(&sigma_q).map(|(inp, &s)| sign_floor(inp, s)).collect();
     let floor = floors.iter().copied().fold(0.0f64, f64::max);
+    // Stribeck speeds from a fiftieth of the data's largest speed up to half of it, 8 % apart, none
+    // below a speed whose sign the noise hides in some run (an excess there is the sign's error)
     let stribeck_grid: Vec<f64> = (0..STRIBECK_GRID)
         .map(|i| 0.5 * top * 0.02f64.powf(i as f64 / (STRIBECK_GRID - 1) as f64))
         .filter(|v| *v > 0.0 && *v >= floor)
         .collect();
     // first with the noise's rest alone; then, with the friction's deceleration Fc/M of that solve,
     // the stuck stretches are rest too (kept unless too few windows are left)
-    let none = vec![0.0; inputs.len()];
-    let mut iv = assemble(inputs, &speeds, &sigma_q, &floors, &none, &stribeck_grid)?;
+    let noise_rest: Vec<Vec<bool>> = speeds.iter().zip(&floors).map(|(v, &floor)| at_rest(v, floor, 0.0)).collect();
+    let mut iv = assemble(inputs, &speeds, &sigma_q, &noise_rest, &stribeck_grid)?;
     let first = iv.solve_cols(&[Param::LnInertia, Param::Viscous, Param::ConstantLoad, Param::Coulomb], &[], 0);
     if let Some((m, fc)) = first.map(|f| (f.beta[0], f.beta[3])).filter(|&(m, fc)| m > 0.0 && fc > 0.0) {
-        let sticks: Vec<f64> = inputs.iter().map(|inp| fc / m * super::quality::median_period(&inp.time)).collect();
+        let stuck_rest: Vec<Vec<bool>> = inputs
+            .iter()
+            .zip(&speeds)
+            .zip(&floors)
+            .map(|((inp, v), &floor)| at_rest(v, floor, fc / m * super::quality::median_period(&inp.time)))
+            .collect();
         // the second pass only where a run has a stuck stretch its noise did not already rest
-        let stuck = speeds.iter().zip(&floors).zip(&sticks).any(|((v, &floor), &stick)| {
-            at_rest(v, floor, stick).iter().zip(v).any(|(&rest, x)| rest && x.abs() >= floor)
-        });
-        if let Some(stuck_out) =
-            stuck.then(|| assemble(inputs, &speeds, &sigma_q, &floors, &sticks, &stribeck_grid)).flatten()
+        if let Some(stuck_out) = (stuck_rest != noise_rest)
+            .then(|| assemble(inputs, &speeds, &sigma_q, &stuck_rest, &stribeck_grid))
+            .flatten()
         {
             iv = stuck_out;
         }
