@@ -721,10 +721,14 @@ impl<'a> DriveProblem<'a> {
     }
 
     /// How far an effect of `fit` moves the simulated positions against what the noise can hide:
-    /// the rms of its linearised share J_e·p_e (its levels; a Stribeck speed only shapes one) over
-    /// the position noise. An effect is visible above 1; below it, it can still lower the BIC over
-    /// many samples (a tenth of the noise, correlated with a controller's dither), but no sample
-    /// shows it.
+    /// its linearised share s = J_e·p_e (its levels; a Stribeck speed only shapes one), sample by
+    /// sample against the position noise, and at its own time scale against the refit's residual,
+    /// the larger. At its time scale both are averaged over blocks as long as s holds (the lag at
+    /// which its autocorrelation falls to ½), rms against rms. A closed loop turns Coulomb friction
+    /// into a tracking offset that holds for a whole stroke, under an encoder's noise sample by
+    /// sample; averaged over the stroke the white noise falls by its square root and the offset
+    /// does not, while a coloured residual (a controller's dither, a model error) keeps its slow
+    /// part. An effect is visible above 1.
     pub fn share_over_noise(&self, fit: &DriveFit, effect: DriveEffect) -> f64 {
         let cols: Vec<usize> = drive_params(effect)
             .iter()
@@ -735,7 +739,9 @@ impl<'a> DriveProblem<'a> {
         if cols.is_empty() || rows == 0 {
             return f64::INFINITY;
         }
-        super::fit::linearised_share(&fit.jacobian, &fit.p, &cols) / self.position_noise
+        let per_sample = super::fit::linearised_share(&fit.jacobian, &fit.p, &cols) / self.position_noise;
+        let share: Vec<f64> = (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum()).collect();
+        per_sample.max(own_time_scale_share(&share, &fit.residual, &self.lengths(), fit.p.len()))
     }
 
     /// The declared inertia every run shares (None when any run leaves it to the fit).
@@ -749,6 +755,53 @@ impl<'a> DriveProblem<'a> {
     /// loop's residual is correlated over hundreds of samples), scaled by B/(B − p).
     pub fn sandwich(&self, jac: &DMatrix<f64>, r: &[f64]) -> DMatrix<f64> {
         super::fit::block_sandwich(jac, r, &self.lengths())
+    }
+}
+
+/// rms(s̄) / rms(r̄) for `share` s and `residual` r averaged over blocks of the lag at which s's
+/// autocorrelation falls to ½, runs (`lengths`) apart. The block is at most the length that leaves
+/// ten blocks per fitted parameter (`parameters`): a fit nulls its residual's slowest blocks (the
+/// initial speeds, a load), and over a few long blocks any residual would read as no noise.
+fn own_time_scale_share(share: &[f64], residual: &[f64], lengths: &[usize], parameters: usize) -> f64 {
+    let runs: Vec<std::ops::Range<usize>> = lengths
+        .iter()
+        .scan(0, |start, &l| {
+            *start += l;
+            Some(*start - l..*start)
+        })
+        .collect();
+    let autocorrelation = |lag: usize| {
+        let (mut lagged, mut energy) = (0.0, 0.0);
+        for run in &runs {
+            let x = &share[run.clone()];
+            energy += x.iter().map(|v| v * v).sum::<f64>();
+            lagged += x.iter().zip(x.iter().skip(lag)).map(|(a, b)| a * b).sum::<f64>();
+        }
+        if energy > 0.0 {
+            lagged / energy
+        } else {
+            0.0
+        }
+    };
+    let longest = (share.len() / (10 * parameters.max(1))).max(1);
+    let mut block = 1;
+    while block < longest && autocorrelation(block) > 0.5 {
+        block = (block + block.div_ceil(4)).min(longest);
+    }
+    let block_rms = |x: &[f64]| {
+        let means: Vec<f64> = runs
+            .iter()
+            .flat_map(|run| x[run.clone()].chunks_exact(block).map(|c| c.iter().sum::<f64>() / block as f64))
+            .collect();
+        (means.iter().map(|m| m * m).sum::<f64>() / means.len().max(1) as f64).sqrt()
+    };
+    let (signal, noise) = (block_rms(share), block_rms(residual));
+    if noise > 0.0 {
+        signal / noise
+    } else if signal > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
     }
 }
 
@@ -1443,7 +1496,11 @@ pub struct DriveDetail {
 
 /// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
 pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
-    let idx: Vec<usize> = drive_params(effect).iter().filter_map(|q| fit.spec.iter().position(|x| x == q)).collect();
+    let idx: Vec<usize> = drive_params(effect)
+        .iter()
+        .filter(|q| **q != Param::LnStribeckVelocity)
+        .filter_map(|q| fit.spec.iter().position(|x| x == q))
+        .collect();
     let k = idx.len();
     let theta = DVector::from_iterator(k, idx.iter().map(|&i| fit.p[i]));
     let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(idx[a], idx[b])]);
@@ -1881,13 +1938,7 @@ impl Rig for DriveRig<'_, '_> {
             .iter()
             .map(|&e| {
                 let w = equation_error.map_or_else(|| wald(refit, e), |ee| ee.wald(e));
-                (
-                    w,
-                    drive_params(e)
-                        .iter()
-                        .filter(|q| **q != Param::LnStribeckVelocity || equation_error.is_none())
-                        .count(),
-                )
+                (w, drive_params(e).iter().filter(|q| **q != Param::LnStribeckVelocity).count())
             })
             .collect();
         let shares: Vec<f64> = added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect();
@@ -2681,6 +2732,64 @@ pub fn plots(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A friction-like share that holds for each stroke (alternating sign every `stroke` samples)
+    /// at `level`, and a residual of white noise of rms 1 (a fixed linear congruential stream).
+    fn strokes_in_noise(level: f64, stroke: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
+        let share = (0..n).map(|i| if (i / stroke) % 2 == 0 { level } else { -level }).collect();
+        let mut state = 12345u64;
+        let mut uniform = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // a sum of 12 uniforms less 6: near-Gaussian, variance 1
+        let residual = (0..n).map(|_| (0..12).map(|_| uniform()).sum::<f64>() - 6.0).collect();
+        (share, residual)
+    }
+
+    #[test]
+    fn a_stroke_long_offset_under_the_noise_is_visible_at_its_own_time_scale() {
+        // a fifth of the noise, sample by sample; strokes of 400 samples hold over a lag of 100
+        // (their autocorrelation 1 − lag/200 falls to ½ there), over which the noise's block means
+        // fall to a tenth of it and the offset's stay
+        let (share, residual) = strokes_in_noise(0.2, 400, 40_000);
+        let seen = own_time_scale_share(&share, &residual, &[20_000, 20_000], 5);
+        assert!(seen > 1.6 && seen < 2.4, "own time scale share {seen}");
+        // the same offset for a tenth of the samples: fewer blocks, the same answer within its spread
+        let short = own_time_scale_share(&share[..4000], &residual[..4000], &[4000], 5);
+        assert!(short > 1.4 && short < 2.8, "own time scale share over 4000 samples {short}");
+        // a share that changes every sample has no time scale to average over: sample by sample
+        let (flicker, _) = strokes_in_noise(0.2, 1, 40_000);
+        let white = own_time_scale_share(&flicker, &residual, &[40_000], 5);
+        assert!((white - 0.2).abs() < 0.01, "a flickering share {white}");
+        // the block stops at ten per fitted parameter: a share constant over the whole record is
+        // averaged over 40 000 / (10 × 400) = 10 samples, not over the record
+        let constant = vec![0.2; 40_000];
+        let capped = own_time_scale_share(&constant, &residual, &[40_000], 400);
+        assert!(capped > 0.4 && capped < 0.9, "a constant share over capped blocks {capped}");
+    }
+
+    #[test]
+    fn a_stribeck_excess_is_tested_on_its_level_alone_whatever_the_speed_unit() {
+        let fit_at = |speed: f64| DriveFit {
+            spec: vec![Param::Stribeck, Param::LnStribeckVelocity],
+            effects: vec![DriveEffect::StribeckFriction],
+            p: vec![0.3, speed.ln()],
+            sims: vec![],
+            residual: vec![],
+            sse: 0.0,
+            jacobian: DMatrix::zeros(0, 2),
+            covariance: DMatrix::from_row_slice(2, 2, &[0.01, 0.0, 0.0, 0.04]),
+            iterations: 0,
+            equation_error: None,
+        };
+        // (0.3 / 0.1)² = 9 whether the speed reads 2e-3 m/s or 2 mm/s; testing ln(speed) = 0 with
+        // the level would have read 9 + ln(2e-3)²/0.04 = 975 and 9 + ln(2)²/0.04 = 21
+        for speed in [2e-3, 2.0] {
+            let w = wald(&fit_at(speed), DriveEffect::StribeckFriction);
+            assert!((w - 9.0).abs() < 1e-9, "Wald {w} at a speed of {speed}");
+        }
+    }
 
     /// A rigid rotary drive on a logged two-sine torque: J q'' = τ − Fv q' − (Fc + Fs exp(−(q'/v_st)²))
     /// tanh(q'/v_s), RK4 with 20 sub-steps per sample period `h`, positions on an encoder of `counts`.
