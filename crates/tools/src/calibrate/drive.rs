@@ -1488,13 +1488,16 @@ pub struct DriveDetail {
     pub wald: f64,
     /// The limit the smallest Wald χ² had to pass (its effect's degrees of freedom).
     pub wald_limit: f64,
-    /// The added effects' smallest rms share of the simulated positions over their noise.
+    /// The added effects' smallest share of the simulated positions over what the noise hides
+    /// (`DriveProblem::share_over_noise`).
     pub share_over_noise: f64,
     /// Whether the refit passed each of `SELECTION_TESTS`.
     pub passed: [bool; 3],
 }
 
-/// Wald statistic θᵀ Σ⁻¹ θ of an effect's parameters with the block-sandwich covariance.
+/// Wald statistic θᵀ Σ⁻¹ θ of an effect's levels with the block-sandwich covariance. A Stribeck
+/// speed is left out: it only shapes the excess, and with no excess it has no value to test (its
+/// logarithm against 0 would test a speed of 1 in the log's unit).
 pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
     let idx: Vec<usize> = drive_params(effect)
         .iter()
@@ -1508,12 +1511,13 @@ pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
 }
 
 /// The drive judge's tests, in `DriveDetail::passed`'s order: the BIC's fall, the Wald test and
-/// the visibility (the effect's share of the positions above their noise), each with the name the
+/// the visibility (the effect's share of the positions above their noise, sample by sample or at
+/// its own time scale), each with the name the
 /// report's `failed` gives it and the words report.md says when it fails.
 pub const SELECTION_TESTS: [(&str, &str); 3] = [
     ("bic", "the BIC did not fall by more than its margin"),
     ("wald", "the Wald test"),
-    ("visibility", "it moves the positions by less than their noise"),
+    ("visibility", "it moves the positions by less than their noise, sample by sample and at its own time scale"),
 ];
 
 /// χ² quantiles at p = 0.001 for 1 and 2 degrees of freedom.
