@@ -580,10 +580,15 @@ impl<'a> DriveProblem<'a> {
 
     /// Forward-difference Jacobian of the stacked positions.
     pub fn jacobian(&self, spec: &[Param], p: &[f64], base: &[Simulated]) -> Option<DMatrix<f64>> {
+        self.jacobian_of_first(spec, p, base, spec.len())
+    }
+
+    /// The Jacobian's first `free` columns (the others are held).
+    fn jacobian_of_first(&self, spec: &[Param], p: &[f64], base: &[Simulated], free: usize) -> Option<DMatrix<f64>> {
         let mut jobs = Vec::new();
         let mut meta = Vec::new();
         for r in 0..self.inputs.len() {
-            for (j, &q) in spec.iter().enumerate() {
+            for (j, &q) in spec.iter().enumerate().take(free) {
                 if !self.depends(q, r) {
                     continue;
                 }
@@ -604,7 +609,7 @@ impl<'a> DriveProblem<'a> {
                 Some(o)
             })
             .collect();
-        let mut jac = DMatrix::zeros(lengths.iter().sum(), p.len());
+        let mut jac = DMatrix::zeros(lengths.iter().sum(), free);
         for ((r, j, h), out) in meta.into_iter().zip(res) {
             let out = out.ok()?.stacked(&self.inputs[r]);
             for (k, (a, b)) in out.iter().zip(base[r].stacked(&self.inputs[r])).enumerate() {
@@ -622,6 +627,22 @@ impl<'a> DriveProblem<'a> {
         p0: Vec<f64>,
         max_iter: usize,
     ) -> Result<DriveFit, String> {
+        let free = spec.len();
+        self.fit_first(spec, effects, p0, max_iter, free)
+    }
+
+    /// Levenberg–Marquardt of `spec`'s first `free` parameters, the rest held at `p0`'s values;
+    /// the Jacobian and block-sandwich covariance of every parameter at the end.
+    fn fit_first(
+        &self,
+        spec: Vec<Param>,
+        effects: Vec<DriveEffect>,
+        p0: Vec<f64>,
+        max_iter: usize,
+        free: usize,
+    ) -> Result<DriveFit, String> {
+        let held = p0[free..].to_vec();
+        let full = |x: &[f64]| -> Vec<f64> { x.iter().chain(&held).copied().collect() };
         let lower = |q: Param| matches!(q, Param::Viscous | Param::Coulomb | Param::Stribeck);
         let smoothing = self.smoothing_range();
         let clamp = |p: &mut [f64]| {
@@ -637,19 +658,23 @@ impl<'a> DriveProblem<'a> {
         let start = p0.clone();
         let m = super::fit::minimize(
             &super::fit::LeastSquares {
-                simulate: &|p| self.simulate_all(&spec, p),
+                simulate: &|x| self.simulate_all(&spec, &full(x)),
                 residual: &|sims| self.residual(sims),
-                jacobian: &|p, sims| self.jacobian(&spec, p, sims),
+                jacobian: &|x, sims| self.jacobian_of_first(&spec, &full(x), sims, free),
                 clamp: &clamp,
                 negligible: &|j, old, new| (new - old).abs() <= 1e-7 * self.typical(spec[j]).max(old.abs()),
                 relative_tolerance: 1e-8,
                 broyden: false,
             },
-            p0,
+            p0[..free].to_vec(),
             max_iter,
         )
         .map_err(|e| self.why_not_simulated(&spec, &start).map_or(e.clone(), |why| format!("{e}: {why}")))?;
-        let (p, sims, r, cost, jac, iterations) = (m.p, m.simulated, m.residual, m.cost, m.jacobian, m.iterations);
+        let (p, sims, r, cost, mut jac, iterations) =
+            (full(&m.p), m.simulated, m.residual, m.cost, m.jacobian, m.iterations);
+        if free < spec.len() {
+            jac = self.jacobian(&spec, &p, &sims).ok_or("the FMU could not simulate a Jacobian's step")?;
+        }
         let covariance = self.sandwich(&jac, &r);
         Ok(DriveFit {
             spec,
@@ -669,6 +694,17 @@ impl<'a> DriveProblem<'a> {
     /// residual, Jacobian and block-sandwich covariance, as a fit reports them.
     pub fn at(&self, spec: Vec<Param>, effects: Vec<DriveEffect>, ee: EquationError) -> Result<DriveFit, String> {
         let p = ee.p.clone();
+        self.at_point(spec, effects, p, ee)
+    }
+
+    /// A model at `p`, not fitted, whose criterion is `ee`'s (its BIC and Wald tests).
+    fn at_point(
+        &self,
+        spec: Vec<Param>,
+        effects: Vec<DriveEffect>,
+        p: Vec<f64>,
+        ee: EquationError,
+    ) -> Result<DriveFit, String> {
         let sims = self.simulate_all(&spec, &p).ok_or_else(|| {
             let why = self.why_not_simulated(&spec, &p).unwrap_or_default();
             format!("the FMU could not simulate the inverse model's parameters: {why}")
@@ -689,6 +725,65 @@ impl<'a> DriveProblem<'a> {
             iterations: 0,
             equation_error: Some(ee),
         })
+    }
+
+    /// An output-error fit of a closed loop with its force parameters (all but the inertia, the
+    /// initial speeds and the sign's smoothing) from the inverse model at the fit's inertia: a stiff
+    /// loop turns a force into a tracking error of force/kp, under the encoder's noise, while the
+    /// logged force carries it whole. The positions set the inertia (the loop's dynamics), the
+    /// logged force the rest; the equation error's BIC and Wald tests judge the effects.
+    pub fn with_force_levels(&self, fit: &DriveFit, iv: &InverseModel) -> Option<ForceLevels> {
+        let (p, _) = self.force_levels(&fit.spec, &fit.p, iv)?;
+        // the inertia, the initial speeds and the smoothing fitted again to the positions, the
+        // force parameters held: spec reordered free first, then put back in its order
+        let motion = |q: &Param| matches!(q, Param::LnInertia | Param::InitialSpeed(_) | Param::LnFrictionSmoothing);
+        let order: Vec<usize> = (0..fit.spec.len())
+            .filter(|&i| motion(&fit.spec[i]))
+            .chain((0..fit.spec.len()).filter(|&i| !motion(&fit.spec[i])))
+            .collect();
+        let free = order.iter().filter(|&&i| motion(&fit.spec[i])).count();
+        let spec: Vec<Param> = order.iter().map(|&i| fit.spec[i]).collect();
+        let start: Vec<f64> = order.iter().map(|&i| p[i]).collect();
+        let refit = self.fit_first(spec, fit.effects.clone(), start, MAX_ITERATIONS, free).ok()?;
+        let mut back = vec![0; order.len()];
+        for (k, &i) in order.iter().enumerate() {
+            back[i] = k;
+        }
+        let n = back.len();
+        let taken = DriveFit {
+            spec: back.iter().map(|&k| refit.spec[k]).collect(),
+            p: back.iter().map(|&k| refit.p[k]).collect(),
+            jacobian: DMatrix::from_fn(refit.jacobian.nrows(), n, |r, c| refit.jacobian[(r, back[c])]),
+            covariance: DMatrix::from_fn(n, n, |a, b| refit.covariance[(back[a], back[b])]),
+            ..refit
+        };
+        // the force parameters' distance from the output error's in its own block-sandwich
+        // covariance: inside its confidence region the positions cannot tell the two apart
+        let force: Vec<usize> = (0..n).filter(|&i| !motion(&fit.spec[i])).collect();
+        let k = force.len();
+        let delta = DVector::from_iterator(k, force.iter().map(|&i| taken.p[i] - fit.p[i]));
+        let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(force[a], force[b])]);
+        let wald = (delta.transpose() * spd_inverse(&cov) * &delta)[(0, 0)];
+        Some(ForceLevels { wald, limit: chi_square_quantile(k), fit: taken })
+    }
+
+    /// `p` with its force parameters from the inverse model at `p`'s inertia, and that equation
+    /// error.
+    fn force_levels(&self, spec: &[Param], p: &[f64], iv: &InverseModel) -> Option<(Vec<f64>, EquationError)> {
+        let inertia = self.model(spec, p, 0).inertia;
+        let force: Vec<Param> = spec
+            .iter()
+            .copied()
+            .filter(|q| !matches!(q, Param::LnInertia | Param::InitialSpeed(_) | Param::LnFrictionSmoothing))
+            .collect();
+        let ee = iv.parameters(&force, Some(inertia))?;
+        let mut p = p.to_vec();
+        for (x, q) in p.iter_mut().zip(spec) {
+            if let Some(i) = force.iter().position(|f| f == q) {
+                *x = ee.p[i];
+            }
+        }
+        Some((p, ee))
     }
 
     /// The friction sign's smoothing speeds a fit may take: from a hard sign (a millionth of the
@@ -756,6 +851,37 @@ impl<'a> DriveProblem<'a> {
     pub fn sandwich(&self, jac: &DMatrix<f64>, r: &[f64]) -> DMatrix<f64> {
         super::fit::block_sandwich(jac, r, &self.lengths())
     }
+}
+
+/// A closed loop's model with its force parameters from the logged force (`with_force_levels`),
+/// and how far they lie from the output error's in its covariance.
+pub struct ForceLevels {
+    /// (θ_force − θ_output)ᵀ Σ⁻¹ (θ_force − θ_output), Σ the output error's block sandwich.
+    pub wald: f64,
+    /// χ² at p = 0.001 for as many degrees of freedom as force parameters.
+    pub limit: f64,
+    pub fit: DriveFit,
+}
+
+impl ForceLevels {
+    /// The positions cannot tell the logged force's parameters from their own.
+    pub fn taken(&self) -> bool {
+        self.wald <= self.limit
+    }
+}
+
+/// The χ² distribution's quantile at p = 0.001 for `dof` degrees of freedom: exact for 1 and 2,
+/// Wilson–Hilferty's above (within 2 % of the table).
+pub fn chi_square_quantile(dof: usize) -> f64 {
+    match dof {
+        0 | 1 => return 3.290_527f64.powi(2), // the standard normal's 0.9995 quantile, squared
+        2 => return -2.0 * 0.001f64.ln(),
+        _ => {}
+    }
+    let k = dof as f64;
+    let z = 3.090_232; // the standard normal's 0.999 quantile
+    let h = 2.0 / (9.0 * k);
+    k * (1.0 - h + z * h.sqrt()).powi(3)
 }
 
 /// rms(s̄) / rms(r̄) for `share` s and `residual` r averaged over blocks of the lag at which s's
@@ -1547,6 +1673,10 @@ pub struct DriveOutcome {
     pub unexplained: bool,
     pub residual_corr_sign: f64,
     pub final_corr_sign: f64,
+    /// A closed loop's force parameters from the logged force (`DriveProblem::with_force_levels`):
+    /// their Wald distance from the search's model and its limit. The final model has them when
+    /// the distance is within the limit.
+    pub force_levels: Option<(f64, f64)>,
 }
 
 /// corr(e, sign q̇) of a fit's position residual (q̇ of the measured motor position).
@@ -2072,6 +2202,7 @@ pub fn calibrate(
         Some(ee) => prob.at(spec, vec![], ee)?,
         None => prob.fit(spec, vec![], p0, MAX_ITERATIONS)?,
     };
+
     let held = held.map(|h| {
         h.inertia_start = prob.inertia_start;
         &*h
@@ -2086,8 +2217,16 @@ pub fn calibrate(
     let rig =
         DriveRig { prob, held, inverse: &inverse, equation_error, held_scores: std::cell::RefCell::new(Vec::new()) };
     let found = super::stepwise::search(&rig, baseline.clone(), budget);
+    let closed_loop = prob.inputs.iter().all(|i| i.rigid && i.drive == DriveKind::Reference);
+    let force_levels = match &inverse {
+        Some(iv) if closed_loop => prob.with_force_levels(&found.model, iv),
+        _ => None,
+    };
     sim.clear_deadline();
-    let current = found.model;
+    let current = match &force_levels {
+        Some(f) if f.taken() => f.fit.clone(),
+        _ => found.model,
+    };
     let mut validation_sims = None;
     let validation = held.and_then(|h| {
         let (sb, b) = predict(prob, h, &baseline)?;
@@ -2123,6 +2262,7 @@ pub fn calibrate(
         load_column,
         // the friction library is exhausted when a sign-of-speed pattern remains in the residual
         unexplained: final_corr.abs() > 0.3,
+        force_levels: force_levels.map(|f| (f.wald, f.limit)),
         residual_corr_sign: residual_corr,
         final_corr_sign: final_corr,
     })
@@ -2342,11 +2482,13 @@ pub fn report_json(
             "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
             "fit": if o.equation_error {
                 "the equation error (IDIM-LS on the logged torque, `inverse_model`) chooses and estimates; the output error on the positions (Levenberg–Marquardt through the FMU) simulates the result"
+            } else if o.force_levels.is_some_and(|(wald, limit)| wald <= limit) {
+                "output error on the positions (Levenberg–Marquardt through the FMU, forward differences) chooses the effects; the final model's force parameters are the equation error's on the logged force at its inertia, the inertia, initial speeds and smoothing fitted again to the positions (`inverse_model.force_levels`)"
             } else {
                 "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)"
             },
             "selection": format!(
-                "an effect is kept when the BIC{} falls by more than {BIC_MARGIN}, its parameters pass a Wald test ({}; χ² above the p = 0.001 quantile) and it moves the simulated positions by more than their noise (rms share over the noise above 1; each attempt's `failed` names the tests it did not pass); the held-out runs (--validate) are simulated after every attempt and reported, never used to choose",
+                "an effect is kept when the BIC{} falls by more than {BIC_MARGIN}, its parameters pass a Wald test ({}; χ² above the p = 0.001 quantile) and it moves the simulated positions by more than their noise hides (its rms share over the position noise, or over the residual's at its own time scale, above 1; each attempt's `failed` names the tests it did not pass); the held-out runs (--validate) are simulated after every attempt and reported, never used to choose",
                 if o.equation_error { " of the equation error" } else { "" },
                 if o.equation_error {
                     "the equation error's coefficients, the smaller χ² of the shared-noise covariance and a cluster sandwich over blocks of windows in time"
@@ -2384,6 +2526,14 @@ pub fn report_json(
             "with_coulomb": {"inertia": iv.with_coulomb_inertia, "viscous": iv.with_coulomb_viscous, "constant_load": iv.with_coulomb_load, "coulomb": iv.coulomb},
             "residual_corr_sign_speed": iv.corr_sign,
         });
+        if let Some((wald, limit)) = o.force_levels {
+            j["inverse_model"]["force_levels"] = json!({
+                "wald_chi2": wald,
+                "limit": limit,
+                "taken": wald <= limit,
+                "note": "a position controller turns a force into a tracking error of force/kp, under the encoder's noise, while the logged force carries it whole: the search's model's force parameters (all but the inertia, the initial speeds and the sign's smoothing) from the equation error at its inertia, those three fitted again to the positions; taken when they lie inside the output error's confidence region (Wald χ² in its block-sandwich covariance at most the p = 0.001 quantile)",
+            });
+        }
     }
     match &o.validation {
         Some((inputs, b, f)) => {
@@ -2662,6 +2812,14 @@ pub fn report_markdown(j: &Value) -> String {
     for form in j["equivalent_forms"].as_array().into_iter().flatten() {
         s += &format!("\n{}\n", form["note"].as_str().unwrap_or_default());
     }
+    let levels = &j["inverse_model"]["force_levels"];
+    if let (Some(wald), Some(limit)) = (levels["wald_chi2"].as_f64(), levels["limit"].as_f64()) {
+        s += &if wald <= limit {
+            format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, inside its confidence region ({limit:.2}): the positions cannot tell them apart, and the force log measures them whole, so the final model has them.\n")
+        } else {
+            format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, outside its confidence region ({limit:.2}): the positions tell them apart, and the final model keeps the output error's.\n")
+        };
+    }
     s += "\n## Chain of evidence\n\n";
     let record = json!({"rounds": j["rounds"], "combinations": j["combinations"], "pruned_effects": j["pruned_effects"],
                         "search_budget": j["search_budget"]});
@@ -2740,7 +2898,7 @@ mod tests {
     /// A friction-like share that holds for each stroke (alternating sign every `stroke` samples)
     /// at `level`, and a residual of white noise of rms 1 (a fixed linear congruential stream).
     fn strokes_in_noise(level: f64, stroke: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
-        let share = (0..n).map(|i| if (i / stroke) % 2 == 0 { level } else { -level }).collect();
+        let share = (0..n).map(|i| if (i / stroke).is_multiple_of(2) { level } else { -level }).collect();
         let mut state = 12345u64;
         let mut uniform = || {
             state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
@@ -2771,6 +2929,15 @@ mod tests {
         let constant = vec![0.2; 40_000];
         let capped = own_time_scale_share(&constant, &residual, &[40_000], 400);
         assert!(capped > 0.4 && capped < 0.9, "a constant share over capped blocks {capped}");
+    }
+
+    #[test]
+    fn the_chi_square_quantile_matches_the_table() {
+        // χ² at p = 0.001 (the table's): 1 to 7 degrees of freedom
+        for (dof, table) in [(1, 10.828), (2, 13.816), (3, 16.266), (4, 18.467), (5, 20.515), (7, 24.322)] {
+            let q = chi_square_quantile(dof);
+            assert!((q / table - 1.0).abs() < 0.02, "{dof} degrees: {q} for {table}");
+        }
     }
 
     #[test]
