@@ -694,17 +694,6 @@ impl<'a> DriveProblem<'a> {
     /// residual, Jacobian and block-sandwich covariance, as a fit reports them.
     pub fn at(&self, spec: Vec<Param>, effects: Vec<DriveEffect>, ee: EquationError) -> Result<DriveFit, String> {
         let p = ee.p.clone();
-        self.at_point(spec, effects, p, ee)
-    }
-
-    /// A model at `p`, not fitted, whose criterion is `ee`'s (its BIC and Wald tests).
-    fn at_point(
-        &self,
-        spec: Vec<Param>,
-        effects: Vec<DriveEffect>,
-        p: Vec<f64>,
-        ee: EquationError,
-    ) -> Result<DriveFit, String> {
         let sims = self.simulate_all(&spec, &p).ok_or_else(|| {
             let why = self.why_not_simulated(&spec, &p).unwrap_or_default();
             format!("the FMU could not simulate the inverse model's parameters: {why}")
@@ -728,12 +717,12 @@ impl<'a> DriveProblem<'a> {
     }
 
     /// An output-error fit of a closed loop with its force parameters (all but the inertia, the
-    /// initial speeds and the sign's smoothing) from the inverse model at the fit's inertia: a stiff
-    /// loop turns a force into a tracking error of force/kp, under the encoder's noise, while the
-    /// logged force carries it whole. The positions set the inertia (the loop's dynamics), the
-    /// logged force the rest; the equation error's BIC and Wald tests judge the effects.
+    /// initial speeds and the sign's smoothing) from the inverse model at the fit's inertia, those
+    /// three fitted again to the positions: a stiff loop turns a force into a tracking error of
+    /// force/kp, under the encoder's noise, while the logged force carries it whole. None where the
+    /// inverse model has no estimate for the fit's effects or the refit fails.
     pub fn with_force_levels(&self, fit: &DriveFit, iv: &InverseModel) -> Option<ForceLevels> {
-        let (p, _) = self.force_levels(&fit.spec, &fit.p, iv)?;
+        let p = self.force_levels(&fit.spec, &fit.p, iv)?;
         // the inertia, the initial speeds and the smoothing fitted again to the positions, the
         // force parameters held: spec reordered free first, then put back in its order
         let motion = |q: &Param| matches!(q, Param::LnInertia | Param::InitialSpeed(_) | Param::LnFrictionSmoothing);
@@ -767,9 +756,8 @@ impl<'a> DriveProblem<'a> {
         Some(ForceLevels { wald, limit: chi_square_quantile(k), fit: taken })
     }
 
-    /// `p` with its force parameters from the inverse model at `p`'s inertia, and that equation
-    /// error.
-    fn force_levels(&self, spec: &[Param], p: &[f64], iv: &InverseModel) -> Option<(Vec<f64>, EquationError)> {
+    /// `p` with its force parameters from the inverse model at `p`'s inertia.
+    fn force_levels(&self, spec: &[Param], p: &[f64], iv: &InverseModel) -> Option<Vec<f64>> {
         let inertia = self.model(spec, p, 0).inertia;
         let force: Vec<Param> = spec
             .iter()
@@ -783,7 +771,7 @@ impl<'a> DriveProblem<'a> {
                 *x = ee.p[i];
             }
         }
-        Some((p, ee))
+        Some(p)
     }
 
     /// The friction sign's smoothing speeds a fit may take: from a hard sign (a millionth of the
