@@ -580,15 +580,16 @@ impl<'a> DriveProblem<'a> {
 
     /// Forward-difference Jacobian of the stacked positions.
     pub fn jacobian(&self, spec: &[Param], p: &[f64], base: &[Simulated]) -> Option<DMatrix<f64>> {
-        self.jacobian_of_first(spec, p, base, spec.len())
+        self.jacobian_columns(spec, p, base, &(0..spec.len()).collect::<Vec<_>>())
     }
 
-    /// The Jacobian's first `free` columns (the others are held).
-    fn jacobian_of_first(&self, spec: &[Param], p: &[f64], base: &[Simulated], free: usize) -> Option<DMatrix<f64>> {
+    /// The Jacobian's columns of the parameters `free` (indices into `spec`), in that order.
+    fn jacobian_columns(&self, spec: &[Param], p: &[f64], base: &[Simulated], free: &[usize]) -> Option<DMatrix<f64>> {
         let mut jobs = Vec::new();
         let mut meta = Vec::new();
         for r in 0..self.inputs.len() {
-            for (j, &q) in spec.iter().enumerate().take(free) {
+            for (c, &j) in free.iter().enumerate() {
+                let q = spec[j];
                 if !self.depends(q, r) {
                     continue;
                 }
@@ -596,7 +597,7 @@ impl<'a> DriveProblem<'a> {
                 let mut x = p.to_vec();
                 x[j] += h;
                 jobs.push((r, x));
-                meta.push((r, j, h));
+                meta.push((r, c, h));
             }
         }
         let res = self.simulate_jobs(spec, &jobs);
@@ -609,11 +610,11 @@ impl<'a> DriveProblem<'a> {
                 Some(o)
             })
             .collect();
-        let mut jac = DMatrix::zeros(lengths.iter().sum(), free);
-        for ((r, j, h), out) in meta.into_iter().zip(res) {
+        let mut jac = DMatrix::zeros(lengths.iter().sum(), free.len());
+        for ((r, c, h), out) in meta.into_iter().zip(res) {
             let out = out.ok()?.stacked(&self.inputs[r]);
             for (k, (a, b)) in out.iter().zip(base[r].stacked(&self.inputs[r])).enumerate() {
-                jac[(offsets[r] + k, j)] = (a - b) / h;
+                jac[(offsets[r] + k, c)] = (a - b) / h;
             }
         }
         Some(jac)
@@ -627,26 +628,31 @@ impl<'a> DriveProblem<'a> {
         p0: Vec<f64>,
         max_iter: usize,
     ) -> Result<DriveFit, String> {
-        let free = spec.len();
-        self.fit_first(spec, effects, p0, max_iter, free)
+        let free: Vec<usize> = (0..spec.len()).collect();
+        self.fit_holding(spec, effects, p0, max_iter, &free)
     }
 
-    /// Levenberg–Marquardt of `spec`'s first `free` parameters, the rest held at `p0`'s values;
-    /// the Jacobian and block-sandwich covariance of every parameter at the end.
-    fn fit_first(
+    /// Levenberg–Marquardt of the parameters `free` (indices into `spec`), the others held at
+    /// `p0`'s values; the Jacobian and block-sandwich covariance of every parameter at the end.
+    fn fit_holding(
         &self,
         spec: Vec<Param>,
         effects: Vec<DriveEffect>,
         p0: Vec<f64>,
         max_iter: usize,
-        free: usize,
+        free: &[usize],
     ) -> Result<DriveFit, String> {
-        let held = p0[free..].to_vec();
-        let full = |x: &[f64]| -> Vec<f64> { x.iter().chain(&held).copied().collect() };
+        let full = |x: &[f64]| -> Vec<f64> {
+            let mut p = p0.clone();
+            for (&i, &v) in free.iter().zip(x) {
+                p[i] = v;
+            }
+            p
+        };
         let lower = |q: Param| matches!(q, Param::Viscous | Param::Coulomb | Param::Stribeck);
         let smoothing = self.smoothing_range();
-        let clamp = |p: &mut [f64]| {
-            for (x, &q) in p.iter_mut().zip(&spec) {
+        let clamp = |x: &mut [f64]| {
+            for (x, q) in x.iter_mut().zip(free.iter().map(|&i| spec[i])) {
                 if lower(q) {
                     *x = x.max(0.0);
                 }
@@ -655,24 +661,23 @@ impl<'a> DriveProblem<'a> {
                 }
             }
         };
-        let start = p0.clone();
         let m = super::fit::minimize(
             &super::fit::LeastSquares {
                 simulate: &|x| self.simulate_all(&spec, &full(x)),
                 residual: &|sims| self.residual(sims),
-                jacobian: &|x, sims| self.jacobian_of_first(&spec, &full(x), sims, free),
+                jacobian: &|x, sims| self.jacobian_columns(&spec, &full(x), sims, free),
                 clamp: &clamp,
-                negligible: &|j, old, new| (new - old).abs() <= 1e-7 * self.typical(spec[j]).max(old.abs()),
+                negligible: &|j, old, new| (new - old).abs() <= 1e-7 * self.typical(spec[free[j]]).max(old.abs()),
                 relative_tolerance: 1e-8,
                 broyden: false,
             },
-            p0[..free].to_vec(),
+            free.iter().map(|&i| p0[i]).collect(),
             max_iter,
         )
-        .map_err(|e| self.why_not_simulated(&spec, &start).map_or(e.clone(), |why| format!("{e}: {why}")))?;
+        .map_err(|e| self.why_not_simulated(&spec, &p0).map_or(e.clone(), |why| format!("{e}: {why}")))?;
         let (p, sims, r, cost, mut jac, iterations) =
             (full(&m.p), m.simulated, m.residual, m.cost, m.jacobian, m.iterations);
-        if free < spec.len() {
+        if free.len() < spec.len() {
             jac = self.jacobian(&spec, &p, &sims).ok_or("the FMU could not simulate a Jacobian's step")?;
         }
         let covariance = self.sandwich(&jac, &r);
@@ -716,62 +721,28 @@ impl<'a> DriveProblem<'a> {
         })
     }
 
-    /// An output-error fit of a closed loop with its force parameters (all but the inertia, the
-    /// initial speeds and the sign's smoothing) from the inverse model at the fit's inertia, those
-    /// three fitted again to the positions: a stiff loop turns a force into a tracking error of
-    /// force/kp, under the encoder's noise, while the logged force carries it whole. None where the
-    /// inverse model has no estimate for the fit's effects or the refit fails.
+    /// An output-error fit of a closed loop with its force parameters (all but those
+    /// `fitted_to_positions`) from the inverse model at the fit's inertia, the others fitted again
+    /// to the positions: a stiff loop turns a force into a tracking error of force/kp, under the
+    /// encoder's noise, while the logged force carries it whole. None where the inverse model has no
+    /// estimate for the fit's effects or the refit fails.
     pub fn with_force_levels(&self, fit: &DriveFit, iv: &InverseModel) -> Option<ForceLevels> {
-        let p = self.force_levels(&fit.spec, &fit.p, iv)?;
-        // the inertia, the initial speeds and the smoothing fitted again to the positions, the
-        // force parameters held: spec reordered free first, then put back in its order
-        let motion = |q: &Param| matches!(q, Param::LnInertia | Param::InitialSpeed(_) | Param::LnFrictionSmoothing);
-        let order: Vec<usize> = (0..fit.spec.len())
-            .filter(|&i| motion(&fit.spec[i]))
-            .chain((0..fit.spec.len()).filter(|&i| !motion(&fit.spec[i])))
-            .collect();
-        let free = order.iter().filter(|&&i| motion(&fit.spec[i])).count();
-        let spec: Vec<Param> = order.iter().map(|&i| fit.spec[i]).collect();
-        let start: Vec<f64> = order.iter().map(|&i| p[i]).collect();
-        let refit = self.fit_first(spec, fit.effects.clone(), start, MAX_ITERATIONS, free).ok()?;
-        let mut back = vec![0; order.len()];
-        for (k, &i) in order.iter().enumerate() {
-            back[i] = k;
+        let (motion, force): (Vec<usize>, Vec<usize>) =
+            (0..fit.spec.len()).partition(|&i| fitted_to_positions(fit.spec[i]));
+        let force_spec: Vec<Param> = force.iter().map(|&i| fit.spec[i]).collect();
+        let ee = iv.parameters(&force_spec, Some(self.model(&fit.spec, &fit.p, 0).inertia))?;
+        let mut start = fit.p.clone();
+        for (&i, &x) in force.iter().zip(&ee.p) {
+            start[i] = x;
         }
-        let n = back.len();
-        let taken = DriveFit {
-            spec: back.iter().map(|&k| refit.spec[k]).collect(),
-            p: back.iter().map(|&k| refit.p[k]).collect(),
-            jacobian: DMatrix::from_fn(refit.jacobian.nrows(), n, |r, c| refit.jacobian[(r, back[c])]),
-            covariance: DMatrix::from_fn(n, n, |a, b| refit.covariance[(back[a], back[b])]),
-            ..refit
-        };
+        let taken = self.fit_holding(fit.spec.clone(), fit.effects.clone(), start, MAX_ITERATIONS, &motion).ok()?;
         // the force parameters' distance from the output error's in its own block-sandwich
         // covariance: inside its confidence region the positions cannot tell the two apart
-        let force: Vec<usize> = (0..n).filter(|&i| !motion(&fit.spec[i])).collect();
         let k = force.len();
         let delta = DVector::from_iterator(k, force.iter().map(|&i| taken.p[i] - fit.p[i]));
         let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(force[a], force[b])]);
         let wald = (delta.transpose() * spd_inverse(&cov) * &delta)[(0, 0)];
         Some(ForceLevels { wald, limit: chi_square_quantile(k), fit: taken })
-    }
-
-    /// `p` with its force parameters from the inverse model at `p`'s inertia.
-    fn force_levels(&self, spec: &[Param], p: &[f64], iv: &InverseModel) -> Option<Vec<f64>> {
-        let inertia = self.model(spec, p, 0).inertia;
-        let force: Vec<Param> = spec
-            .iter()
-            .copied()
-            .filter(|q| !matches!(q, Param::LnInertia | Param::InitialSpeed(_) | Param::LnFrictionSmoothing))
-            .collect();
-        let ee = iv.parameters(&force, Some(inertia))?;
-        let mut p = p.to_vec();
-        for (x, q) in p.iter_mut().zip(spec) {
-            if let Some(i) = force.iter().position(|f| f == q) {
-                *x = ee.p[i];
-            }
-        }
-        Some(p)
     }
 
     /// The friction sign's smoothing speeds a fit may take: from a hard sign (a millionth of the
@@ -822,8 +793,8 @@ impl<'a> DriveProblem<'a> {
         if cols.is_empty() || rows == 0 {
             return f64::INFINITY;
         }
-        let per_sample = super::fit::linearised_share(&fit.jacobian, &fit.p, &cols) / self.position_noise;
-        let share: Vec<f64> = (0..rows).map(|i| cols.iter().map(|&j| fit.jacobian[(i, j)] * fit.p[j]).sum()).collect();
+        let share = super::fit::linearised_shares(&fit.jacobian, &fit.p, &cols);
+        let per_sample = super::fit::rms(&share) / self.position_noise;
         per_sample.max(own_time_scale_share(&share, &fit.residual, &self.lengths(), fit.p.len()))
     }
 
@@ -839,6 +810,12 @@ impl<'a> DriveProblem<'a> {
     pub fn sandwich(&self, jac: &DMatrix<f64>, r: &[f64]) -> DMatrix<f64> {
         super::fit::block_sandwich(jac, r, &self.lengths())
     }
+}
+
+/// The parameters a closed loop's positions set (the inertia: the loop's dynamics; each run's
+/// initial speed; the friction sign's smoothing), not its logged force (`with_force_levels`).
+fn fitted_to_positions(q: Param) -> bool {
+    matches!(q, Param::LnInertia | Param::InitialSpeed(_) | Param::LnFrictionSmoothing)
 }
 
 /// A closed loop's model with its force parameters from the logged force (`with_force_levels`),
@@ -858,13 +835,11 @@ impl ForceLevels {
     }
 }
 
-/// The χ² distribution's quantile at p = 0.001 for `dof` degrees of freedom: exact for 1 and 2,
-/// Wilson–Hilferty's above (within 2 % of the table).
+/// The χ² distribution's quantile at p = 0.001 for `dof` degrees of freedom: the table's
+/// (`wald_limit`) for 1 and 2, Wilson–Hilferty's above (within 2 % of the table).
 pub fn chi_square_quantile(dof: usize) -> f64 {
-    match dof {
-        0 | 1 => return 3.290_527f64.powi(2), // the standard normal's 0.9995 quantile, squared
-        2 => return -2.0 * 0.001f64.ln(),
-        _ => {}
+    if dof <= 2 {
+        return wald_limit(dof);
     }
     let k = dof as f64;
     let z = 3.090_232; // the standard normal's 0.999 quantile
@@ -907,7 +882,7 @@ fn own_time_scale_share(share: &[f64], residual: &[f64], lengths: &[usize], para
             .iter()
             .flat_map(|run| x[run.clone()].chunks_exact(block).map(|c| c.iter().sum::<f64>() / block as f64))
             .collect();
-        (means.iter().map(|m| m * m).sum::<f64>() / means.len().max(1) as f64).sqrt()
+        super::fit::rms(&means)
     };
     let (signal, noise) = (block_rms(share), block_rms(residual));
     if noise > 0.0 {
@@ -2190,7 +2165,6 @@ pub fn calibrate(
         Some(ee) => prob.at(spec, vec![], ee)?,
         None => prob.fit(spec, vec![], p0, MAX_ITERATIONS)?,
     };
-
     let held = held.map(|h| {
         h.inertia_start = prob.inertia_start;
         &*h

@@ -1338,10 +1338,17 @@ pub const MAX_BROYDEN_UPDATES: usize = 3;
 /// The rms over the Jacobian's rows of the linearised share Σ_j J_ij p_j of the parameters `cols`:
 /// how far they move the output (an effect's levels, judged against the noise).
 pub fn linearised_share(jacobian: &DMatrix<f64>, p: &[f64], cols: &[usize]) -> f64 {
-    let rows = jacobian.nrows().max(1);
-    let sum: f64 =
-        (0..jacobian.nrows()).map(|i| cols.iter().map(|&j| jacobian[(i, j)] * p[j]).sum::<f64>().powi(2)).sum();
-    (sum / rows as f64).sqrt()
+    rms(&linearised_shares(jacobian, p, cols))
+}
+
+/// Root mean square (0 for no values).
+pub fn rms(x: &[f64]) -> f64 {
+    (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
+}
+
+/// The linearised share Σ_j J_ij p_j of the parameters `cols`, row by row.
+pub fn linearised_shares(jacobian: &DMatrix<f64>, p: &[f64], cols: &[usize]) -> Vec<f64> {
+    (0..jacobian.nrows()).map(|i| cols.iter().map(|&j| jacobian[(i, j)] * p[j]).sum()).collect()
 }
 
 pub fn levenberg_marquardt(prob: &Problem, spec: ModelSpec, p0: Vec<f64>, max_iter: usize) -> Result<Fit, String> {

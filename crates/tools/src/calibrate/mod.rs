@@ -389,8 +389,7 @@ fn calibrate_device(
         // each run's own error, so a run (or a segment) that fits worse than the rest shows
         let residual = &outcome.final_fit.residual[offset..offset + lengths[i]];
         offset += lengths[i];
-        j["final_rmse_rad"] =
-            serde_json::json!((residual.iter().map(|e| e * e).sum::<f64>() / residual.len().max(1) as f64).sqrt());
+        j["final_rmse_rad"] = serde_json::json!(fit::rms(residual));
         match conditioning[i] {
             MotorConditioning::BandLimited { edge_hz } => j["input_band_hz"] = serde_json::json!(edge_hz),
             MotorConditioning::Smoothed { half_width_s } => j["input_smoothing_s"] = serde_json::json!(half_width_s),
