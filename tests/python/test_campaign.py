@@ -1,7 +1,9 @@
 """The random-rig campaign (tests/truth/campaign.py): its draws cover the ranges the issue sets, and
 rigs of it that pass keep passing. The campaign itself (300 rigs, or the 30-seed subset with `--ci`)
 is a benchmark, not a test: it prints the pass rate per class."""
+import json
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -136,6 +138,29 @@ def test_rigs_that_pass_keep_passing(tmp_path, seed):
     result = campaign.run_rig(campaign.draw(seed), tmp_path, 120.0)
     assert result["passed"], result["why"]
     assert math.isfinite(result["seconds"])
+
+
+def test_coulomb_friction_is_not_read_as_hysteretic_damping(tmp_path):
+    # campaign rig 180, shortened: sines at two frequencies per temperature through a viscous
+    # transmission, and Coulomb friction. Its dissipation per cycle falls with frequency as hysteretic
+    # damping's does, so the baseline chose that law, and Coulomb friction refitted under it alone left
+    # too much structure to earn its place: nothing was added, 8x the floor (the loop before 2026-11-29)
+    args = ["--declare-inertia", "--seed", "180", "--excitation", "sine", "--temperatures", "40,60",
+            "--frequencies", "1.718,3.436", "--stiffness", "24.2,6.05", "--damping", "0.2185,0.109",
+            "--inertia", "0.00703", "--amplitude", "0.265", "--duration", "5", "--rate", "5000",
+            "--noise", "1.56e-4", "--quantum", "1.41e-3", "--jitter", "0", "--dropout", "0",
+            "--effect", "coulomb_friction=0.0644"]
+    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *args])
+    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "runs"), "--out",
+                          str(tmp_path / "calibration"), "--no-plots"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    report = json.loads((tmp_path / "calibration" / "report.json").read_text())
+    assert [e["effect"] for e in report["added_effects"]] == ["coulomb_friction"], report["added_effects"]
+    assert report["damping_law"]["chosen"] == "viscous", report["damping_law"]
+    coulomb = report["added_effects"][0]["parameters"]["torque_nm"]
+    assert abs(coulomb / 0.0644 - 1) < 0.1, coulomb
+    for g, (k, c) in zip(report["identified"], [(24.2, 0.2185), (6.05, 0.109)]):
+        assert abs(g["stiffness"] / k - 1) < 0.1 and abs(g["damping"] / c - 1) < 0.1, g
 
 
 DRIVE_DRAWS = [campaign.draw_drive(s) for s in range(1, 201)]
