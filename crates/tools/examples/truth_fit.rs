@@ -2,15 +2,33 @@
 //! that missed a better model (the truth's BIC lower than the report's) from runs that cannot tell
 //! the two apart. `cargo run --release -p thermovia-tools --example truth_fit -- RIG_FOLDER`
 //! (a campaign rig: RIG_FOLDER/runs with truth.json, RIG_FOLDER/calibration/report.json).
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
+use serde_json::Value;
 use thermovia_tools::calibrate::{conditioning, data, fit, search, sim};
 
-fn main() -> Result<(), Box<dyn std::error::Error>> {
+type Error = Box<dyn std::error::Error>;
+
+fn main() {
+    if let Err(e) = run() {
+        eprintln!("truth_fit: {e}");
+        std::process::exit(1);
+    }
+}
+
+fn read_json(path: &Path) -> Result<Value, Error> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    Ok(serde_json::from_str(&text).map_err(|e| format!("{}: {e}", path.display()))?)
+}
+
+fn number(v: &Value, what: &str) -> Result<f64, Error> {
+    Ok(v.as_f64().ok_or_else(|| format!("truth.json: {what} is not a number"))?)
+}
+
+fn run() -> Result<(), Error> {
     let rig = PathBuf::from(std::env::args().nth(1).ok_or("usage: truth_fit RIG_FOLDER")?);
-    let truth: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(rig.join("runs/truth.json"))?)?;
-    let report: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(rig.join("calibration/report.json"))?)?;
+    let truth = read_json(&rig.join("runs/truth.json"))?;
+    let report = read_json(&rig.join("calibration/report.json"))?;
     let runs = data::read_inputs_with(&[rig.join("runs")], data::ReadOptions { repair_samples: false })?;
     let (group, temperatures) = conditioning::group_runs(&runs);
     let inputs = runs.iter().map(|r| conditioning::sim_input(r, None).0).collect();
@@ -19,38 +37,40 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let simulator = sim::Simulator::new(fmu, 2)?;
     let mut prob = fit::Problem::new(&simulator, inputs, measured, group, &temperatures)?;
     // the transmission: each temperature's truth K and C (viscous, as the truth model's)
+    let truth_runs = truth["runs"].as_array().ok_or("truth.json: no runs")?;
     let mut p = Vec::new();
     for t in &temperatures {
-        let run = truth["runs"].as_array().unwrap().iter().find(|r| r["temperature_c"].as_f64() == Some(*t)).unwrap();
-        p.push(run["stiffness"].as_f64().unwrap().ln());
-        p.push(run["damping"].as_f64().unwrap().ln());
+        let run = truth_runs
+            .iter()
+            .find(|r| r["temperature_c"].as_f64() == Some(*t))
+            .ok_or_else(|| format!("truth.json: no run at {t} °C"))?;
+        p.push(number(&run["stiffness"], "stiffness")?.ln());
+        p.push(number(&run["damping"], "damping")?.ln());
     }
     let mut effects = Vec::new();
-    let v = |e: &str, k: &str| truth["effects"][e][k].as_f64().unwrap();
-    for (name, _) in truth["effects"].as_object().unwrap() {
+    let empty = serde_json::Map::new();
+    for (name, values) in truth["effects"].as_object().unwrap_or(&empty) {
+        let v = |k: &str| number(&values[k], &format!("{name}.{k}"));
         match name.as_str() {
-            "coulomb_friction" => push(&mut effects, &mut p, fit::Effect::CoulombFriction, &[v(name, "torque_nm")]),
-            "backlash" => push(&mut effects, &mut p, fit::Effect::Backlash, &[v(name, "width_rad")]),
-            "link_damping" => push(&mut effects, &mut p, fit::Effect::LinkDamping, &[v(name, "damping_nms")]),
-            "constant_load" => push(&mut effects, &mut p, fit::Effect::ConstantLoad, &[v(name, "torque_nm")]),
+            "coulomb_friction" => push(&mut effects, &mut p, fit::Effect::CoulombFriction, &[v("torque_nm")?]),
+            "backlash" => push(&mut effects, &mut p, fit::Effect::Backlash, &[v("width_rad")?]),
+            "link_damping" => push(&mut effects, &mut p, fit::Effect::LinkDamping, &[v("damping_nms")?]),
+            "constant_load" => push(&mut effects, &mut p, fit::Effect::ConstantLoad, &[v("torque_nm")?]),
             "gravity" => {
-                let (m, o) = (v(name, "mgl_nm"), v(name, "offset_rad"));
+                let (m, o) = (v("mgl_nm")?, v("offset_rad")?);
                 push(&mut effects, &mut p, fit::Effect::Gravity, &[m * o.cos(), m * o.sin()])
             }
-            "stribeck_friction" => push(
-                &mut effects,
-                &mut p,
-                fit::Effect::StribeckFriction,
-                &[v(name, "torque_nm"), v(name, "velocity").ln()],
-            ),
+            "stribeck_friction" => {
+                push(&mut effects, &mut p, fit::Effect::StribeckFriction, &[v("torque_nm")?, v("velocity")?.ln()])
+            }
             "asymmetric_friction" => {
-                let (cp, cn) = (v(name, "coulomb_positive"), v(name, "coulomb_negative"));
-                let (vp, vn) = (v(name, "viscous_positive"), v(name, "viscous_negative"));
+                let (cp, cn) = (v("coulomb_positive")?, v("coulomb_negative")?);
+                let (vp, vn) = (v("viscous_positive")?, v("viscous_negative")?);
                 push(&mut effects, &mut p, fit::Effect::CoulombFriction, &[(cp + cn) / 2.0]);
                 push(&mut effects, &mut p, fit::Effect::LinkDamping, &[(vp + vn) / 2.0]);
                 push(&mut effects, &mut p, fit::Effect::AsymmetricFriction, &[(cp - cn) / 2.0, (vp - vn) / 2.0]);
             }
-            other => return Err(format!("truth effect {other} not mapped").into()),
+            other => return Err(format!("truth effect {other} is not mapped to the loop's parameters").into()),
         }
     }
     let spec = fit::ModelSpec {

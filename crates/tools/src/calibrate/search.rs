@@ -1037,10 +1037,10 @@ impl DeviceRig<'_, '_> {
         let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
         spec.effects.extend(added.iter().map(|c| c.effect));
         // A law chosen without the effect may be standing in for it (Coulomb friction's dissipation
-        // per cycle falls with frequency as hysteretic damping's does; campaign rigs 180 and 38): a
-        // single candidate is refitted under every structure the data allow, and the lowest BIC is
-        // its refit (refitted under the others only when it fails to earn its place, rig 38 kept a
-        // link damping beside a Stribeck excess that earned its place under the stand-in law).
+        // per cycle falls with frequency as hysteretic damping's does; campaign rig 180): a single
+        // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
+        // Under every one, not only where it fails to earn its place under the current one: on rig 38
+        // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
         let structures: Vec<Structure> = if added.len() == 1 {
             std::iter::once((spec.law, spec.springs))
                 .chain(self.laws.allowed.iter().copied().filter(|&s| s != (spec.law, spec.springs)))
