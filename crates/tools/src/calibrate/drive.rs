@@ -78,6 +78,13 @@ pub fn drive_params(e: DriveEffect) -> &'static [Param] {
     }
 }
 
+/// An effect's levels on a drive: its parameters without a Stribeck speed, which only shapes the
+/// excess (with no excess it has no value of its own, and its logarithm at 0 would be a speed of 1
+/// in the log's unit). The Wald test, the visibility and the removal cost read these.
+fn drive_levels(e: DriveEffect) -> impl Iterator<Item = Param> {
+    drive_params(e).iter().copied().filter(|q| *q != Param::LnStribeckVelocity)
+}
+
 /// Physical values of one simulation, in the file's units.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct DriveModel {
@@ -784,11 +791,7 @@ impl<'a> DriveProblem<'a> {
     /// does not, while a coloured residual (a controller's dither, a model error) keeps its slow
     /// part. An effect is visible above 1.
     pub fn share_over_noise(&self, fit: &DriveFit, effect: DriveEffect) -> f64 {
-        let cols: Vec<usize> = drive_params(effect)
-            .iter()
-            .filter(|q| **q != Param::LnStribeckVelocity)
-            .filter_map(|q| fit.spec.iter().position(|x| x == q))
-            .collect();
+        let cols: Vec<usize> = drive_levels(effect).filter_map(|q| fit.spec.iter().position(|&x| x == q)).collect();
         let rows = fit.jacobian.nrows();
         if cols.is_empty() || rows == 0 {
             return f64::INFINITY;
@@ -1584,15 +1587,19 @@ pub struct DriveDetail {
     pub passed: [bool; 3],
 }
 
+/// The linearised BIC cost of an effect's removal from an output-error fit: its levels at zero (the
+/// effect off), every parameter of it gone (`stepwise::removal_delta_bic`).
+fn removal_cost(m: &DriveFit, e: DriveEffect) -> f64 {
+    let idx: Vec<usize> = drive_levels(e).filter_map(|q| m.spec.iter().position(|&x| x == q)).collect();
+    let removed = drive_params(e).iter().filter(|q| m.spec.contains(q)).count();
+    super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx, removed)
+}
+
 /// Wald statistic θᵀ Σ⁻¹ θ of an effect's levels with the block-sandwich covariance. A Stribeck
 /// speed is left out: it only shapes the excess, and with no excess it has no value to test (its
 /// logarithm against 0 would test a speed of 1 in the log's unit).
 pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
-    let idx: Vec<usize> = drive_params(effect)
-        .iter()
-        .filter(|q| **q != Param::LnStribeckVelocity)
-        .filter_map(|q| fit.spec.iter().position(|x| x == q))
-        .collect();
+    let idx: Vec<usize> = drive_levels(effect).filter_map(|q| fit.spec.iter().position(|&x| x == q)).collect();
     let k = idx.len();
     let theta = DVector::from_iterator(k, idx.iter().map(|&i| fit.p[i]));
     let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(idx[a], idx[b])]);
@@ -2035,7 +2042,7 @@ impl Rig for DriveRig<'_, '_> {
             .iter()
             .map(|&e| {
                 let w = equation_error.map_or_else(|| wald(refit, e), |ee| ee.wald(e));
-                (w, drive_params(e).iter().filter(|q| **q != Param::LnStribeckVelocity).count())
+                (w, drive_levels(e).count())
             })
             .collect();
         let shares: Vec<f64> = added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect();
@@ -2087,8 +2094,7 @@ impl Rig for DriveRig<'_, '_> {
                 .parameters(&spec, self.prob.declared_inertia())
                 .map_or(f64::INFINITY, |without| without.bic - ee.bic);
         }
-        let idx: Vec<usize> = drive_params(e).iter().filter_map(|q| m.spec.iter().position(|x| x == q)).collect();
-        super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx)
+        removal_cost(m, e)
     }
     fn without(&self, m: &DriveFit, e: DriveEffect) -> Option<DriveFit> {
         // the asymmetry and the Stribeck excess are defined over Coulomb friction
@@ -2856,6 +2862,39 @@ pub fn plots(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_stribeck_excess_removal_zeroes_its_level_not_its_speed() {
+        // inertia, viscous, Coulomb friction, a Stribeck excess (level, ln speed): the excess is off
+        // when its level is zero. Forcing ln v to 0 as well read a speed of 1 in the log's unit into
+        // the removal, so its cost moved with the log's speed unit while the fit stayed the same
+        let n = 400;
+        let jacobian = DMatrix::from_fn(n, 5, |i, j| {
+            let t = i as f64 / n as f64;
+            [t.sin(), (3.0 * t).cos(), t * t, (7.0 * t).sin() + 0.3 * t, (5.0 * t).cos() * t][j]
+        });
+        let fit_with_speed = |speed: f64| DriveFit {
+            spec: vec![Param::LnInertia, Param::Viscous, Param::Coulomb, Param::Stribeck, Param::LnStribeckVelocity],
+            effects: vec![DriveEffect::CoulombFriction, DriveEffect::StribeckFriction],
+            p: vec![-4.0, 0.02, 0.5, 0.01, speed.ln()],
+            sims: vec![],
+            residual: vec![],
+            sse: 1e-4,
+            jacobian: jacobian.clone(),
+            covariance: DMatrix::zeros(0, 0),
+            iterations: 0,
+            equation_error: None,
+        };
+        // the same speed in rad/s and in mrad/s: the same fit, so the same cost
+        let (a, b) = (
+            removal_cost(&fit_with_speed(0.05), DriveEffect::StribeckFriction),
+            removal_cost(&fit_with_speed(50.0), DriveEffect::StribeckFriction),
+        );
+        assert!(a.is_finite() && (a - b).abs() <= 1e-9 * a.abs().max(1.0), "{a} against {b}");
+        // and the model loses both parameters: the cost is the level's Δ SSE less two ln n
+        let one_level = super::super::stepwise::removal_delta_bic(&jacobian, &fit_with_speed(0.05).p, 1e-4, &[3], 1);
+        assert!((one_level - a - (n as f64).ln()).abs() <= 1e-9 * a.abs().max(1.0), "{one_level} against {a}");
+    }
 
     /// A friction-like share that holds for each stroke (alternating sign every `stroke` samples)
     /// at `level`, and a residual of white noise of rms 1 (a fixed linear congruential stream).

@@ -322,9 +322,11 @@ fn level_columns(fit: &Fit, n_groups: usize, e: Effect) -> Vec<usize> {
 }
 
 /// The linearised BIC cost of `e`'s removal from `fit`: its levels forced to zero while the rest
-/// re-adjusts (`stepwise::removal_delta_bic`).
+/// re-adjusts, and every parameter of it gone (`stepwise::removal_delta_bic`).
 fn removal_cost(fit: &Fit, n_groups: usize, e: Effect) -> f64 {
-    super::stepwise::removal_delta_bic(&fit.jacobian, &fit.p, fit.sse, &level_columns(fit, n_groups, e))
+    let levels = level_columns(fit, n_groups, e);
+    let removed = if fit.spec.effects.contains(&e) { e.params().len() } else { 0 };
+    super::stepwise::removal_delta_bic(&fit.jacobian, &fit.p, fit.sse, &levels, removed)
 }
 
 /// The effects of `fit` no sample can show: their share of the output below the noise floor.

@@ -180,9 +180,11 @@ pub fn predicted_delta_bic(n: usize, sse_now: f64, gain: f64, k: usize) -> f64 {
     n * ((sse_now - gain) / sse_now.max(1e-300)).max(1e-300).ln() + k as f64 * n.ln()
 }
 
-/// Predicted BIC change of forcing the parameters `idx` of a fit (Jacobian `jacobian`, SSE `sse`, `n`
-/// samples) to zero while the rest re-adjusts, linearised: Δ SSE = θᵀ [(JᵀJ)⁻¹]_θθ⁻¹ θ.
-pub fn removal_delta_bic(jacobian: &DMatrix<f64>, p: &[f64], sse: f64, idx: &[usize]) -> f64 {
+/// Predicted BIC change of removing an effect from a fit (Jacobian `jacobian`, SSE `sse`, `n`
+/// samples), linearised: its levels `idx` forced to zero while the rest re-adjusts, Δ SSE =
+/// θᵀ [(JᵀJ)⁻¹]_θθ⁻¹ θ, and the model `removed` parameters lighter (its levels and the shape
+/// parameters, such as a Stribeck speed, that mean nothing once the levels are zero).
+pub fn removal_delta_bic(jacobian: &DMatrix<f64>, p: &[f64], sse: f64, idx: &[usize], removed: usize) -> f64 {
     if idx.is_empty() {
         return f64::NEG_INFINITY;
     }
@@ -192,7 +194,7 @@ pub fn removal_delta_bic(jacobian: &DMatrix<f64>, p: &[f64], sse: f64, idx: &[us
     let theta = DVector::from_iterator(k, idx.iter().map(|&i| p[i]));
     let delta_sse = (theta.transpose() * spd_inverse(&block) * &theta)[(0, 0)].max(0.0);
     let n = jacobian.nrows() as f64;
-    n * ((sse + delta_sse) / sse.max(1e-300)).ln() - k as f64 * n.ln()
+    n * ((sse + delta_sse) / sse.max(1e-300)).ln() - removed.max(k) as f64 * n.ln()
 }
 
 /// How a refit compares with the model it would replace: BIC and the rig's own evidence.
@@ -984,7 +986,7 @@ mod tests {
         }
         fn removal_delta_bic(&self, m: &Model, e: usize) -> f64 {
             let i = m.cols.iter().position(|&c| c == e).unwrap();
-            removal_delta_bic(&self.design(&m.cols), &m.p, m.sse, &[i])
+            removal_delta_bic(&self.design(&m.cols), &m.p, m.sse, &[i], 1)
         }
         fn without(&self, m: &Model, e: usize) -> Option<Model> {
             Some(self.fit(m.cols.iter().copied().filter(|&c| c != e).collect()))
