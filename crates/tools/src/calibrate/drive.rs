@@ -80,7 +80,8 @@ pub fn drive_params(e: DriveEffect) -> &'static [Param] {
 
 /// An effect's levels on a drive: its parameters without a Stribeck speed, which only shapes the
 /// excess (with no excess it has no value of its own, and its logarithm at 0 would be a speed of 1
-/// in the log's unit). The Wald test, the visibility and the removal cost read these.
+/// in the log's unit). The Wald tests (output and equation error), the visibility, the judge's
+/// degrees of freedom and the removal cost read these.
 fn drive_levels(e: DriveEffect) -> impl Iterator<Item = Param> {
     drive_params(e).iter().copied().filter(|q| *q != Param::LnStribeckVelocity)
 }
@@ -1018,8 +1019,7 @@ impl EquationError {
     /// Wald statistic of an effect's levels (θᵀ Σ⁻¹ θ over the effect's linear parameters), the
     /// smaller of the shared-noise covariance's and the cluster sandwich's.
     pub fn wald(&self, effect: DriveEffect) -> f64 {
-        let idx: Vec<usize> =
-            drive_params(effect).iter().filter_map(|q| self.cols.iter().position(|c| c == q)).collect();
+        let idx: Vec<usize> = drive_levels(effect).filter_map(|q| self.cols.iter().position(|&c| c == q)).collect();
         if idx.is_empty() {
             return 0.0;
         }
@@ -1591,8 +1591,7 @@ pub struct DriveDetail {
 /// effect off), every parameter of it gone (`stepwise::removal_delta_bic`).
 fn removal_cost(m: &DriveFit, e: DriveEffect) -> f64 {
     let idx: Vec<usize> = drive_levels(e).filter_map(|q| m.spec.iter().position(|&x| x == q)).collect();
-    let removed = drive_params(e).iter().filter(|q| m.spec.contains(q)).count();
-    super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx, removed)
+    super::stepwise::removal_delta_bic(&m.jacobian, &m.p, m.sse, &idx, drive_params(e).len())
 }
 
 /// Wald statistic θᵀ Σ⁻¹ θ of an effect's levels with the block-sandwich covariance. A Stribeck
@@ -2869,10 +2868,7 @@ mod tests {
         // when its level is zero. Forcing ln v to 0 as well read a speed of 1 in the log's unit into
         // the removal, so its cost moved with the log's speed unit while the fit stayed the same
         let n = 400;
-        let jacobian = DMatrix::from_fn(n, 5, |i, j| {
-            let t = i as f64 / n as f64;
-            [t.sin(), (3.0 * t).cos(), t * t, (7.0 * t).sin() + 0.3 * t, (5.0 * t).cos() * t][j]
-        });
+        let jacobian = super::super::stepwise::five_smooth_columns(n);
         let fit_with_speed = |speed: f64| DriveFit {
             spec: vec![Param::LnInertia, Param::Viscous, Param::Coulomb, Param::Stribeck, Param::LnStribeckVelocity],
             effects: vec![DriveEffect::CoulombFriction, DriveEffect::StribeckFriction],

@@ -324,9 +324,13 @@ fn level_columns(fit: &Fit, n_groups: usize, e: Effect) -> Vec<usize> {
 /// The linearised BIC cost of `e`'s removal from `fit`: its levels forced to zero while the rest
 /// re-adjusts, and every parameter of it gone (`stepwise::removal_delta_bic`).
 fn removal_cost(fit: &Fit, n_groups: usize, e: Effect) -> f64 {
-    let levels = level_columns(fit, n_groups, e);
-    let removed = if fit.spec.effects.contains(&e) { e.params().len() } else { 0 };
-    super::stepwise::removal_delta_bic(&fit.jacobian, &fit.p, fit.sse, &levels, removed)
+    super::stepwise::removal_delta_bic(
+        &fit.jacobian,
+        &fit.p,
+        fit.sse,
+        &level_columns(fit, n_groups, e),
+        e.params().len(),
+    )
 }
 
 /// The effects of `fit` no sample can show: their share of the output below the noise floor.
@@ -1320,10 +1324,7 @@ mod tests {
         // into the removal, so its cost moved with where the speed sat while the fit (its Jacobian,
         // its SSE) stayed the same
         let n = 400;
-        let jacobian = DMatrix::from_fn(n, 5, |i, j| {
-            let t = i as f64 / n as f64;
-            [t.sin(), (3.0 * t).cos(), t * t, (7.0 * t).sin() + 0.3 * t, (5.0 * t).cos() * t][j]
-        });
+        let jacobian = super::super::stepwise::five_smooth_columns(n);
         let spec = ModelSpec {
             effects: vec![Effect::CoulombFriction, Effect::StribeckFriction],
             law: DampingLaw::Viscous,

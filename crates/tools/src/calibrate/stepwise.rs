@@ -197,6 +197,16 @@ pub fn removal_delta_bic(jacobian: &DMatrix<f64>, p: &[f64], sse: f64, idx: &[us
     n * ((sse + delta_sse) / sse.max(1e-300)).ln() - removed.max(k) as f64 * n.ln()
 }
 
+/// Five smooth, independent columns over `n` samples: a fit's Jacobian for the removal-cost tests of
+/// both rigs (the fit's values are the tests' own).
+#[cfg(test)]
+pub(crate) fn five_smooth_columns(n: usize) -> DMatrix<f64> {
+    DMatrix::from_fn(n, 5, |i, j| {
+        let t = i as f64 / n as f64;
+        [t.sin(), (3.0 * t).cos(), t * t, (7.0 * t).sin() + 0.3 * t, (5.0 * t).cos() * t][j]
+    })
+}
+
 /// How a refit compares with the model it would replace: BIC and the rig's own evidence.
 #[derive(Clone, Debug)]
 pub struct Verdict<D> {
