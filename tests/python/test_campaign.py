@@ -201,6 +201,17 @@ def test_drive_rigs_that_pass_keep_passing(tmp_path, seed):
     assert result["passed"], result["why"]
 
 
+def test_the_reference_driven_rate_is_split_at_the_position_floor(capsys):
+    def result(offset, passed):
+        return {"class": "drive rotary, reference", "passed": passed, "rig": {"friction_offset_floors": offset}}
+    torque_driven = {"class": "drive rotary, torque", "passed": False, "rig": {}}
+    campaign.print_offset_breakdown([result(0.2, False), result(0.99, True), result(1.0, True), result(7.0, False),
+                                     torque_driven])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == ["  reference-driven, friction's offset Fc/kp under the position floor: 1/2 passed",
+                     "  reference-driven, friction's offset Fc/kp over the position floor: 1/2 passed"]
+
+
 def test_a_torque_multisine_reaches_the_rigs_peak_speed(tmp_path):
     # drive rig 13's body (inertia-dominated at the multisine's 0.3-5 Hz): a torque peak of the peak
     # speed's friction alone reached 9 of its 143 rad/s, below its 15 rad/s Stribeck speed

@@ -379,6 +379,10 @@ def run_rig(rig, out, budget):
                 "why": [f"the truth model did not make the runs: {type(e).__name__} {e}"], "rig": rig["rig"]}
     truth = json.loads((data / "truth.json").read_text())
     if drive:
+        if truth.get("controller"):
+            # how far the controller lets friction hold the axis off its reference, in position floors:
+            # under one, the positions barely carry the friction (reported beside the rates, not scored)
+            rig["rig"]["friction_offset_floors"] = rig["rig"]["coulomb"] / truth["controller"]["kp"] / rig["floor"]
         if truth.get("replay_rms") is not None:
             rig["floor"] = max(rig["floor"], truth["replay_rms"])
         return calibrate_and_score(rig, data, result, budget, score_drive)
@@ -461,6 +465,18 @@ def ci_drive_seeds():
     return first_small_seeds(draw_drive, CI_DRIVE_RIGS)
 
 
+def print_offset_breakdown(drive_results):
+    """The reference-driven rigs' pass rate split where friction's tracking offset under the loop,
+    Fc/kp, is under the position floor (the positions barely carry the friction) and over it: what
+    the class's rate is made of. Reported, not scored."""
+    held = [r for r in drive_results if r.get("rig", {}).get("friction_offset_floors") is not None]
+    for name, side in (("under", lambda x: x < 1.0), ("over", lambda x: x >= 1.0)):
+        rs = [r for r in held if side(r["rig"]["friction_offset_floors"])]
+        if rs:
+            print(f"  reference-driven, friction's offset Fc/kp {name} the position floor: "
+                  f"{sum(r['passed'] for r in rs)}/{len(rs)} passed")
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/campaign"), help="folder for the rigs and campaign.json")
@@ -511,6 +527,7 @@ def main(argv=None):
     drive_results = [r for r in results if r["class"].startswith("drive")]
     if drive_results:
         print(f"drive rigs: {100 * sum(r['passed'] for r in drive_results) / len(drive_results):.1f} %")
+        print_offset_breakdown(drive_results)
     kinds = {
         "device": inside,
         "drive": [r for r in results if r["class"].startswith("drive")],
