@@ -407,13 +407,24 @@ fn calibrate_device(
     let harmonics_left = leftover.is_some_and(|r| r > diagnose::NONLINEAR_HARMONIC_LIMIT);
     // a structured residual this far above the data's own noise floor is unexplained even where no
     // linear box or harmonic points at its kind: the library's effects were tried and it stayed.
-    // The floor here is the link sensor's with the motor encoder's count beside it: the model is
-    // driven by the measured motor angle, and while a coarse encoder dwells its reading sits a
-    // fraction of a count off for as long as it dwells, a slow error no conditioning removes
-    // (held-out rig 93: both encoders 2.6e-4 rad a count, the right effects at the truth's own
-    // replay floor, flagged at 2.15x the link's alone)
-    let input_floor = signal::pooled_quantisation_floor(runs.iter().map(|r| &r.motor[..]));
-    let far_above_noise = model_rmse > FAR_ABOVE_NOISE * floor.hypot(input_floor);
+    // The floor here is the link sensor's with what the motor log's own error does to the model
+    // beside it: the measured motor angle drives the model, and while a coarse encoder dwells its
+    // reading sits a fraction of a count off for as long as it dwells, a slow error no conditioning
+    // removes, which a lightly damped link then rings with (`input_error_floor`). The count's
+    // q_m/√12 in its place misjudged it both ways: held-out rig 93 (the right effects, ζ 0.06) sat at
+    // 1.52× the floor it made, outside-library rig 156 at 1.56× (docs/calibration.md)
+    let count_floor = signal::pooled_quantisation_floor(runs.iter().map(|r| &r.motor[..]));
+    // three simulations of the final model, cheaper than a refit: taken where the budget still affords a refit
+    // (a rig at its budget keeps the rule before them, the count's share and its factor, and its report says
+    // so with a null)
+    let simulated = budget
+        .affords(1.0)
+        .then(|| input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing))
+        .flatten();
+    let input_floor = simulated.unwrap_or(count_floor);
+    stepwise::debug(format_args!("input error floor {simulated:?} rad (the count's {count_floor:.4e})"));
+    let factor = if simulated.is_some() { FAR_ABOVE_NOISE } else { FAR_ABOVE_COUNT_FLOOR };
+    let far_above_noise = model_rmse > factor * floor.hypot(input_floor);
     outcome.unexplained = !outcome.final_signatures.white() && (box_beats_model || harmonics_left || far_above_noise);
     report["unexplained"] = serde_json::json!(outcome.unexplained);
     report["residual_white"] = serde_json::json!(outcome.final_signatures.white());
@@ -425,8 +436,9 @@ fn calibrate_device(
         "words": reference::words(model_rmse, trivial.rmse, arx, floor),
         "nonlinear": {"leftover_harmonics_over_noise": leftover, "limit": diagnose::NONLINEAR_HARMONIC_LIMIT,
             "what": "the largest residual harmonic at 2ω, 3ω or 5ω over what white noise at the floor leaves (σ √(2/N)), median over the sinusoidal runs: a nonlinearity the model lacks, in the library or not"},
-        "rule": format!("unexplained when the residual is not white (structure ratio ≥ {}) and either the black box's rms above the noise floor is below the model's by more than a factor {REFERENCE_MARGIN}, or harmonics at 2ω, 3ω or 5ω are left above {} times the noise's, or the model's rms is above {FAR_ABOVE_NOISE} times the noise floor taken with the motor encoder's count (√(σ² + q_m²/12): the measured motor angle drives the model)", diagnose::STRUCTURE_LIMIT, diagnose::NONLINEAR_HARMONIC_LIMIT),
-        "motor_quantisation_floor_rad": input_floor,
+        "rule": format!("unexplained when the residual is not white (structure ratio ≥ {}) and either the black box's rms above the noise floor is below the model's by more than a factor {REFERENCE_MARGIN}, or harmonics at 2ω, 3ω or 5ω are left above {} times the noise's, or the model's rms is above {FAR_ABOVE_NOISE} times the noise floor taken with what the motor log's own error moves the model's link by (input_error_rad; {FAR_ABOVE_COUNT_FLOOR} times the floor taken with the motor count's q_m/√12 where the budget left no time to simulate it and input_error_rad is null: the measured motor angle drives the model)", diagnose::STRUCTURE_LIMIT, diagnose::NONLINEAR_HARMONIC_LIMIT),
+        "input_error_rad": simulated,
+        "motor_quantisation_floor_rad": count_floor,
     });
     if !outcome.unexplained && !outcome.final_signatures.white() {
         report["remaining_structure"] = serde_json::json!(format!(
@@ -481,14 +493,67 @@ fn calibrate_device(
     Ok(Calibration { runs, temperatures, outcome: Some(outcome), drive: None, report, files })
 }
 
+/// How far the motor log's own error moves the final model's link: the model simulated on each run's
+/// motor angle with a fresh draw of the log's error added, conditioned as the run's own was, against
+/// the model on the run itself (rms over every sample; the difference is the fresh draw's alone, which
+/// has the statistics of the error the log already carries). The draw is the encoder's: a count's
+/// rounding, one uniform offset in ±q/2 for each stretch the reading holds (a dwelling encoder's
+/// error holds as long as it dwells), and the noise in front of it. A run of steps dwells a few
+/// times only, so the mean square is taken over [`INPUT_ERROR_DRAWS`] draws, from a fixed seed: the
+/// same runs give the same floor. None when a simulation fails.
+fn input_error_floor(runs: &[data::Run], prob: &fit::Problem, fit: &fit::Fit, smoothing: Option<f64>) -> Option<f64> {
+    let mut rng = synthetic::SplitMix::new(0x5EED_1F10);
+    let mut mean_square = 0.0;
+    for _ in 0..INPUT_ERROR_DRAWS {
+        let inputs: Vec<sim::SimInput> = runs
+            .iter()
+            .zip(&prob.inputs)
+            .map(|(r, input)| {
+                let q = signal::quantum(&r.motor);
+                let total = signal::robust_noise(&r.time, &r.motor);
+                let sigma = (total * total - q * q / 12.0).max(0.0).sqrt();
+                let mut offset = 0.0;
+                let motor: Vec<f64> = r
+                    .motor
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &m)| {
+                        if k == 0 || m != r.motor[k - 1] {
+                            offset = q * (rng.uniform() - 0.5);
+                        }
+                        m + offset + sigma * rng.normal()
+                    })
+                    .collect();
+                let perturbed = data::Run { motor, ..r.clone() };
+                sim::SimInput { motor: sim_input(&perturbed, smoothing).0.motor, ..input.clone() }
+            })
+            .collect();
+        let other = prob.held_out(inputs, prob.measured.clone(), prob.group.clone());
+        let moved = fit::Fit::evaluate(&other, fit.spec.clone(), fit.p.clone())?;
+        let diff: Vec<f64> = moved.residual.iter().zip(&fit.residual).map(|(a, b)| a - b).collect();
+        mean_square += fit::rms(&diff).powi(2) / INPUT_ERROR_DRAWS as f64;
+    }
+    Some(mean_square.sqrt())
+}
+
+/// Draws of the motor log's error that `input_error_floor` averages.
+const INPUT_ERROR_DRAWS: usize = 3;
+
 /// The black box must beat the model's rms above the noise by this factor for the leftover
 /// structure to count as unexplained (a margin for the reference's own fitting freedom).
 const REFERENCE_MARGIN: f64 = 1.1;
 
-/// A final rms error this many times the data's noise floor, with a residual that is not white, is
-/// unexplained whatever the references say (the campaign's pass line is 1.2×; between the two the
-/// references decide).
-const FAR_ABOVE_NOISE: f64 = 2.0;
+/// A final rms error this many times the data's noise floor (the link sensor's with the motor log's
+/// own error, `input_error_floor`), with a residual that is not white, is unexplained whatever the
+/// references say: the line of "explained" is 1.2× the floor, with room for what the floor
+/// leaves out (what the conditioning itself costs a right model, a few draws' spread; measured in
+/// docs/calibration.md); between 1.2× and this the references decide.
+const FAR_ABOVE_NOISE: f64 = 1.5;
+
+/// [`FAR_ABOVE_NOISE`] where the floor takes the motor count's q_m/√12 in place of the simulated
+/// input error (no time left to simulate it): the rule before the simulation, whose floor a right
+/// model could stand 1.52× above (held-out rig 93).
+const FAR_ABOVE_COUNT_FLOOR: f64 = 2.0;
 
 /// The drive loop (drive.rs) on runs driven by torque or by a reference, rigid or linear.
 fn calibrate_drive(
