@@ -502,16 +502,23 @@ fn calibrate_device(
 /// times only, so the mean square is taken over [`INPUT_ERROR_DRAWS`] draws, from a fixed seed: the
 /// same runs give the same floor. None when a simulation fails.
 fn input_error_floor(runs: &[data::Run], prob: &fit::Problem, fit: &fit::Fit, smoothing: Option<f64>) -> Option<f64> {
+    // each run's count and the noise in front of it: the log's, the same for every draw
+    let encoders: Vec<(f64, f64)> = runs
+        .iter()
+        .map(|r| {
+            let q = signal::quantum(&r.motor);
+            let total = signal::robust_noise(&r.time, &r.motor);
+            (q, (total * total - q * q / 12.0).max(0.0).sqrt())
+        })
+        .collect();
     let mut rng = synthetic::SplitMix::new(0x5EED_1F10);
     let mut mean_square = 0.0;
     for _ in 0..INPUT_ERROR_DRAWS {
         let inputs: Vec<sim::SimInput> = runs
             .iter()
             .zip(&prob.inputs)
-            .map(|(r, input)| {
-                let q = signal::quantum(&r.motor);
-                let total = signal::robust_noise(&r.time, &r.motor);
-                let sigma = (total * total - q * q / 12.0).max(0.0).sqrt();
+            .zip(&encoders)
+            .map(|((r, input), &(q, sigma))| {
                 let mut offset = 0.0;
                 let motor: Vec<f64> = r
                     .motor
