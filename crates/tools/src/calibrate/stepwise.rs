@@ -398,32 +398,66 @@ fn backward_step<R: Rig>(
     None
 }
 
-/// Records a swap or a pair tried in a round; its refit becomes the round's winner where it earned its
-/// place with the lowest BIC so far (`winner`: its index in `combinations`).
-fn record_combination<R: Rig>(
-    rig: &R,
-    combinations: &mut Vec<Attempt<R::Effect, R::Detail>>,
-    attempt: Attempt<R::Effect, R::Detail>,
-    refit: R::Model,
-    accepted: &mut Option<R::Model>,
-    winner: &mut Option<usize>,
+/// Records a swap or a pair tried in a round; its refit joins `earned` (with its index in
+/// `combinations`) where it earned its place on the screen.
+fn record_combination<E, D, M>(
+    combinations: &mut Vec<Attempt<E, D>>,
+    attempt: Attempt<E, D>,
+    refit: M,
+    earned: &mut Vec<(usize, M)>,
 ) {
     let keep = attempt.verdict.keep;
     combinations.push(attempt);
-    if keep && accepted.as_ref().is_none_or(|x| rig.bic(&refit) < rig.bic(x)) {
-        *accepted = Some(refit);
-        *winner = Some(combinations.len() - 1);
+    if keep {
+        earned.push((combinations.len() - 1, refit));
     }
 }
 
-/// Of the combinations tried from index `from` on, only the round's winner stays marked kept
-/// (earlier rounds' records are final).
-fn only_the_winner_kept<E, D>(combinations: &mut [Attempt<E, D>], from: usize, winner: Option<usize>) {
-    for (k, c) in combinations.iter_mut().enumerate().skip(from) {
-        if Some(k) != winner {
-            c.verdict.keep = false;
+/// Of the refits that earned their place on the screen (each with its index in the round's
+/// record), the lowest BIC that keeps its place on every sample (`Rig::converge`), best BIC first,
+/// and those after it in line, untried; the ones before it lost their place.
+#[allow(clippy::type_complexity)]
+fn first_to_converge<R: Rig>(
+    rig: &R,
+    current: &R::Model,
+    mut in_line: Vec<(usize, R::Model)>,
+    budget: &Budget,
+    round: usize,
+) -> (Option<(usize, R::Model)>, Vec<(usize, R::Model)>) {
+    in_line.sort_by(|a, b| rig.bic(&a.1).total_cmp(&rig.bic(&b.1)));
+    let mut in_line = in_line.into_iter();
+    let mut tried = 0;
+    while let Some((k, m)) = in_line.next() {
+        // the first in line runs whatever the budget, as a round's winner always has
+        if tried > 0 && !budget.allows("the next in line on every sample") {
+            break;
+        }
+        tried += 1;
+        if let Some(done) = budget.timed(|| rig.converge(current, m, round)) {
+            return (Some((k, done)), in_line.collect());
         }
     }
+    (None, Vec::new())
+}
+
+/// The swaps or pairs of a round (from index `from` of `combinations`) that earned their place on
+/// the screen, run on to convergence best BIC first (`first_to_converge`): the one that keeps its
+/// place is the only one marked kept.
+fn converged_combination<R: Rig>(
+    rig: &R,
+    current: &R::Model,
+    earned: Vec<(usize, R::Model)>,
+    budget: &Budget,
+    round: usize,
+    combinations: &mut [Attempt<R::Effect, R::Detail>],
+    from: usize,
+) -> Option<R::Model> {
+    let (winner, _) = first_to_converge(rig, current, earned, budget, round);
+    let k = winner.as_ref().map(|(k, _)| *k);
+    for (i, c) in combinations.iter_mut().enumerate().skip(from) {
+        c.verdict.keep = Some(i) == k;
+    }
+    winner.map(|(_, m)| m)
 }
 
 /// Whether two models hold the same effects, in any order.
@@ -483,10 +517,9 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             let rankable = rig.rankable(&current);
             // refits are for candidates the ranking cannot tell apart from the best
             let best_score = if rankable { candidates.first().map_or(0.0, |c| c.score) } else { 0.0 };
-            let mut accepted: Option<R::Model> = None;
-            // the round's other single refits that earned their place: the next in line where the
-            // winner goes below the noise as soon as it is in
-            let mut runners_up: Vec<R::Model> = Vec::new();
+            // the round's single refits that earned their place on the screen, with their index in
+            // `round.attempts`
+            let mut earned: Vec<(usize, R::Model)> = Vec::new();
             let mut single = |c: &Ranked<R::Effect>, round: &mut Round<R::Effect, R::State, R::Detail>| {
                 if !budget.allows("the rest of a round's refits") {
                     return false;
@@ -496,11 +529,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 let keep = verdict.keep;
                 round.attempts.push(Attempt { stage: "round", effects: vec![c.effect], removed: vec![], verdict });
                 if keep {
-                    if accepted.as_ref().is_none_or(|a| rig.bic(&refit) < rig.bic(a)) {
-                        runners_up.extend(accepted.replace(refit));
-                    } else {
-                        runners_up.push(refit);
-                    }
+                    earned.push((round.attempts.len() - 1, refit));
                 }
                 true
             };
@@ -532,14 +561,20 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     }
                 }
             }
-            if let Some(f) = &accepted {
-                let last = rig.effects(f).last().copied();
-                for a in round.attempts.iter_mut() {
-                    a.verdict.keep = a.verdict.keep && Some(a.effects[0]) == last;
-                }
+            let round_number = rounds.len() + 1;
+            // The single winner runs on to convergence before any swap or pair is tried: one that
+            // earned its place on the screening share and loses it on every sample leaves the
+            // round to the next single in line and then to the swaps and pairs (fresh rig 263: link
+            // damping won the screen and lost on every sample, and the round ended with no pair
+            // tried, the truth's Coulomb friction and Stribeck excess among them). The singles
+            // left in line after the winner are its runners-up.
+            let (winner, in_line) = first_to_converge(rig, &current, earned, budget, round_number);
+            let mut runners_up: Vec<R::Model> = in_line.into_iter().map(|(_, m)| m).collect();
+            let k = winner.as_ref().map(|(k, _)| *k);
+            for (i, a) in round.attempts.iter_mut().enumerate() {
+                a.verdict.keep = Some(i) == k;
             }
-            // a combination (a swap or a pair) that won this round: its index in `combinations`
-            let mut winner_index = None;
+            let mut accepted = winner.map(|(_, m)| m);
             // Swaps: a candidate whose refit lowered the BIC without earning its place may be held in
             // the valley of an effect that stands in for it (fresh rigs 121 and 143: a backlash for
             // the Stribeck excess, whose refit beside it gained 13 000 and 2 000 in BIC and removed
@@ -560,6 +595,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     .collect();
                 outs.sort_by(|a, b| a.1.total_cmp(&b.1));
                 let first_swap = combinations.len();
+                let mut earned = Vec::new();
                 'swaps: for c in gained.iter().filter_map(|a| candidates.iter().find(|c| c.effect == a.effects[0])) {
                     for &(out, _) in outs.iter().filter(|(e, _)| rig.defined_over(c.effect) != Some(*e)) {
                         if !budget.allows("the rest of the swaps") {
@@ -573,10 +609,11 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                             removed: vec![out],
                             verdict,
                         };
-                        record_combination(rig, &mut combinations, attempt, refit, &mut accepted, &mut winner_index);
+                        record_combination(&mut combinations, attempt, refit, &mut earned);
                     }
                 }
-                only_the_winner_kept(&mut combinations, first_swap, winner_index);
+                accepted =
+                    converged_combination(rig, &current, earned, budget, round_number, &mut combinations, first_swap);
             }
             if accepted.is_none() && shortlist > 0 && budget.allows("pairs of candidates") {
                 let pool: Vec<&Ranked<R::Effect>> =
@@ -594,6 +631,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                         pairs.push((base, e));
                     }
                 }
+                let mut earned = Vec::new();
                 for (a, b) in pairs {
                     if !budget.allows("the rest of the pairs") {
                         break;
@@ -607,20 +645,10 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                         removed: vec![],
                         verdict,
                     };
-                    record_combination(rig, &mut combinations, attempt, refit, &mut accepted, &mut winner_index);
+                    record_combination(&mut combinations, attempt, refit, &mut earned);
                 }
-                only_the_winner_kept(&mut combinations, first_pair, winner_index);
-            }
-            let round_number = rounds.len() + 1;
-            if let Some(f) = accepted.take() {
-                accepted = budget.timed(|| rig.converge(&current, f, round_number));
-                if accepted.is_none() {
-                    if let Some(a) = round.attempts.iter_mut().find(|a| a.verdict.keep) {
-                        a.verdict.keep = false;
-                    } else if let Some(k) = winner_index {
-                        combinations[k].verdict.keep = false;
-                    }
-                }
+                accepted =
+                    converged_combination(rig, &current, earned, budget, round_number, &mut combinations, first_pair);
             }
             let Some(f) = accepted else {
                 rounds.push(round);
@@ -873,6 +901,9 @@ mod tests {
         /// an effect no sample can show whatever its refit gained (the device's visibility reads
         /// the effect's own levels, not what the refit moved beside it)
         invisible: Option<usize>,
+        /// an effect whose refit alone earns its place on the screen and not on every sample
+        /// (`converge` refuses it: the device's link damping on fresh rig 263)
+        screen_only: Option<usize>,
     }
 
     impl Linear {
@@ -988,8 +1019,9 @@ mod tests {
             let keep = self.bic(refit) < self.bic(m) - BIC_MARGIN && self.excess(refit) <= 2.0 / 3.0 * self.excess(m);
             Verdict { keep, bic_before: self.bic(m), bic_after: self.bic(refit), detail: () }
         }
-        fn converge(&self, _m: &Model, winner: Model, _round: usize) -> Option<Model> {
-            Some(winner)
+        fn converge(&self, m: &Model, winner: Model, _round: usize) -> Option<Model> {
+            let added: Vec<usize> = winner.cols.iter().copied().filter(|c| !m.cols.contains(c)).collect();
+            (self.screen_only.is_none_or(|e| added != [e])).then_some(winner)
         }
         fn adopt(&self, m: Model, _round: usize) -> Model {
             m
@@ -1042,6 +1074,7 @@ mod tests {
             overrated: None,
             valley: None,
             invisible: None,
+            screen_only: None,
         };
         let start = r.fit(vec![]);
         (r, start)
@@ -1061,6 +1094,23 @@ mod tests {
         assert_eq!(s.record.rounds[0].candidates[0].effect, 0, "the larger effect ranks first");
         assert_eq!(s.path.len(), 3, "start and two accepted steps");
         assert!(s.record.pruned.is_empty() && s.record.budget_exhausted.is_none());
+    }
+
+    /// A round's single winner that loses its place on every sample leaves the round to the pairs
+    /// (before, the round ended there and the pair the data hold was never tried).
+    #[test]
+    fn a_single_winner_that_does_not_converge_leaves_the_round_to_the_pairs() {
+        let x: Vec<Vec<f64>> = (0..4).map(|k| normals(k + 1, N)).collect();
+        // x0 alone earns its place (the excess 5 → 1); x1 alone does not (5 → 4)
+        let (mut r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + x[1][i]);
+        r.screen_only = Some(0);
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
+        let round = &s.record.rounds[0];
+        assert!(round.attempts.iter().all(|a| !a.verdict.keep), "the single that did not converge is not kept");
+        let pair = s.record.combinations.iter().find(|c| c.verdict.keep).expect("a pair won");
+        assert_eq!(sorted(pair.effects.clone()), vec![0, 1]);
+        assert_eq!(s.path.len(), 2, "start and the pair");
     }
 
     /// An effect that earns its place and then goes below the noise at once (the device's Coulomb
