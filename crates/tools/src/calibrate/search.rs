@@ -1112,7 +1112,8 @@ impl Rig for DeviceRig<'_, '_> {
         !m.sig.white()
     }
     fn rankable(&self, m: &Judged) -> bool {
-        !at_bound(self.prob, &m.fit)
+        // a transmission dragging the link through its damper is no start either (`no_start`)
+        !(0..self.prob.n_groups).any(|g| no_start(self.prob, g, &m.fit.p))
     }
     fn state(&self, m: &Judged) -> Signatures {
         self.with_screen(m, |_, _, s| s.clone())

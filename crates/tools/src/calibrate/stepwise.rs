@@ -547,14 +547,27 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             // the best, not about the rest: those are tried too (fresh rig 162: a Maxwell branch
             // predicted 4 327 and gained 2; the truth's Stribeck excess, predicting 679, was never
             // refitted alone).
+            // Where the ranking is blind (`Rig::rankable`), its predictions say nothing of what a
+            // refit from a start away from the current model finds: every candidate left is tried
+            // (fresh rig 178: a limp, dragging transmission standing in for a 9 mrad backlash, whose
+            // linearised share at zero width predicted no gain; it was never refitted).
             let realised =
                 round.attempts.iter().map(|a| a.verdict.bic_after - a.verdict.bic_before).fold(0.0, f64::min);
-            if shortlist > 0 && !round.attempts.is_empty() && round.attempts.iter().all(|a| !a.verdict.keep) {
+            if shortlist > 0
+                && (!rankable || !round.attempts.is_empty())
+                && round.attempts.iter().all(|a| !a.verdict.keep)
+            {
                 let tried: Vec<R::Effect> = round.attempts.iter().map(|a| a.effects[0]).collect();
+                let inside = rig.effects(&current);
                 for c in candidates
                     .iter()
-                    .filter(|c| !tried.contains(&c.effect) && c.predicted_delta_bic < realised.min(0.0) - BIC_MARGIN)
-                    .take(shortlist)
+                    .filter(|c| {
+                        let promised = c.predicted_delta_bic < realised.min(0.0) - BIC_MARGIN;
+                        // an excess is refitted over its base only (alone it mimics the base)
+                        let based = rig.defined_over(c.effect).is_none_or(|b| inside.contains(&b));
+                        !tried.contains(&c.effect) && (promised || (!rankable && based))
+                    })
+                    .take(if rankable { shortlist } else { candidates.len() })
                 {
                     if !single(c, &mut round) {
                         break;
@@ -904,6 +917,9 @@ mod tests {
         /// an effect whose refit alone earns its place on the screen and not on every sample
         /// (`converge` refuses it: the device's link damping on fresh rig 263)
         screen_only: Option<usize>,
+        /// an effect the linearisation at the current model cannot see (the device's backlash at
+        /// zero width beside a limp transmission: no gain predicted, fresh rig 178)
+        unseen: Option<usize>,
     }
 
     impl Linear {
@@ -974,6 +990,15 @@ mod tests {
                         };
                     }
                     let (aug, beta) = lin.with(&self.design(&[c]));
+                    if self.unseen == Some(c) {
+                        return Ranked {
+                            effect: c,
+                            score: 0.0,
+                            predicted_delta_bic: BIC_MARGIN,
+                            start: vec![0.0],
+                            evidence: String::new(),
+                        };
+                    }
                     if self.overrated == Some(c) {
                         return Ranked {
                             effect: c,
@@ -1075,6 +1100,7 @@ mod tests {
             valley: None,
             invisible: None,
             screen_only: None,
+            unseen: None,
         };
         let start = r.fit(vec![]);
         (r, start)
@@ -1181,6 +1207,23 @@ mod tests {
         assert_eq!(sorted(s.model.cols.clone()), vec![1, 2]);
         let pair = s.record.combinations.iter().find(|c| c.verdict.keep).expect("a kept pair");
         assert_eq!((pair.stage, sorted(pair.effects.clone())), ("pair after a round", vec![1, 2]));
+    }
+
+    /// Where the ranking is blind, a candidate it predicts nothing for is refitted all the same; where
+    /// it is not, the prediction is trusted.
+    #[test]
+    fn a_blind_ranking_leaves_no_candidate_untried() {
+        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 1, N)).collect();
+        let (mut r, start) = rig(x.clone(), |i| 2.0 * x[1][i]);
+        r.unseen = Some(1);
+        let trusted = search(&r, start.clone(), &Budget::seconds(60.0));
+        assert!(trusted.model.cols.is_empty(), "a ranking that sees is trusted: {:?}", trusted.model.cols);
+        r.blind = true;
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(s.model.cols, vec![1]);
+        let kept: Vec<usize> =
+            s.record.rounds[0].attempts.iter().filter(|a| a.verdict.keep).map(|a| a.effects[0]).collect();
+        assert_eq!(kept, vec![1], "found by a single refit of its own");
     }
 
     /// An excess the ranking sees only over its base (the Stribeck excess over Coulomb friction) is
