@@ -123,11 +123,6 @@ fn combination_verdict(
     v
 }
 
-/// Whether some temperature group's stiffness or damping sits on its bound.
-pub fn at_bound(prob: &Problem, fit: &Fit) -> bool {
-    (0..prob.n_groups).any(|g| prob.transmission_at_bound(g, &fit.p))
-}
-
 /// A round of the device's search: the screened residual's signatures, the ranking, the refits
 /// with their [`Evidence`].
 pub type Round = super::stepwise::Round<Effect, Signatures, Evidence>;

@@ -254,9 +254,10 @@ pub trait Rig {
     fn bic(&self, m: &Self::Model) -> f64;
     /// Whether the residual still shows structure the rounds should look for.
     fn structure_left(&self, m: &Self::Model) -> bool;
-    /// False where the linearised ranking is blind (a fit at a bound: a rigid link does not feel a
-    /// small probe): every candidate predicting a gain is then refitted, not only those the
-    /// ranking cannot tell from the best (pairs are formed either way).
+    /// False where the linearised ranking is blind (the device's fit at a bound, where a rigid link
+    /// does not feel a small probe, or dragging the link through its damper): the shortlist then
+    /// takes the candidates predicting a gain whatever their score, and where none of them earns
+    /// its place, every candidate left is refitted (pairs are formed either way).
     fn rankable(&self, m: &Self::Model) -> bool;
     fn state(&self, m: &Self::Model) -> Self::State;
     /// Candidates, best first.
