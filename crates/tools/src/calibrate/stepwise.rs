@@ -454,11 +454,16 @@ fn converged_combination<R: Rig>(
     from: usize,
 ) -> Option<R::Model> {
     let (winner, _) = first_to_converge(rig, current, earned, budget, round);
-    let k = winner.as_ref().map(|(k, _)| *k);
-    for (i, c) in combinations.iter_mut().enumerate().skip(from) {
-        c.verdict.keep = Some(i) == k;
-    }
+    only_the_winner_kept(combinations, from, winner.as_ref().map(|(k, _)| *k));
     winner.map(|(_, m)| m)
+}
+
+/// Of the attempts from index `from` on, only `winner` (an index into `attempts`) stays marked kept:
+/// the others either never earned their place or lost it on every sample.
+fn only_the_winner_kept<E, D>(attempts: &mut [Attempt<E, D>], from: usize, winner: Option<usize>) {
+    for (i, a) in attempts.iter_mut().enumerate().skip(from) {
+        a.verdict.keep = Some(i) == winner;
+    }
 }
 
 /// Whether two models hold the same effects, in any order.
@@ -559,13 +564,12 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 && round.attempts.iter().all(|a| !a.verdict.keep)
             {
                 let tried: Vec<R::Effect> = round.attempts.iter().map(|a| a.effects[0]).collect();
-                let inside = rig.effects(&current);
                 for c in candidates
                     .iter()
                     .filter(|c| {
                         let promised = c.predicted_delta_bic < realised.min(0.0) - BIC_MARGIN;
                         // an excess is refitted over its base only (alone it mimics the base)
-                        let based = rig.defined_over(c.effect).is_none_or(|b| inside.contains(&b));
+                        let based = rig.defined_over(c.effect).is_none_or(|b| effects_before.contains(&b));
                         !tried.contains(&c.effect) && (promised || (!rankable && based))
                     })
                     .take(if rankable { shortlist } else { candidates.len() })
@@ -584,10 +588,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             // left in line after the winner are its runners-up.
             let (winner, in_line) = first_to_converge(rig, &current, earned, budget, round_number);
             let mut runners_up: Vec<R::Model> = in_line.into_iter().map(|(_, m)| m).collect();
-            let k = winner.as_ref().map(|(k, _)| *k);
-            for (i, a) in round.attempts.iter_mut().enumerate() {
-                a.verdict.keep = Some(i) == k;
-            }
+            only_the_winner_kept(&mut round.attempts, 0, winner.as_ref().map(|(k, _)| *k));
             let mut accepted = winner.map(|(_, m)| m);
             // Swaps: a candidate whose refit lowered the BIC without earning its place may be held in
             // the valley of an effect that stands in for it (fresh rigs 121 and 143: a backlash for
