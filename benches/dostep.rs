@@ -34,6 +34,10 @@ struct Regime {
 
 const GRAVITY: (&str, f64) = ("gravity_link_mass", 0.91);
 const FRICTION: (&str, f64) = ("coulomb_friction", 0.05);
+/// A link that sticks and slips (the motor's 2 N·m against 1.7 N·m of friction on a light link):
+/// near rest the friction's slope goes into the exponential steps' linear part.
+const HEAVY_FRICTION: (&str, f64) = ("coulomb_friction", 1.7);
+const LIGHT_LINK: (&str, f64) = ("link_inertia", 0.023);
 const BACKLASH: (&str, f64) = ("backlash_width", 0.01);
 /// The crystallinity on the melting curve both ways (the model before issue 20), for the cost of
 /// the kinetics in the same run.
@@ -103,6 +107,14 @@ const REGIMES: &[Regime] = &[
         heater_w: 0.0,
         time_grid: false,
         params: &[FRICTION],
+    },
+    Regime {
+        label: "Coulomb friction 1.7 N·m, sticking",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 0.0,
+        time_grid: false,
+        params: &[HEAVY_FRICTION, LIGHT_LINK],
     },
     Regime {
         label: "backlash 0.01 rad",

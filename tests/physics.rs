@@ -559,6 +559,8 @@ fn caches_do_not_change_the_trajectory() {
         Params::default(),
         Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, stribeck_friction: 0.02, ..Params::default() },
         Params { backlash_width: 0.01, gravity_link_mass: 0.3, ..Params::default() },
+        // a link that sticks: linearised steps, each damping's matrix exponential built once and kept
+        Params { coulomb_friction: 1.7, link_inertia: 0.023, ..Params::default() },
     ];
     for p in cases {
         let mut a = at_temperature(p.clone(), 35.0);

@@ -128,6 +128,49 @@ pub const SUBSTEP_SLACK: f64 = 1e-9;
 /// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
 const MAX_ETD_LEVEL: u32 = 10;
 
+/// Linearised steps kept at most ([`Model::linearised_etd`]); beyond, the cache starts again. A
+/// link crossing the friction's zone at speed meets slopes all over the grid; a held one, a few.
+const MAX_LINEARISED_STEPS: usize = 4096;
+
+/// What a linearised step is built from besides the parameters: its length, the coupling, the
+/// moduli (bit patterns) and its damping's multiple of the grid.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+struct LinearisedKey {
+    len: u64,
+    coupling: Coupling,
+    moduli: [u64; 3],
+    multiple: u64,
+}
+
+impl LinearisedKey {
+    fn new(c: &Coefficients, len: f64, coupling: Coupling, multiple: u64) -> Self {
+        LinearisedKey {
+            len: len.to_bits(),
+            coupling,
+            moduli: [c.stiffness.to_bits(), c.damping.to_bits(), c.maxwell_stiffness.to_bits()],
+            multiple,
+        }
+    }
+}
+
+/// The linearised step ([`EtdStep::with_link_damping`]) `key` names, its damping `damping` (the
+/// grid's, [`EtdStep::linearised_damping_on_grid`]): built once and kept in `cache`. The key holds
+/// everything the step is built from besides the parameters (a parameter change clears the cache),
+/// so a kept step is the step built afresh, bit for bit, and a restored state continues as it would
+/// have.
+fn linearised_etd<'c>(
+    cache: &'c mut std::collections::HashMap<LinearisedKey, EtdStep>,
+    p: &Params,
+    key: LinearisedKey,
+    c: &Coefficients,
+    damping: f64,
+) -> &'c EtdStep {
+    if cache.len() >= MAX_LINEARISED_STEPS && !cache.contains_key(&key) {
+        cache.clear();
+    }
+    cache.entry(key).or_insert_with(|| EtdStep::with_link_damping(p, c, f64::from_bits(key.len), key.coupling, damping))
+}
+
 /// The exponential Runge–Kutta level nearest the last accepted step: round(log2(key/last)) in
 /// 0..=MAX_ETD_LEVEL (0 without a last step), from the binary exponent of √2·key/last (the
 /// ratio is a power of two whenever the last step was exponential; no libm call).
@@ -214,6 +257,9 @@ pub struct Model {
     contact_steps: Vec<(f64, Coupling, LinearStep)>,
     /// Exponential Runge–Kutta coefficients of those states: (length, coupling, step).
     contact_etd: Vec<(f64, Coupling, EtdStep)>,
+    /// Linearised steps of a link near rest under friction, by what they are built from
+    /// ([`Model::linearised_etd`]).
+    linearised_etd: std::collections::HashMap<LinearisedKey, EtdStep>,
     /// The enthalpy's inverse series about the PCL temperature's current anchor.
     inversion: thermal::InversionCache,
     /// Bounds of the transmission's stiffness, damping and Maxwell stiffness over every PCL
@@ -294,6 +340,7 @@ impl Model {
             etd_steps: Vec::new(),
             contact_steps: Vec::new(),
             contact_etd: Vec::new(),
+            linearised_etd: std::collections::HashMap::new(),
             inversion: thermal::InversionCache::default(),
             torque_bounds: None,
         }
@@ -320,6 +367,7 @@ impl Model {
         self.etd_steps.clear();
         self.contact_steps.clear();
         self.contact_etd.clear();
+        self.linearised_etd.clear();
         self.inversion = thermal::InversionCache::default();
         self.torque_bounds = None;
         self.params.prony = None;
@@ -629,7 +677,17 @@ impl Model {
                 // a link at or near rest under friction: its slope in the linear part
                 (table, Some(damping)) => {
                     let c = if table.is_some() { coefficients } else { Coefficients::ZERO };
-                    let step = EtdStep::with_link_damping(&self.params, &c, len, coupling, damping);
+                    let built;
+                    let (step, damping) = match EtdStep::linearised_damping_on_grid(&self.params, len, damping) {
+                        Some((multiple, on_grid)) => {
+                            let key = LinearisedKey::new(&c, len, coupling, multiple);
+                            (linearised_etd(&mut self.linearised_etd, &self.params, key, &c, on_grid), on_grid)
+                        }
+                        None => {
+                            built = EtdStep::with_link_damping(&self.params, &c, len, coupling, damping);
+                            (&built, damping)
+                        }
+                    };
                     step.step(&self.params, &shifted, u, &s0.linearised(damping, x[mechanics::LINK_SPEED]))
                 }
             };

@@ -110,7 +110,7 @@ pub struct Propagator {
 /// edge (the spring–damper would pull). In every case the mechanics is linear; with backlash the
 /// engaged and clipped states are linear in coordinates shifted by the play's half-width on θm
 /// (see [`Contact`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Coupling {
     Engaged,
     /// No torque; the branch relaxes (q' = −q/λ here: built without moduli; with a relaxing branch
@@ -478,6 +478,19 @@ impl EtdStep {
         a[(LINK_SPEED, LINK_SPEED)] -= p.per_link_inertia(damping);
         let half = phi_blocks(&a, &b, p.per_link_inertia(1.0), 0.5 * h).fixed_rows::<N_STATE>(0).into_owned();
         EtdStep::from_rows(&half, &doubled(&half), c, h)
+    }
+
+    /// [`EtdStep::with_link_damping`]'s damping on a grid: the nearest multiple of
+    /// [`LINEARISED_DAMPING_GRID`]·J_l/h (at least one), as (multiple, damping). Steps on the same
+    /// grid point share one matrix exponential ([`crate::Model`] keeps them). The friction slope's
+    /// distance from the grid point, at most half a spacing (h·|Δslope|/J_l ≤ 1/32), goes to the
+    /// explicit stages, as the slope's change within the step already does. None for a link
+    /// whose speed is prescribed (no inertia to scale by).
+    pub fn linearised_damping_on_grid(p: &Params, h: f64, damping: f64) -> Option<(u64, f64)> {
+        let spacing = LINEARISED_DAMPING_GRID / (h * p.per_link_inertia(1.0));
+        let multiple = (damping / spacing).round().max(1.0);
+        (spacing.is_finite() && spacing > 0.0 && multiple.is_finite() && multiple < u64::MAX as f64)
+            .then_some((multiple as u64, multiple * spacing))
     }
 
     /// The step of length h from the first [`N_STATE`] rows of [`phi_blocks`] at h/2 and h.
@@ -1617,6 +1630,14 @@ fn friction_slope(friction: &Friction, v: f64, vs: f64) -> f64 {
 /// this limit at 0.1 and with a cruder speed bound in its place (the tolerance, not the limit, set
 /// its error); the heavy-friction regime, linearised now, holds 2.1e-7 rad with it at 0.5.
 const LINEARISED_SLOPE_LIMIT: f64 = 0.5;
+
+/// Spacing of the grid a linearised step's damping is rounded to, in h·damping/J_l: 1/16. The
+/// rounding leaves the explicit stages h·|Δslope|/J_l ≤ 1/32 to carry, against the 0.5 that
+/// [`LINEARISED_SLOPE_LIMIT`] allows them; and a link held by friction (the slope at its steepest,
+/// step after step) reuses one matrix exponential instead of building one per step. Measured
+/// (2026-11-29): the matrix exponentials were half the calibration's time on campaign rig 252
+/// (1.4 N·m of friction on 0.048 kg·m², motor steps); benches/dostep.rs has the regime.
+pub const LINEARISED_DAMPING_GRID: f64 = 1.0 / 16.0;
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
 pub fn link_gravity(p: &Params, link_angle: f64) -> f64 {
