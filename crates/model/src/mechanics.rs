@@ -483,9 +483,9 @@ impl EtdStep {
     /// [`EtdStep::with_link_damping`]'s damping on a grid: the nearest multiple of
     /// [`LINEARISED_DAMPING_GRID`]·J_l/h (at least one), as (multiple, damping). Steps on the same
     /// grid point share one matrix exponential ([`crate::Model`] keeps them). The friction slope's
-    /// distance from the grid point, at most half a spacing (h·|Δslope|/J_l ≤ 1/32), goes to the
-    /// explicit stages, as the slope's change within the step already does. None for a link
-    /// whose speed is prescribed (no inertia to scale by).
+    /// distance from the grid point, at most half a spacing, goes to the explicit stages, as the
+    /// slope's change within the step already does. None for a link whose speed is prescribed (no
+    /// inertia to scale by).
     pub fn linearised_damping_on_grid(p: &Params, h: f64, damping: f64) -> Option<(u64, f64)> {
         let spacing = LINEARISED_DAMPING_GRID / (h * p.per_link_inertia(1.0));
         let multiple = (damping / spacing).round().max(1.0);
@@ -1623,8 +1623,10 @@ pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep:
 }
 
 /// Explicit steps a sub-step may need before the friction's slope goes into the linear part. A
-/// linearised step builds a matrix exponential of its own and is held to the tighter tolerance,
-/// so it pays only where the explicit steps are many: measured on a 0.52 Hz prescribed sine,
+/// linearised step builds a matrix exponential of its own (kept for the next step that meets the
+/// same slope, [`LINEARISED_DAMPING_GRID`]: a link crossing the zone at speed meets a new one
+/// each step) and is held to the tighter tolerance, so it pays only where the explicit steps are
+/// many (before the exponentials were kept): measured on a 0.52 Hz prescribed sine,
 /// 2 ms steps, J_l = 0.023 kg·m², 10.4 s, the model alone (2026-11-27): 0.2 N·m (87 explicit
 /// steps a sub-step) 7.4 ms explicit, 16.8 ms linearised; 1.7 N·m (739) 432 ms explicit (2.2e6
 /// attempted steps), 71–80 ms linearised (3e4–6e4).
@@ -1659,13 +1661,15 @@ fn friction_slope(friction: &Friction, v: f64) -> f64 {
 /// its error); the heavy-friction regime, linearised now, holds 2.1e-7 rad with it at 0.5.
 const LINEARISED_SLOPE_LIMIT: f64 = 0.5;
 
-/// Spacing of the grid a linearised step's damping is rounded to, in h·damping/J_l: 1/16. The
-/// rounding leaves the explicit stages h·|Δslope|/J_l ≤ 1/32 to carry, against the 0.5 that
-/// [`LINEARISED_SLOPE_LIMIT`] allows them; and a link held by friction (the slope at its steepest,
-/// step after step) reuses one matrix exponential instead of building one per step. Measured
-/// (2026-11-29): the matrix exponentials were half the calibration's time on campaign rig 252
-/// (1.4 N·m of friction on 0.048 kg·m², motor steps); benches/dostep.rs has the regime.
-pub const LINEARISED_DAMPING_GRID: f64 = 1.0 / 16.0;
+/// Spacing of the grid a linearised step's damping is rounded to, in h·damping/J_l: 2^-20, far
+/// below what the step's error control feels, so the grid only names a damping the step has met
+/// before. A link held by friction meets one slope (its steepest) step after step, and reuses one
+/// matrix exponential instead of building one per step. Measured (2026-11-29, a 1.7 N·m friction
+/// on a 0.023 kg·m² link, torque-driven, 250 000 steps of 1 ms): 8.0 µs a step before, 0.96 µs
+/// with this grid and the slope in closed form ([`Friction::slope`]); a coarser grid costs
+/// attempted steps, the rounding's share going to the explicit stages at the tight tolerance
+/// (1/16: 2.3e6 attempts, 3.8 µs; 1/1024: 8.2e5, 1.2 µs; 2^-20: 6.0e5, as with no rounding).
+pub const LINEARISED_DAMPING_GRID: f64 = 1.0 / 1_048_576.0;
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
 pub fn link_gravity(p: &Params, link_angle: f64) -> f64 {
