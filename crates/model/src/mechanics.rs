@@ -1661,15 +1661,15 @@ fn friction_slope(friction: &Friction, v: f64) -> f64 {
 /// its error); the heavy-friction regime, linearised now, holds 2.1e-7 rad with it at 0.5.
 const LINEARISED_SLOPE_LIMIT: f64 = 0.5;
 
-/// Spacing of the grid a linearised step's damping is rounded to, in h·damping/J_l: 2^-20, far
-/// below what the step's error control feels, so the grid only names a damping the step has met
-/// before. A link held by friction meets one slope (its steepest) step after step, and reuses one
-/// matrix exponential instead of building one per step. Measured (2026-11-29, a 1.7 N·m friction
-/// on a 0.023 kg·m² link, torque-driven, 250 000 steps of 1 ms): 8.0 µs a step before, 0.96 µs
-/// with this grid and the slope in closed form ([`Friction::slope`]); a coarser grid costs
-/// attempted steps, the rounding's share going to the explicit stages at the tight tolerance
-/// (1/16: 2.3e6 attempts, 3.8 µs; 1/1024: 8.2e5, 1.2 µs; 2^-20: 6.0e5, as with no rounding).
-pub const LINEARISED_DAMPING_GRID: f64 = 1.0 / 1_048_576.0;
+/// Spacing of the grid a linearised step's damping is rounded to, in h·damping/J_l: 1/128. The
+/// grid names the dampings a step meets again (a link its friction holds creeps, and its slope
+/// moves with the torque it holds); the rounding's share goes to the explicit stages at the tight
+/// tolerance and costs attempted steps. Measured (2026-11-29): on campaign rigs 2 and 3 (each run
+/// alone, the whole calibration) 38.5 and 38.7 s before; with the grid at 1/16 –, 13.8 s; 1/64
+/// 13.6, 11.4 s; 1/128 14.3, 13.0 s; 1/256 15.6, 14.5 s; 2^-20 (no reuse there) –, 42.1 s. On
+/// examples/sticking.rs (a link at rest under 1.7 N·m) 8.1 µs a step before; 1/16 3.8, 1/64 2.7,
+/// 1/128 2.1, 1/256 1.6 and 2^-20 0.96 µs.
+pub const LINEARISED_DAMPING_GRID: f64 = 1.0 / 128.0;
 
 /// Gravity on a link in a vertical plane, hanging at `gravity_offset`.
 pub fn link_gravity(p: &Params, link_angle: f64) -> f64 {
