@@ -128,8 +128,9 @@ pub const SUBSTEP_SLACK: f64 = 1e-9;
 /// Finest exponential Runge–Kutta sub-step: the communication sub-step / 2^MAX_ETD_LEVEL.
 const MAX_ETD_LEVEL: u32 = 10;
 
-/// Linearised steps kept at most ([`Model::linearised_etd`]); beyond, the cache starts again. A
-/// link crossing the friction's zone at speed meets slopes all over the grid; a held one, a few.
+/// Linearised steps kept at most ([`linearised_etd`]); beyond, the cache starts again. A link
+/// crossing the friction's zone at speed meets slopes all over the grid; a held one returns to the
+/// same ones.
 const MAX_LINEARISED_STEPS: usize = 4096;
 
 /// What a linearised step is built from besides the parameters: its length, the coupling, the
@@ -160,7 +161,7 @@ impl LinearisedKey {
 /// afresh, bit for bit, and a restored state continues as it would have. Steps of other moduli are
 /// not met again while the PCL heats or cools: the cache holds the moduli of the last linearised
 /// step only (`last_moduli`), and a step whose moduli differ from the last one's is not kept (a
-/// heating link's steps, kept, cost 7 % of its step time in hashing and memory for no reuse).
+/// heating link's steps, kept, cost 4–7 % of its step time in hashing and memory for no reuse).
 #[inline(never)]
 fn linearised_etd<'c>(
     cache: &'c mut std::collections::HashMap<LinearisedKey, EtdStep>,
@@ -273,7 +274,7 @@ pub struct Model {
     /// Exponential Runge–Kutta coefficients of those states: (length, coupling, step).
     contact_etd: Vec<(f64, Coupling, EtdStep)>,
     /// Linearised steps of a link near rest under friction, by what they are built from
-    /// ([`Model::linearised_etd`]).
+    /// ([`linearised_etd`]).
     linearised_etd: std::collections::HashMap<LinearisedKey, EtdStep>,
     /// The moduli (bit patterns) of the last linearised step ([`linearised_etd`]).
     linearised_moduli: [u64; 3],
