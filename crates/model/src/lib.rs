@@ -696,22 +696,19 @@ impl Model {
                 // a link at or near rest under friction: its slope in the linear part
                 (table, Some(damping)) => {
                     let c = if table.is_some() { coefficients } else { Coefficients::ZERO };
+                    let on_grid = EtdStep::linearised_damping_on_grid(&self.params, len, damping);
+                    let damping = on_grid.map_or(damping, |(_, d)| d);
+                    let kept = on_grid.and_then(|(multiple, _)| {
+                        let key = LinearisedKey::new(&c, len, coupling, multiple);
+                        let cache = &mut self.linearised_etd;
+                        linearised_etd(cache, &mut self.linearised_moduli, &self.params, key, &c, damping)
+                    });
                     let built;
-                    let (step, damping) = match EtdStep::linearised_damping_on_grid(&self.params, len, damping) {
-                        Some((multiple, on_grid)) => {
-                            let key = LinearisedKey::new(&c, len, coupling, multiple);
-                            let kept = &mut self.linearised_etd;
-                            match linearised_etd(kept, &mut self.linearised_moduli, &self.params, key, &c, on_grid) {
-                                Some(step) => (step, on_grid),
-                                None => {
-                                    built = EtdStep::with_link_damping(&self.params, &c, len, coupling, on_grid);
-                                    (&built, on_grid)
-                                }
-                            }
-                        }
+                    let step = match kept {
+                        Some(step) => step,
                         None => {
                             built = EtdStep::with_link_damping(&self.params, &c, len, coupling, damping);
-                            (&built, damping)
+                            &built
                         }
                     };
                     step.step(&self.params, &shifted, u, &s0.linearised(damping, x[mechanics::LINK_SPEED]))

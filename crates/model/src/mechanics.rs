@@ -856,7 +856,7 @@ impl EtdStep {
                 // from the start's; it must keep h·|Δslope|/J_l within LINEARISED_SLOPE_LIMIT
                 let h_per_j = p.per_link_inertia(self.length());
                 let off = speeds.iter().any(|&v| {
-                    let change = friction_slope(torque.friction, v) - torque.linearised;
+                    let change = torque.friction.slope(v) - torque.linearised;
                     let moved = h_per_j * change.abs();
                     moved.is_nan() || moved > LINEARISED_SLOPE_LIMIT
                 });
@@ -1541,9 +1541,8 @@ impl Friction {
         }
         -level * sign - self.coulomb_asymmetry * sign * sign - self.viscous_asymmetry * sign * link_speed
     }
-}
 
-impl Friction {
+    /// −dτ_f/dθl' of the friction at `v`, N·m·s/rad (a damping where positive):
     /// −d[`Friction::at`]/dv in closed form, one tanh (a central difference took two): with the
     /// smoothed sign S = tanh(v/v_s), S' = (1 − S²)/v_s (0 beyond the sign's zone, where S is ±1
     /// exactly), and the level L = F_c + F_s e^{−(v/v_st)²},
@@ -1618,7 +1617,7 @@ pub fn friction_linearisation(p: &Params, friction: &Friction, v0: f64, substep:
     if vs.is_nan() || vs <= 0.0 || v0.abs() >= SIGN_SATURATION * vs || explicit_is_cheaper {
         return None;
     }
-    let slope = friction_slope(friction, v0);
+    let slope = friction.slope(v0);
     (slope.is_finite() && slope > 0.0).then_some(slope)
 }
 
@@ -1646,11 +1645,6 @@ const EXPLICIT_STEPS_BEFORE_LINEARISING_HELD: f64 = 16.0;
 /// τ up to 0.9999 F. (At 1·v_s, τ ≤ 0.76 F only: tests/physics.rs's held link still took 189
 /// attempted steps per communication step, 18 at 5·v_s.)
 const HELD_SPEED: f64 = 5.0;
-
-/// −dτ_f/dθl' of the friction at `v`, N·m·s/rad: a damping where positive ([`Friction::slope`]).
-fn friction_slope(friction: &Friction, v: f64) -> f64 {
-    friction.slope(v)
-}
 
 /// How far a linearised step's stages may move the friction's slope from the one its linear part
 /// carries: h·|Δslope|/J_l at most this (the explicit stages' rule allows 0.1 of the whole slope;
