@@ -47,13 +47,13 @@ fn top_frequency(r: &Run) -> f64 {
     }
 }
 
-/// The motor angle's band reaches at most this many times its top frequency (`top_frequency`), its
-/// half-power point there (`band_edge_cap`): the passband of the smoothing the band fades into at
-/// its ends (a quintic Savitzky–Golay window of half-width 0.1 s over the top frequency passes up
-/// to about ten times it, Schafer 2011). The noise alone does not set the edge: an encoder's error
-/// near a sinusoid's turns, where it dwells on a count, is no white noise, and up to 13 Hz of it
-/// (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white level; passed to a
-/// never-pulling backlash it left the fit at 2.2× its noise floor.
+/// A sinusoidal motor angle's band reaches at most this many times its frequency, its half-power
+/// point there (`band_edge_cap`): the passband of the smoothing the band fades into at its ends (a
+/// quintic Savitzky–Golay window of half-width 0.1 s over the top frequency passes up to about ten
+/// times it, Schafer 2011); other runs are not capped (`model_motor`). The noise alone does not set
+/// a sinusoid's edge: an encoder's error near its turns, where it dwells on a count, is no white
+/// noise, and up to 13 Hz of it (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white
+/// level; passed to a never-pulling backlash it left the fit at 2.2× its noise floor.
 pub const BAND_TOP_FACTOR: f64 = 10.0;
 
 /// The highest edge the band limit may take for a run whose top frequency is `top_hz`: the band's
@@ -124,8 +124,8 @@ pub enum MotorConditioning {
 }
 
 /// The motor angle that drives the model, and how it was conditioned (`sim_input`): with
-/// `smoothing_seconds`, smoothed; else band-limited to its motion (`signal::band_limited`, the edge
-/// capped by `band_edge_cap`) and faded into the smoothing within one period of the edge of either
+/// `smoothing_seconds`, smoothed; else band-limited to its motion (`signal::band_limited`, a
+/// sinusoid's edge capped by `band_edge_cap`) and faded into the smoothing within one period of the edge of either
 /// end, where the band limit's reflection is a guess (raw samples there let a never-pulling
 /// backlash take a kick that stays in its play: 3.7× the noise floor on a synthetic backlash rig).
 /// Band-limited rather than smoothed by default: on the campaign's CI subset, device rigs inside
@@ -136,8 +136,14 @@ fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorCondi
     let half = smoothing_half_width(r, smoothing_seconds);
     let smoothed = smooth(&r.time, &r.motor, half);
     if smoothing_seconds.is_none() {
-        let cap = band_edge_cap(top_frequency(r));
-        if let Some((limited, edge_hz)) = band_limited(&r.time, &r.motor, (cap > 0.0).then_some(cap)) {
+        // A sinusoid's edge is capped where its smoothing's passband ends (`band_edge_cap`): at its
+        // turns the encoder dwells on a count, an error the white-noise rule cannot see. Steps and
+        // multisines have no top frequency to cap at: three times the rms frequency put the edge
+        // under the motion that rings the link (campaign rig 243, steps: 7.3 Hz on a 7.3 Hz link,
+        // 1.24× the floor with every parameter within 0.4 %; uncapped 1.02×), so theirs is the noise's.
+        let sinusoid = super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz);
+        let cap = sinusoid.then(|| band_edge_cap(r.frequency_hz)).filter(|&cap| cap > 0.0);
+        if let Some((limited, edge_hz)) = band_limited(&r.time, &r.motor, cap) {
             return (fade_ends(&r.time, &limited, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
         }
     }
@@ -155,5 +161,50 @@ pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
     match super::signal::start_speed(t, x, most) {
         Some((v, se)) if v.abs() > 3.0 * se => v,
         _ => 0.0,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::signal::rms_frequency;
+
+    /// A run read from a file as `calibrate` reads it: the motor angle `motor(t)` on a 20 000-count
+    /// encoder at 2 kHz for 20 s, the link at rest.
+    fn run_of(name: &str, motor: impl Fn(f64) -> f64) -> Run {
+        let q = 2.0 * std::f64::consts::PI / 20_000.0;
+        let mut text = String::from("# temperature_c=22\ntime_s,motor_angle_rad,link_angle_rad\n");
+        for k in 0..40_000 {
+            let t = k as f64 * 5e-4;
+            text += &format!("{t},{},0\n", (motor(t) / q).round() * q);
+        }
+        let path = std::env::temp_dir().join(format!("thermovia-conditioning-{}-{name}.csv", std::process::id()));
+        std::fs::write(&path, text).unwrap();
+        let run = super::super::data::read_run(&path).unwrap();
+        std::fs::remove_file(&path).unwrap();
+        run
+    }
+
+    fn edge(r: &Run) -> f64 {
+        match sim_input(r, None).1 {
+            MotorConditioning::BandLimited { edge_hz } => edge_hz,
+            other => panic!("not band-limited: {other:?}"),
+        }
+    }
+
+    #[test]
+    fn only_a_sinusoids_band_is_capped_at_its_smoothings_passband() {
+        // steps of 0.3 rad every 2 s, each a first-order approach over 50 ms: their content reaches
+        // far past three times their rms frequency, where the cap of a sinusoid would put the edge
+        let steps = run_of("steps", |t| {
+            let (k, s) = ((t / 2.0).floor(), t % 2.0);
+            let level = |k: f64| if k as i64 % 2 == 0 { 0.3 } else { -0.3 };
+            level(k - 1.0) + (level(k) - level(k - 1.0)) * (1.0 - (-s / 0.05).exp())
+        });
+        let old_cap = band_edge_cap(3.0 * rms_frequency(&steps.time, &steps.motor));
+        assert!(edge(&steps) > 2.0 * old_cap, "steps' edge {} Hz against {old_cap} Hz", edge(&steps));
+        // a sine's edge stays at its cap, whatever the encoder's dwell error leaves above the noise
+        let sine = run_of("sine", |t| 0.3 * (2.0 * std::f64::consts::PI * 0.5 * t).sin());
+        assert!(edge(&sine) <= band_edge_cap(sine.frequency_hz) * (1.0 + 1e-9), "sine's edge {}", edge(&sine));
     }
 }

@@ -73,7 +73,7 @@ pub struct CalibrateArgs {
     /// Smooth the measured motor angle instead of band-limiting it: the half-width in seconds of a
     /// zero-phase quintic Savitzky–Golay window (0: the raw samples). Default: per run, band-limited
     /// to its motion, zero phase, flat up to where its variance falls to twice its white noise's
-    /// (the band's half-power point at most ten times the run's top frequency), zero at twice that
+    /// (a sinusoid's half-power point at most ten times its frequency), zero at twice that
     /// (runs[].input_band_hz), so a coarse motor encoder's steps do not ring the model's resonance;
     /// off when the motor angle carries no noise.
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
