@@ -226,6 +226,13 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         })
         .collect();
     let record = record_json(o);
+    let mut forms = equivalent_forms(&added);
+    let softest = (0..prob.n_groups).map(|g| o.final_fit.p[2 * g].exp()).fold(f64::INFINITY, f64::min);
+    let links: Vec<&[f64]> = runs.iter().map(|r| &r.link[..]).collect();
+    let floor = o.final_signatures.noise_floor;
+    if let (Some(form), Value::Array(list)) = (gravity_offset_form(&added, &links, softest, floor), &mut forms) {
+        list.push(form);
+    }
     json!({
         "runs": runs_json,
         "baseline": metrics(prob, &o.baseline),
@@ -234,7 +241,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "final": metrics(prob, &o.final_fit),
         "unexplained": o.unexplained,
         "pruned_effects": record["pruned_effects"],
-        "equivalent_forms": equivalent_forms(&added),
+        "equivalent_forms": forms,
         "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
         "plausibility": prob.torque_scale().map(|t| json!({
@@ -702,6 +709,59 @@ fn magnitude_key(effect: &str) -> Option<&'static str> {
     }
 }
 
+/// Gravity hanging at an offset θ0, −A sin(θ − θ0) = −A cos θ0 sin θ + A sin θ0 cos θ, is over a
+/// link's measured angles gravity of A cos θ0 hanging at 0 with a constant load of A sin θ0 times
+/// the mean of cos θ there, less a torque A sin θ0 (cos θ − its mean) that a small range keeps
+/// small: the form with the load has one parameter more for the same forces. Given (device
+/// reports) where that torque, rms over the measured `links`, moves the link through the softest
+/// fitted `stiffness` by no more than the noise `floor`: the runs cannot tell the two apart, so
+/// the BIC keeps the offset, and a truth with a load and an upright link reads the same.
+pub fn gravity_offset_form(added: &[Value], links: &[&[f64]], stiffness: f64, floor: f64) -> Option<Value> {
+    let param =
+        |name: &str, key: &str| added.iter().find(|e| e["effect"] == name).and_then(|e| e["parameters"][key].as_f64());
+    let (mgl, offset) = (param("gravity", "mgl_nm")?, param("gravity", "offset_rad")?);
+    let (upright, sideways) = (mgl * offset.cos(), mgl * offset.sin());
+    let n = links.iter().map(|l| l.len()).sum::<usize>();
+    if !(upright > 0.0 && sideways != 0.0 && n > 0 && stiffness > 0.0) {
+        return None;
+    }
+    let cosines = || links.iter().flat_map(|l| l.iter().map(|t| t.cos()));
+    let mean = cosines().sum::<f64>() / n as f64;
+    let spread = (cosines().map(|c| (c - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let (torque, moved) = (sideways.abs() * spread, sideways.abs() * spread / stiffness);
+    if !(moved <= floor) {
+        return None;
+    }
+    let load_now = param("constant_load", "torque_nm");
+    let load = sideways * mean + load_now.unwrap_or(0.0);
+    let (lo, hi) =
+        links.iter().flat_map(|l| l.iter()).fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &t| (a.min(t), b.max(t)));
+    let mut found = json!({"gravity": {"mgl_nm": mgl, "offset_rad": offset}});
+    if let Some(l) = load_now {
+        found["constant_load"] = json!({"torque_nm": l});
+    }
+    let note = format!(
+        "Equivalent form: gravity of {} N.m hanging at {} rad is, over the link's measured angles ({} to {} rad), gravity \
+         of {} N.m hanging at 0 with a constant load of {} N.m on the link: the two differ by {} N.m rms, which moves the \
+         link by about {} rad against a noise floor of {} rad. The runs cannot tell the two apart; the search kept the \
+         form with the offset (one parameter fewer).",
+        short(mgl),
+        short(offset),
+        short(lo),
+        short(hi),
+        short(upright),
+        short(load),
+        short(torque),
+        short(moved),
+        short(floor),
+    );
+    Some(json!({
+        "found": found,
+        "equivalent": {"gravity": {"mgl_nm": upright, "offset_rad": 0.0}, "constant_load": {"torque_nm": load}},
+        "note": note,
+    }))
+}
+
 /// Effect sets the data cannot tell apart, for `added_effects` (interfaces.md `equivalent_forms`).
 /// Asymmetric Coulomb friction, levels F+ forward and F− backward, takes −F+ from a link moving
 /// forward and +F− from one moving back: that is symmetric friction (F+ + F−)/2 plus a constant load
@@ -959,6 +1019,34 @@ mod tests {
         assert_eq!(forms[1]["found"]["constant_load"]["torque_nm"], 0.002);
         assert_eq!(forms.as_array().unwrap().len(), 2);
         assert_eq!(equivalent_forms(&added[1..]).as_array().unwrap().len(), 0);
+    }
+
+    #[test]
+    fn gravity_at_an_offset_is_reported_with_its_load_form_where_the_noise_hides_the_difference() {
+        let added = vec![
+            json!({"effect": "gravity", "parameters": {"mgl_nm": 1.0, "offset_rad": 0.2}}),
+            json!({"effect": "constant_load", "parameters": {"torque_nm": 0.01}}),
+        ];
+        let link: Vec<f64> = (0..=100).map(|k| -0.05 + 0.001 * k as f64).collect();
+        let form = gravity_offset_form(&added, &[&link], 10.0, 1e-5).expect("a small range hides the difference");
+        let (mgl, load) = (
+            form["equivalent"]["gravity"]["mgl_nm"].as_f64().unwrap(),
+            form["equivalent"]["constant_load"]["torque_nm"].as_f64().unwrap(),
+        );
+        assert_eq!(form["equivalent"]["gravity"]["offset_rad"], 0.0);
+        assert_eq!(form["found"]["constant_load"]["torque_nm"], 0.01);
+        // the same torque on the link, −A sin(θ − θ0) + L0 against −A' sin θ + L, to the cos θ term's spread
+        for &t in &link {
+            let (found, equivalent) = (-(t - 0.2f64).sin() + 0.01, -mgl * t.sin() + load);
+            assert!((found - equivalent).abs() < 0.2f64.sin() * 1.3e-3, "at {t}: {found} against {equivalent}");
+        }
+        assert!(form["note"].as_str().unwrap().contains("hanging at 0.2 rad"), "{}", form["note"]);
+        // a floor under what the difference moves the link by, a link hanging at 0, or one upside down: no form
+        assert!(gravity_offset_form(&added, &[&link], 10.0, 1e-6).is_none());
+        let hanging =
+            |offset: f64| vec![json!({"effect": "gravity", "parameters": {"mgl_nm": 1.0, "offset_rad": offset}})];
+        assert!(gravity_offset_form(&hanging(0.0), &[&link], 10.0, 1e-5).is_none());
+        assert!(gravity_offset_form(&hanging(3.0), &[&link], 10.0, 1e-5).is_none());
     }
 
     #[test]
