@@ -740,11 +740,16 @@ pub fn gravity_offset_form(added: &[Value], links: &[&[f64]], stiffness: f64, fl
     if let Some(l) = load_now {
         found["constant_load"] = json!({"torque_nm": l});
     }
+    // with a load found beside it, the offset is the parameter too many
+    let kept = if load_now.is_some() {
+        "the search kept both the offset and a load, which over this range act as one"
+    } else {
+        "the search kept the form with the offset (one parameter fewer)"
+    };
     let note = format!(
         "Equivalent form: gravity of {} N.m hanging at {} rad is, over the link's measured angles ({} to {} rad), gravity \
          of {} N.m hanging at 0 with a constant load of {} N.m on the link: the two differ by {} N.m rms, which moves the \
-         link by about {} rad against a noise floor of {} rad. The runs cannot tell the two apart; the search kept the \
-         form with the offset (one parameter fewer).",
+         link by about {} rad against a noise floor of {} rad. The runs cannot tell the two apart; {kept}.",
         short(mgl),
         short(offset),
         short(lo),
@@ -1041,6 +1046,9 @@ mod tests {
             assert!((found - equivalent).abs() < 0.2f64.sin() * 1.3e-3, "at {t}: {found} against {equivalent}");
         }
         assert!(form["note"].as_str().unwrap().contains("hanging at 0.2 rad"), "{}", form["note"]);
+        assert!(form["note"].as_str().unwrap().contains("act as one"), "{}", form["note"]);
+        let alone = gravity_offset_form(&added[..1], &[&link], 10.0, 1e-5).unwrap();
+        assert!(alone["note"].as_str().unwrap().contains("one parameter fewer"), "{}", alone["note"]);
         // a floor under what the difference moves the link by, a link hanging at 0, or one upside down: no form
         assert!(gravity_offset_form(&added, &[&link], 10.0, 1e-6).is_none());
         let hanging =
