@@ -275,8 +275,10 @@ fn calibrate_device(
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
+    let conditioning_started = std::time::Instant::now();
     let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
         runs.iter().map(|r| sim_input(r, args.input_smoothing)).unzip();
+    let conditioning_seconds = conditioning_started.elapsed().as_secs_f64();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let mut prob = fit::Problem::new(sim, inputs, measured, group, &temperatures)?;
     let laws = search::damping_laws(&prob);
@@ -414,13 +416,13 @@ fn calibrate_device(
     // q_m/√12 in its place misjudged it both ways: held-out rig 93 (the right effects, ζ 0.06) sat at
     // 1.52× the floor it made, outside-library rig 156 at 1.56× (docs/calibration.md)
     let count_floor = signal::pooled_quantisation_floor(runs.iter().map(|r| &r.motor[..]));
-    // three simulations of the final model, cheaper than a refit: taken where the budget still affords a refit
-    // (a rig at its budget keeps the rule before them, the count's share and its factor, and its report says
-    // so with a null)
-    let simulated = budget
-        .affords(1.0)
-        .then(|| input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing))
-        .flatten();
+    // three simulations of the final model on motor angles conditioned again: taken where the budget
+    // affords them (a rig at its budget keeps the rule before them, the count's share and its factor,
+    // and its report says so with a null)
+    let simulated = budget.affords(1.0).then(|| {
+        input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing, &budget, conditioning_seconds)
+    });
+    let simulated = simulated.flatten();
     let input_floor = simulated.unwrap_or(count_floor);
     stepwise::debug(format_args!("input error floor {simulated:?} rad (the count's {count_floor:.4e})"));
     let factor = if simulated.is_some() { FAR_ABOVE_NOISE } else { FAR_ABOVE_COUNT_FLOOR };
@@ -500,8 +502,19 @@ fn calibrate_device(
 /// rounding, one uniform offset in ±q/2 for each stretch the reading holds (a dwelling encoder's
 /// error holds as long as it dwells), and the noise in front of it. A run of steps dwells a few
 /// times only, so the mean square is taken over [`INPUT_ERROR_DRAWS`] draws, from a fixed seed: the
-/// same runs give the same floor. None when a simulation fails.
-fn input_error_floor(runs: &[data::Run], prob: &fit::Problem, fit: &fit::Fit, smoothing: Option<f64>) -> Option<f64> {
+/// same runs give the same floor. None when a simulation fails, or when a draw would end past the
+/// budget's fits ([`stepwise::Budget::end`]): each draw conditions every run's motor angle again, and
+/// on a million samples that alone takes seconds the simulations' deadline does not see (fresh rig
+/// 178: three draws, 15 s, took the calibration 9.5 s past its budget). A draw is expected to take
+/// as long as the last one, the first as long as the runs' first conditioning, `conditioning_seconds`.
+fn input_error_floor(
+    runs: &[data::Run],
+    prob: &fit::Problem,
+    fit: &fit::Fit,
+    smoothing: Option<f64>,
+    budget: &stepwise::Budget,
+    conditioning_seconds: f64,
+) -> Option<f64> {
     // each run's count and the noise in front of it: the log's, the same for every draw
     let encoders: Vec<(f64, f64)> = runs
         .iter()
@@ -513,7 +526,12 @@ fn input_error_floor(runs: &[data::Run], prob: &fit::Problem, fit: &fit::Fit, sm
         .collect();
     let mut rng = synthetic::SplitMix::new(0x5EED_1F10);
     let mut mean_square = 0.0;
+    let mut expected_seconds = conditioning_seconds;
     for _ in 0..INPUT_ERROR_DRAWS {
+        if !budget.fits_end_after(expected_seconds) {
+            return None;
+        }
+        let started = std::time::Instant::now();
         let inputs: Vec<sim::SimInput> = runs
             .iter()
             .zip(&prob.inputs)
@@ -539,6 +557,7 @@ fn input_error_floor(runs: &[data::Run], prob: &fit::Problem, fit: &fit::Fit, sm
         let moved = fit::Fit::evaluate(&other, fit.spec.clone(), fit.p.clone())?;
         let diff: Vec<f64> = moved.residual.iter().zip(&fit.residual).map(|(a, b)| a - b).collect();
         mean_square += fit::rms(&diff).powi(2) / INPUT_ERROR_DRAWS as f64;
+        expected_seconds = started.elapsed().as_secs_f64();
     }
     Some(mean_square.sqrt())
 }
