@@ -419,10 +419,12 @@ fn calibrate_device(
     // three simulations of the final model on motor angles conditioned again: taken where the budget
     // affords them (a rig at its budget keeps the rule before them, the count's share and its factor,
     // and its report says so with a null)
-    let simulated = budget.affords(1.0).then(|| {
-        input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing, &budget, conditioning_seconds)
-    });
-    let simulated = simulated.flatten();
+    let simulated = budget
+        .affords(1.0)
+        .then(|| {
+            input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing, &budget, conditioning_seconds)
+        })
+        .flatten();
     let input_floor = simulated.unwrap_or(count_floor);
     stepwise::debug(format_args!("input error floor {simulated:?} rad (the count's {count_floor:.4e})"));
     let factor = if simulated.is_some() { FAR_ABOVE_NOISE } else { FAR_ABOVE_COUNT_FLOOR };

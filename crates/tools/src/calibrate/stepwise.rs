@@ -472,7 +472,6 @@ fn only_the_winner_kept<E, D>(attempts: &mut [Attempt<E, D>], from: usize, winne
     }
 }
 
-/// Whether two models hold the same effects, in any order.
 /// The candidates paired after a round whose singles all failed: the [`PAIR_POOL`] the ranking
 /// predicts the most of, then up to as many again whose single refit this round lowered the BIC by
 /// more than [`BIC_MARGIN`] though the prediction left them out, the largest realised gain first.
@@ -505,6 +504,7 @@ fn pair_pool<'c, E: Copy + PartialEq, D>(
     predicted.into_iter().chain(gained.into_iter().map(|(c, _)| c).take(PAIR_POOL)).collect()
 }
 
+/// Whether two models hold the same effects, in any order.
 fn same_effects<E: PartialEq>(a: &[E], b: &[E]) -> bool {
     a.len() == b.len() && a.iter().all(|e| b.contains(e))
 }
