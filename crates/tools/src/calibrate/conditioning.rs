@@ -37,10 +37,11 @@ pub fn group_runs(runs: &[Run]) -> (Vec<usize>, Vec<f64>) {
     (group, temps)
 }
 
-/// The highest frequency a run's motor angle carries: its own for a single sinusoid, else three
-/// times its RMS frequency rms(θm')/(2π rms(θm − mean)), with speeds over ±10 ms.
-fn top_frequency(r: &Run) -> f64 {
-    if super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz) {
+/// The highest frequency a run's motor angle carries: its own for a single sinusoid (`sinusoid`,
+/// `fit::is_sinusoidal_signal`), else three times its RMS frequency rms(θm')/(2π rms(θm − mean)),
+/// with speeds over ±10 ms.
+fn top_frequency(r: &Run, sinusoid: bool) -> f64 {
+    if sinusoid {
         r.frequency_hz
     } else {
         3.0 * rms_frequency(&r.time, &r.motor)
@@ -72,8 +73,9 @@ pub fn band_edge_cap(top_hz: f64) -> f64 {
 /// band limit's ends, `model_motor`): 0.1 s over the highest frequency the run carries
 /// (`top_frequency`). A quintic Savitzky–Golay window of M samples passes up to about fs/M
 /// (Schafer 2011), ten times that frequency. A motor angle without noise (second-difference noise
-/// below 1e-12 of its swing) is not smoothed.
-pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
+/// below 1e-12 of its swing) is not smoothed. `sinusoid`: whether the run reads as a single one
+/// (`fit::is_sinusoidal_signal`, read once by the caller, which caps a sinusoid's band as well).
+pub fn smoothing_half_width(r: &Run, seconds: Option<f64>, sinusoid: bool) -> usize {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
     let seconds = match seconds {
@@ -82,7 +84,7 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>) -> usize {
             if noise_free(&r.motor) {
                 return 0;
             }
-            let top = top_frequency(r);
+            let top = top_frequency(r, sinusoid);
             if top > 0.0 {
                 0.1 / top
             } else {
@@ -133,7 +135,9 @@ pub enum MotorConditioning {
 fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorConditioning) {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
-    let half = smoothing_half_width(r, smoothing_seconds);
+    // only the band limit (no smoothing given) asks whether the run is a sinusoid
+    let sinusoid = smoothing_seconds.is_none() && super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz);
+    let half = smoothing_half_width(r, smoothing_seconds, sinusoid);
     let smoothed = smooth(&r.time, &r.motor, half);
     if smoothing_seconds.is_none() {
         // A sinusoid's edge is capped where its smoothing's passband ends (`band_edge_cap`): at its
@@ -141,7 +145,6 @@ fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorCondi
         // multisines have no top frequency to cap at: three times the rms frequency put the edge
         // under the motion that rings the link (campaign rig 243, steps: 7.3 Hz on a 7.3 Hz link,
         // 1.24× the floor with every parameter within 0.4 %; uncapped 1.02×), so theirs is the noise's.
-        let sinusoid = super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz);
         let cap = sinusoid.then(|| band_edge_cap(r.frequency_hz)).filter(|&cap| cap > 0.0);
         if let Some((limited, edge_hz)) = band_limited(&r.time, &r.motor, cap) {
             return (fade_ends(&r.time, &limited, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });

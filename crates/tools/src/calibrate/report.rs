@@ -709,6 +709,11 @@ fn magnitude_key(effect: &str) -> Option<&'static str> {
     }
 }
 
+/// The value of `key` among the parameters of the added effect named `effect`, if found.
+fn added_parameter(added: &[Value], effect: &str, key: &str) -> Option<f64> {
+    added.iter().find(|e| e["effect"] == effect).and_then(|e| e["parameters"][key].as_f64())
+}
+
 /// Gravity hanging at an offset θ0, −A sin(θ − θ0) = −A cos θ0 sin θ + A sin θ0 cos θ, is over a
 /// link's measured angles gravity of A cos θ0 hanging at 0 with a constant load of A sin θ0 times
 /// the mean of cos θ there, less a torque A sin θ0 (cos θ − its mean) that a small range keeps
@@ -717,8 +722,7 @@ fn magnitude_key(effect: &str) -> Option<&'static str> {
 /// fitted `stiffness` by no more than the noise `floor`: the runs cannot tell the two apart, so
 /// the BIC keeps the offset, and a truth with a load and an upright link reads the same.
 pub fn gravity_offset_form(added: &[Value], links: &[&[f64]], stiffness: f64, floor: f64) -> Option<Value> {
-    let param =
-        |name: &str, key: &str| added.iter().find(|e| e["effect"] == name).and_then(|e| e["parameters"][key].as_f64());
+    let param = |name: &str, key: &str| added_parameter(added, name, key);
     let (mgl, offset) = (param("gravity", "mgl_nm")?, param("gravity", "offset_rad")?);
     let (upright, sideways) = (mgl * offset.cos(), mgl * offset.sin());
     let n = links.iter().map(|l| l.len()).sum::<usize>();
@@ -779,7 +783,7 @@ pub fn equivalent_forms(added: &[Value]) -> Value {
     let mut forms = Vec::new();
     for e in added.iter().filter(|e| e["effect"] == "asymmetric_friction") {
         let (Some(fp), Some(fm)) = (param(e, "coulomb_positive"), param(e, "coulomb_negative")) else { continue };
-        let load_now = added.iter().find(|x| x["effect"] == "constant_load").and_then(|x| param(x, "torque_nm"));
+        let load_now = added_parameter(added, "constant_load", "torque_nm");
         let (coulomb, load) = ((fp + fm) / 2.0, (fm - fp) / 2.0 + load_now.unwrap_or(0.0));
         let viscous = match (param(e, "viscous_positive"), param(e, "viscous_negative")) {
             (Some(bp), Some(bn)) if bp != bn => format!(
@@ -809,7 +813,7 @@ pub fn equivalent_forms(added: &[Value]) -> Value {
     // load L is, without the load, asymmetric friction of F+ − L forward and F− + L back; where either
     // would be < 0 there is no such form (friction that pushes). Its viscous levels are the
     // asymmetric friction's, else both the link damping's.
-    let find = |name: &str, key: &str| added.iter().find(|x| x["effect"] == name).and_then(|x| param(x, key));
+    let find = |name: &str, key: &str| added_parameter(added, name, key);
     let asymmetric = added.iter().find(|e| e["effect"] == "asymmetric_friction");
     let levels = match asymmetric {
         Some(e) => param(e, "coulomb_positive").zip(param(e, "coulomb_negative")),
