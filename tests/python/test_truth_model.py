@@ -87,6 +87,21 @@ def test_the_multisine_run_follows_the_transfer_function_at_each_of_its_frequenc
         assert abs(yi / mi - h) < 1e-5 * abs(h), (f, yi / mi, h)
 
 
+def test_a_large_friction_on_a_light_link_holds_it_creeping_as_the_smoothed_law_says():
+    # campaign rig 173's friction and inertia: F/(v_s J) = 1.3e5 /s, 12.7 times past 1/h at the default
+    # step, where unsplit RK4 chatters about zero speed. Under a load τ < F the exact link creeps at
+    # v_s atanh(τ/F) once the speed has settled (at F sech²/(v_s J), within microseconds).
+    f, j, vs, load = 1.127, 0.00887, 1e-3, 0.128
+    p = {"stiffness": 0.0, "damping": 0.0, "inertia": j, "constant_load": load,
+         **tm.parse_effects([f"coulomb_friction={f}"])}
+    assert tm.friction_rate(p) * 1e-4 > 10
+    t, x, v = tm.simulate(p, 0.5, 1e-4, lambda t: (0.0, 0.0))
+    creep = vs * math.atanh(load / f)
+    settled = t >= 0.01
+    assert np.max(np.abs(v[settled] / creep - 1)) < 1e-6, (v[settled].min(), v[settled].max(), creep)
+    assert abs((x[-1] - x[np.argmax(settled)]) / (creep * (t[-1] - 0.01)) - 1) < 1e-6
+
+
 def test_asymmetric_friction_decelerates_each_direction_by_its_own_levels():
     j = 0.018
     fp, fn, bp, bn = 0.06, 0.03, 0.02, 0.01
