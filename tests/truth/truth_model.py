@@ -117,13 +117,18 @@ def friction_rate(p):
     return level / (p.get("friction_smoothing", 1e-3) * p["inertia"])
 
 
-def rk4_advance(acc, t, th, v, h, p):
+def sign_zone(p):
+    """The link speed below which the friction's smoothed sign is not yet ±1, rad/s."""
+    return SIGN_ZONE * p.get("friction_smoothing", 1e-3)
+
+
+def rk4_advance(acc, t, th, v, h, rate, zone):
     """(θ, θ') after h from (θ, θ') at t: one RK4 step, or where the friction is stiff at this step
-    (h·λ > STIFF_STEP) and the speed is within the sign's zone or can reach it in h (at twice the
-    acceleration now), n = ⌈h·λ/STIFF_STEP⌉ steps of h/n."""
+    (h·λ > STIFF_STEP, λ = `rate`, `friction_rate`) and the speed is within the sign's zone (`zone`,
+    `sign_zone`) or can reach it in h (at twice the acceleration now), n = ⌈h·λ/STIFF_STEP⌉ steps of h/n."""
     a1 = acc(t, th, v)
-    n = math.ceil(h * p["friction_rate"] / STIFF_STEP - 1e-9) if p.get("friction_rate", 0.0) > 0.0 else 1
-    if n <= 1 or abs(v) > SIGN_ZONE * p.get("friction_smoothing", 1e-3) + 2.0 * abs(a1) * h:
+    n = math.ceil(h * rate / STIFF_STEP - 1e-9) if rate > 0.0 else 1
+    if n <= 1 or abs(v) > zone + 2.0 * abs(a1) * h:
         return rk4_step(acc, t, th, v, h, a1)
     sub = h / n
     for k in range(n):
@@ -150,7 +155,7 @@ def simulate(p, t_end, dt, motor):
     out, speed = np.empty(n + 1), np.empty(n + 1)
     out[0], speed[0] = th, v
     j = p["inertia"]
-    p["friction_rate"] = friction_rate(p)
+    rate, zone = friction_rate(p), sign_zone(p)
 
     def acc(t, th, v):
         m, dm = motor(t)
@@ -158,7 +163,7 @@ def simulate(p, t_end, dt, motor):
         return link_torque(m - th, dm - v, v, p) / j
 
     for i in range(n):
-        th, v = rk4_advance(acc, i * dt, th, v, dt, p)
+        th, v = rk4_advance(acc, i * dt, th, v, dt, rate, zone)
         out[i + 1], speed[i + 1] = th, v
     return np.arange(n + 1) * dt, out, speed
 
@@ -177,7 +182,7 @@ def replay(p, t_log, m_log, vm_true, starts, dt):
     logged sample."""
     out = np.empty(len(t_log))
     j = p["inertia"]
-    p["friction_rate"] = friction_rate(p)
+    rate, zone = friction_rate(p), sign_zone(p)
     th = v = 0.0
     for i in range(len(t_log)):
         if i in starts:
@@ -196,7 +201,7 @@ def replay(p, t_log, m_log, vm_true, starts, dt):
             return link_torque(m_log[i] + slope * (t - t0) - th, vm_true[i] + dv * (t - t0) - v, v, p) / j
 
         for s in range(steps):
-            th, v = rk4_advance(acc, t0 + s * h, th, v, h, p)
+            th, v = rk4_advance(acc, t0 + s * h, th, v, h, rate, zone)
     return out
 
 
