@@ -29,6 +29,9 @@ struct Regime {
     heater_w: f64,
     /// h passed as t(k+1) − t(k) with t(k) = k·1 ms (fmpy's time grid) instead of exactly 1 ms.
     time_grid: bool,
+    /// Each h drawn within ±this share of 1 ms (a logger's jittered timestamps, as `calibrate`
+    /// replays them): a step length met once.
+    jitter: f64,
     params: &'static [(&'static str, f64)],
 }
 
@@ -54,6 +57,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[],
     },
     Regime {
@@ -62,15 +66,25 @@ const REGIMES: &[Regime] = &[
         ambient_c: 60.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[],
     },
-    Regime { label: "heating at 8 W", start_c: 22.0, ambient_c: 22.0, heater_w: 8.0, time_grid: false, params: &[] },
+    Regime {
+        label: "heating at 8 W",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 8.0,
+        time_grid: false,
+        jitter: 0.0,
+        params: &[],
+    },
     Regime {
         label: "cooling from 60 °C",
         start_c: 60.0,
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[],
     },
     Regime {
@@ -79,6 +93,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[EQUILIBRIUM],
     },
     Regime {
@@ -87,10 +102,35 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 8.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[EQUILIBRIUM],
     },
     Regime {
-        label: "h = t(k+1) − t(k)", start_c: 22.0, ambient_c: 22.0, heater_w: 0.0, time_grid: true, params: &[]
+        label: "h = t(k+1) − t(k)",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 0.0,
+        time_grid: true,
+        jitter: 0.0,
+        params: &[],
+    },
+    Regime {
+        label: "jittered h (±15 %), 50 °C, linear",
+        start_c: 50.0,
+        ambient_c: 50.0,
+        heater_w: 0.0,
+        time_grid: false,
+        jitter: 0.15,
+        params: &[],
+    },
+    Regime {
+        label: "jittered h (±15 %), 50 °C, Coulomb friction 0.05 N·m",
+        start_c: 50.0,
+        ambient_c: 50.0,
+        heater_w: 0.0,
+        time_grid: false,
+        jitter: 0.15,
+        params: &[FRICTION],
     },
     Regime {
         label: "gravity 0.91 kg at 0.14 m",
@@ -98,6 +138,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[GRAVITY],
     },
     Regime {
@@ -106,6 +147,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[FRICTION],
     },
     Regime {
@@ -114,6 +156,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[HEAVY_FRICTION, LIGHT_LINK],
     },
     Regime {
@@ -122,6 +165,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[BACKLASH],
     },
     Regime {
@@ -130,6 +174,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[BACKLASH, PRONY],
     },
     Regime {
@@ -138,6 +183,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 0.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[BACKLASH, ELASTO_BACKLASH],
     },
     Regime {
@@ -146,6 +192,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 8.0,
         time_grid: true,
+        jitter: 0.0,
         params: &[GRAVITY, FRICTION, BACKLASH, ELASTO_BACKLASH],
     },
     Regime {
@@ -154,6 +201,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 8.0,
         time_grid: false,
+        jitter: 0.0,
         params: &[PRONY],
     },
     Regime {
@@ -162,6 +210,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 8.0,
         time_grid: true,
+        jitter: 0.0,
         params: &[GRAVITY, FRICTION, BACKLASH, PRONY],
     },
     Regime {
@@ -170,6 +219,7 @@ const REGIMES: &[Regime] = &[
         ambient_c: 22.0,
         heater_w: 8.0,
         time_grid: true,
+        jitter: 0.0,
         params: &[GRAVITY, FRICTION, BACKLASH],
     },
 ];
@@ -199,7 +249,12 @@ fn run(fmu: &Fmu, r: &Regime, steps: usize) -> f64 {
     let start = Instant::now();
     for k in 0..steps {
         let t = k as f64 * STEP;
-        let h = if r.time_grid { (k + 1) as f64 * STEP - t } else { STEP };
+        let h = if r.time_grid {
+            (k + 1) as f64 * STEP - t
+        } else {
+            // a deterministic spread over ±jitter (7919 is prime: the sequence does not repeat soon)
+            STEP * (1.0 + r.jitter * ((k * 7919 % 1000) as f64 / 500.0 - 1.0))
+        };
         inst.set_reals(&[torque], &[2.0 * (w * t).sin()]).unwrap();
         inst.step(h).unwrap();
         inst.get_reals(&[link], &mut out).unwrap();

@@ -1024,7 +1024,15 @@ impl<N: Tabulated> PropagatorTable<N> {
         let xf = x * FINE_CELLS_PER_NODE as f64;
         // xf > 0, so truncation is floor; m + 1 ≤ the last row's fine node since x < rows[3].
         let m = xf as usize;
-        Position::Fine { m, frac: xf - m as f64 }
+        let frac = xf - m as f64;
+        // Exactly on a node (a PCL held at 40 or 50 °C), the fine read is that node itself: its
+        // stencil's weights are one 1 and three 0 (a Lagrange cubic at its own node) and the fraction 0, so the same numbers
+        // (but for the sign of a zero) from one node instead of the four or five the two fine ends
+        // need. A step length met once (a logger's jittered timestamps) builds a table per step.
+        if frac == 0.0 && m % FINE_CELLS_PER_NODE == 0 {
+            return Position::Node(m / FINE_CELLS_PER_NODE);
+        }
+        Position::Fine { m, frac }
     }
 
     /// The cubic at fine node `m`: four nodes of the log-linear piece [rows[k], rows[k+1]] that
@@ -1905,6 +1913,35 @@ mod tests {
                     "{theta0} {d}: {} vs {exact}",
                     torque.at([x[LINK_ANGLE], x[LINK_SPEED]])
                 );
+            }
+        }
+    }
+
+    /// A PCL held exactly at a lattice node (40 °C, 50 °C: whole lattice spacings above 22 °C) reads
+    /// that node alone: one matrix exponential for a step length met once (a jittered log's), not
+    /// the four or five the fine cell's two stencils need, and the same numbers the fine read
+    /// approaches from just above.
+    #[test]
+    fn a_temperature_on_a_node_reads_that_node_alone() {
+        let p = loaded_params();
+        for celsius in [40.0, 41.0, 50.0, 22.125] {
+            let t = crate::params::ZERO_CELSIUS + celsius;
+            let n = ((celsius - TABLE_TEMPERATURES_C[0]) / PROPAGATOR_LATTICE) as usize;
+            assert_eq!(node_celsius(n), celsius);
+            let mut table = PropagatorTable::<EtdStep>::new(1e-3);
+            assert_eq!(table.missing(t), vec![n], "{celsius} °C");
+            table.build(&p, t);
+            let (mut cell, mut at_node) = (FineCell::default(), EtdStep::ZERO);
+            assert!(table.try_at(t, &mut cell, &mut at_node));
+            let direct = EtdStep::build(&p, &Coefficients::at(&p, node_temperature(n)), 1e-3);
+            assert_eq!(at_node.values(), direct.values(), "{celsius} °C");
+            // a hair above the node the fine path reads, from its stencils' nodes
+            let above = t + 1e-9;
+            table.build(&p, above);
+            let mut fine = EtdStep::ZERO;
+            assert!(table.try_at(above, &mut FineCell::default(), &mut fine));
+            for (a, b) in at_node.values().iter().zip(fine.values()) {
+                assert!((a - b).abs() <= 1e-9 * (1.0 + a.abs()), "{celsius} °C: {a} against {b}");
             }
         }
     }
