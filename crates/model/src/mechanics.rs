@@ -1029,7 +1029,7 @@ impl<N: Tabulated> PropagatorTable<N> {
         // stencil's weights are one 1 and three 0 (a Lagrange cubic at its own node) and the fraction 0, so the same numbers
         // (but for the sign of a zero) from one node instead of the four or five the two fine ends
         // need. A step length met once (a logger's jittered timestamps) builds a table per step.
-        if frac == 0.0 && m % FINE_CELLS_PER_NODE == 0 {
+        if frac == 0.0 && m.is_multiple_of(FINE_CELLS_PER_NODE) {
             return Position::Node(m / FINE_CELLS_PER_NODE);
         }
         Position::Fine { m, frac }
