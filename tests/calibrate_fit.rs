@@ -5,6 +5,24 @@ mod common;
 use thermovia_tools::calibrate::fit::{levenberg_marquardt, DampingLaw, Effect, ModelSpec, Problem, SpringBank};
 use thermovia_tools::calibrate::sim::{SimInput, Simulator};
 
+/// One run at 22 °C: the motor swung by `amplitude` rad at `frequency` Hz, sampled at `rate` Hz for
+/// `duration` s, on a link of `inertia` kg·m² starting at rest.
+fn sine_input(rate: f64, duration: f64, frequency: f64, amplitude: f64, inertia: f64) -> SimInput {
+    let time: Vec<f64> = (0..=(rate * duration) as usize).map(|k| k as f64 / rate).collect();
+    let w = 2.0 * std::f64::consts::PI * frequency;
+    SimInput {
+        motor: time.iter().map(|t| amplitude * (w * t).sin()).collect(),
+        housing_k: vec![295.15; time.len()],
+        time,
+        frequency_hz: frequency,
+        link_inertia: Some(inertia),
+        link0: 0.0,
+        com_distance: 0.14,
+        initial_link_speed: 0.0,
+        after_gap: false,
+    }
+}
+
 /// A link driven at 1/40 of its natural frequency (fresh rig 144's shape: J = 4.8e-3 kg·m², K = 19 N·m/rad,
 /// 0.24 Hz, 500 Hz for 7.5 s) with gravity and Coulomb friction, fitted from the truth with every torque
 /// 27× too large (where the campaign's fit of that rig ended): the link barely feels its inertia, so
@@ -13,20 +31,7 @@ use thermovia_tools::calibrate::sim::{SimInput, Simulator};
 #[test]
 fn a_fit_started_with_every_torque_scaled_finds_the_truths_scale() {
     let sim = Simulator::new(common::fmu(), 2).unwrap();
-    let (rate, duration, frequency, amplitude) = (500.0, 7.5, 0.2424, 0.17);
-    let time: Vec<f64> = (0..=(rate * duration) as usize).map(|k| k as f64 / rate).collect();
-    let w = 2.0 * std::f64::consts::PI * frequency;
-    let input = SimInput {
-        motor: time.iter().map(|t| amplitude * (w * t).sin()).collect(),
-        housing_k: vec![295.15; time.len()],
-        time,
-        frequency_hz: frequency,
-        link_inertia: Some(4.84e-3),
-        link0: 0.0,
-        com_distance: 0.14,
-        initial_link_speed: 0.0,
-        after_gap: false,
-    };
+    let input = sine_input(500.0, 7.5, 0.2424, 0.17, 4.84e-3);
     let spec = ModelSpec {
         effects: vec![Effect::Gravity, Effect::CoulombFriction],
         law: DampingLaw::Viscous,
@@ -94,20 +99,7 @@ fn a_backlash_width_left_short_is_found_by_the_final_scan() {
     use thermovia_tools::calibrate::search::scan_backlash_width;
     use thermovia_tools::calibrate::stepwise::Budget;
     let sim = Simulator::new(common::fmu(), 2).unwrap();
-    let (rate, duration, frequency, amplitude) = (2000.0, 4.0, 1.5, 0.05);
-    let time: Vec<f64> = (0..=(rate * duration) as usize).map(|k| k as f64 / rate).collect();
-    let w = 2.0 * std::f64::consts::PI * frequency;
-    let input = SimInput {
-        motor: time.iter().map(|t| amplitude * (w * t).sin()).collect(),
-        housing_k: vec![295.15; time.len()],
-        time,
-        frequency_hz: frequency,
-        link_inertia: Some(0.02),
-        link0: 0.0,
-        com_distance: 0.14,
-        initial_link_speed: 0.0,
-        after_gap: false,
-    };
+    let input = sine_input(2000.0, 4.0, 1.5, 0.05, 0.02);
     let spec = ModelSpec {
         effects: vec![Effect::Backlash],
         law: DampingLaw::Viscous,
