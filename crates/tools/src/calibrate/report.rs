@@ -260,6 +260,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "backlash_law": o.backlash_laws.as_ref().map(|b| json!({
             "chosen": if b.elasto { "elasto_backlash" } else { "clipped" },
             "compared": b.compared.iter().map(|(law, rmse, bic)| json!({"law": law, "rmse_rad": rmse, "bic": bic})).collect::<Vec<_>>(),
+            "width_scan": b.width_scan.map(|(from, to)| json!({"from_rad": from, "to_rad": to})),
             "rule": format!("with backlash in the final model, the clipped spring-damper (the search's) and Modelica's ElastoBacklash (the damper capped by the spring) are both fitted from the search's parameters on the fitting runs; ElastoBacklash is kept when it lowers the BIC by more than {}", super::stepwise::BIC_MARGIN),
         })),
         "identified_baseline": identified(prob, &o.baseline, temps),
@@ -545,6 +546,15 @@ fn identified_markdown(j: &Value) -> String {
             })
             .collect();
         s += &format!("\nBacklash law: **{}** ({}).\n", law["chosen"].as_str().unwrap_or("?"), rows.join("; "));
+        if let Some(scan) = law.get("width_scan").and_then(Value::as_object) {
+            let rad = |k: &str| scan.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+            s += &format!(
+                "The final backlash width was scanned over a tenth of itself and refitted from the best: \
+                 {:.4e} → {:.4e} rad (the cost is rugged at a difference step's scale, docs/calibration.md).\n",
+                rad("from_rad"),
+                rad("to_rad")
+            );
+        }
     }
     s
 }
@@ -1008,6 +1018,14 @@ fn truth_markdown(t: &Value) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_scanned_backlash_width_is_named_in_the_report() {
+        let law = |scan: Value| json!({"backlash_law": {"chosen": "clipped", "compared": [], "rule": "", "width_scan": scan}});
+        let md = super::identified_markdown(&law(json!({"from_rad": 8.028e-4, "to_rad": 8.918e-4})));
+        assert!(md.contains("8.0280e-4 → 8.9180e-4 rad"), "{md}");
+        assert!(!super::identified_markdown(&law(Value::Null)).contains("scanned"));
+    }
+
     #[test]
     fn asymmetric_coulomb_friction_is_reported_with_its_load_form() {
         let added = vec![

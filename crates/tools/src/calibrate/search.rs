@@ -152,6 +152,9 @@ pub struct BacklashLawChoice {
     /// (law, rmse, bic): the clipped law, then ElastoBacklash (absent when its fit failed).
     pub compared: Vec<(&'static str, f64, f64)>,
     pub elasto: bool,
+    /// The width before and after the final scan ([`scan_backlash_width`]), rad; None where the scan
+    /// kept it.
+    pub width_scan: Option<(f64, f64)>,
 }
 
 /// Factors the backlash width is scanned by around the fit's own, each with the rest held.
@@ -219,9 +222,9 @@ pub fn choose_backlash_law(
     match elasto {
         Some(e) if e.bic() < current.bic() - BIC_MARGIN => {
             let sig = signatures(prob, &e);
-            (e, sig, Some(BacklashLawChoice { compared, elasto: true }))
+            (e, sig, Some(BacklashLawChoice { compared, elasto: true, width_scan: None }))
         }
-        _ => (current, sig, Some(BacklashLawChoice { compared, elasto: false })),
+        _ => (current, sig, Some(BacklashLawChoice { compared, elasto: false, width_scan: None })),
     }
 }
 
@@ -1354,15 +1357,28 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
             sig = signatures(prob, &current);
         }
     }
+    let mut width_scan = None;
     if !budget.spent() && current.spec.effects.contains(&Effect::Backlash) {
+        let width = |f: &Fit| {
+            f.spec
+                .offsets(prob.n_groups)
+                .into_iter()
+                .find(|&(_, e)| e == Effect::Backlash)
+                .map_or(f64::NAN, |(o, _)| f.p[o])
+        };
         let before = current.sse;
+        let from = width(&current);
         current = scan_backlash_width(prob, current, budget);
         if current.sse != before {
             sig = signatures(prob, &current);
+            width_scan = Some((from, width(&current)));
         }
     }
-    let (current, sig, backlash_laws) =
+    let (current, sig, mut backlash_laws) =
         if budget.spent() { (current, sig, None) } else { budget.timed(|| choose_backlash_law(prob, current, sig)) };
+    if let Some(b) = backlash_laws.as_mut() {
+        b.width_scan = width_scan;
+    }
     let unexplained = !sig.white();
     Ok(Outcome {
         record,
