@@ -115,7 +115,8 @@ fn a_backlash_width_left_short_is_found_by_the_final_scan() {
     measured[0].iter_mut().enumerate().for_each(|(k, y)| *y += noise(k));
     let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
     let short = Fit::evaluate(&prob, spec.clone(), vec![truth[0], truth[1], 0.85 * width]).unwrap();
-    let scanned = scan_backlash_width(&prob, short.clone(), &Budget::seconds(120.0));
+    let (scanned, moved) = scan_backlash_width(&prob, short.clone(), &Budget::seconds(120.0));
+    assert_eq!(moved, Some((short.p[2], scanned.p[2])));
     assert!(
         (scanned.p[2] / width - 1.0).abs() < 0.02 && scanned.sse < 0.1 * short.sse,
         "width {:.4e} (truth {width:.1e}, started at {:.4e}), SSE {:.3e} from {:.3e}",
@@ -125,5 +126,6 @@ fn a_backlash_width_left_short_is_found_by_the_final_scan() {
         short.sse
     );
     let right = Fit::evaluate(&prob, spec, truth.clone()).unwrap();
-    assert_eq!(scan_backlash_width(&prob, right, &Budget::seconds(120.0)).p, truth, "the truth's width moved");
+    let (kept, moved) = scan_backlash_width(&prob, right, &Budget::seconds(120.0));
+    assert_eq!((kept.p, moved), (truth, None), "the truth's width moved");
 }

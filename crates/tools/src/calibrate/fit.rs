@@ -362,8 +362,7 @@ impl ModelSpec {
     /// (asymmetry's index, its level's index) for the asymmetric friction's Coulomb and viscous
     /// asymmetries: each level ± its asymmetry must stay ≥ 0.
     pub fn friction_level_pairs(&self, n_groups: usize) -> Vec<(usize, Option<usize>)> {
-        let offsets = self.offsets(n_groups);
-        let at = |e: Effect| offsets.iter().find(|(_, x)| *x == e).map(|(o, _)| *o);
+        let at = |e: Effect| self.offset_of(e, n_groups);
         match at(Effect::AsymmetricFriction) {
             Some(a) => vec![(a, at(Effect::CoulombFriction)), (a + 1, at(Effect::LinkDamping))],
             None => Vec::new(),
@@ -383,6 +382,10 @@ impl ModelSpec {
                 (o, e)
             })
             .collect()
+    }
+    /// Start index of effect `e`'s parameters; None where `e` is not in the model.
+    pub fn offset_of(&self, e: Effect, n_groups: usize) -> Option<usize> {
+        self.offsets(n_groups).into_iter().find(|&(_, x)| x == e).map(|(o, _)| o)
     }
     pub fn typical(&self, n_groups: usize) -> Vec<f64> {
         let mut t = vec![1.0; 2 * n_groups];

@@ -380,7 +380,7 @@ fn baseline_bounds_resolved(report: &Value) -> Vec<String> {
 /// a limit (`Problem::plausible_limits`).
 fn plausible(prob: &Problem, fit: &Fit, e: Effect) -> Vec<(&'static str, f64, f64)> {
     let limits = prob.plausible_limits(&fit.spec);
-    let (o, _) = fit.spec.offsets(prob.n_groups).into_iter().find(|&(_, x)| x == e).expect("effect in the fit");
+    let o = fit.spec.offset_of(e, prob.n_groups).expect("effect in the fit");
     let first = o - 2 * prob.n_groups;
     e.params().iter().enumerate().filter_map(|(i, p)| limits[first + i].map(|l| (p.0, l, fit.p[o + i]))).collect()
 }

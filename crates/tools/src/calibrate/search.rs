@@ -169,11 +169,12 @@ const WIDTH_SCAN_ROUNDS: usize = 4;
 /// over larger steps (campaign rig 169: 0.803 mrad against the truth's 0.894, the error falling
 /// from 1.79e-4 rad at 0.803 to 1.35e-4 at 0.88–0.93 with K and C held). Only the final model is
 /// scanned: a larger difference step in every refit took other searches down other paths.
-pub fn scan_backlash_width(prob: &Problem, mut current: Fit, budget: &Budget) -> Fit {
-    let Some(w) = current.spec.offsets(prob.n_groups).into_iter().find(|&(_, e)| e == Effect::Backlash).map(|(o, _)| o)
-    else {
-        return current;
+/// Returns the model with the width before and after, where the scan moved it.
+pub fn scan_backlash_width(prob: &Problem, mut current: Fit, budget: &Budget) -> (Fit, Option<(f64, f64)>) {
+    let Some(w) = current.spec.offset_of(Effect::Backlash, prob.n_groups) else {
+        return (current, None);
     };
+    let from = current.p[w];
     let n = current.n as f64;
     for _ in 0..WIDTH_SCAN_ROUNDS {
         if current.p[w] <= 0.0 || !budget.affords(2.0) {
@@ -198,7 +199,8 @@ pub fn scan_backlash_width(prob: &Problem, mut current: Fit, budget: &Budget) ->
             _ => break,
         }
     }
-    current
+    let moved = (current.p[w] != from).then_some((from, current.p[w]));
+    (current, moved)
 }
 
 /// With backlash in the model, the clipped law (the search's) and Modelica's ElastoBacklash
@@ -1262,7 +1264,7 @@ impl Rig for DeviceRig<'_, '_> {
         spec.effects.push(lighter);
         // the constant part of what the heavier effect did: gravity's torque at angle 0 is ∓ m g d sin φ,
         // asymmetric friction's Coulomb asymmetry a is a load of ∓ a; both signs are tried, and none
-        let offset = current.spec.offsets(self.prob.n_groups).into_iter().find(|&(_, x)| x == e).map(|(o, _)| o)?;
+        let offset = current.spec.offset_of(e, self.prob.n_groups)?;
         let guess = if e == Effect::Gravity { current.p[offset + 1] } else { current.p[offset] };
         let starts = [guess, -guess, 0.0].map(|g| p.iter().copied().chain([g]).collect()).to_vec();
         let fit = fit_from_best(self.prob, spec, starts, SCREEN_ITERATIONS).ok()?;
@@ -1358,20 +1360,10 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
         }
     }
     let mut width_scan = None;
-    if !budget.spent() && current.spec.effects.contains(&Effect::Backlash) {
-        let width = |f: &Fit| {
-            f.spec
-                .offsets(prob.n_groups)
-                .into_iter()
-                .find(|&(_, e)| e == Effect::Backlash)
-                .map_or(f64::NAN, |(o, _)| f.p[o])
-        };
-        let before = current.sse;
-        let from = width(&current);
-        current = scan_backlash_width(prob, current, budget);
-        if current.sse != before {
+    if !budget.spent() {
+        (current, width_scan) = scan_backlash_width(prob, current, budget);
+        if width_scan.is_some() {
             sig = signatures(prob, &current);
-            width_scan = Some((from, width(&current)));
         }
     }
     let (current, sig, mut backlash_laws) =
