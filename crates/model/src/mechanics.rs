@@ -1026,9 +1026,10 @@ impl<N: Tabulated> PropagatorTable<N> {
         let m = xf as usize;
         let frac = xf - m as f64;
         // Exactly on a node (a PCL held at 40 or 50 °C), the fine read is that node itself: its
-        // stencil's weights are one 1 and three 0 (a Lagrange cubic at its own node) and the fraction 0, so the same numbers
-        // (but for the sign of a zero) from one node instead of the four or five the two fine ends
-        // need. A step length met once (a logger's jittered timestamps) builds a table per step.
+        // stencil's weights are one 1 and three 0 (a Lagrange cubic at its own node) and the
+        // fraction 0, so the same numbers (but for the sign of a zero) from one node instead of the
+        // four or five the two fine ends need. A step length met once (a logger's jittered
+        // timestamps) builds a table per step.
         if frac == 0.0 && m.is_multiple_of(FINE_CELLS_PER_NODE) {
             return Position::Node(m / FINE_CELLS_PER_NODE);
         }
