@@ -16,8 +16,8 @@ use nalgebra::{DMatrix, DVector};
 /// Fraction of the residual's low-frequency structure (over white noise) an effect must remove.
 pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
 /// How far above its noise floor (the link sensor's, `Signatures::noise_floor`) a model's rms must
-/// be for a refit that lowered the BIC and some of the structure to be taken where nothing earned
-/// its place: the factor the unexplained rule uses against that floor without the motor log's
+/// be for a refit that lowered the BIC and some of the structure to be ranked in its turn where
+/// nothing earned its place (`Rig::partly_earned`): the factor the unexplained rule uses against that floor without the motor log's
 /// simulated error (`FAR_ABOVE_COUNT_FLOOR` in mod.rs), where a right model has stood 1.52× above.
 pub const FAR_ABOVE_FLOOR: f64 = 2.0;
 pub const MAX_ITERATIONS: usize = 25;
@@ -41,12 +41,6 @@ fn earns_its_place(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Sig
 /// effects may be missing there, each removing only its part of the structure.
 fn far_above_floor(sig: &Signatures) -> bool {
     sig.rmse > FAR_ABOVE_FLOOR * sig.noise_floor
-}
-
-/// The partial form of [`earns_its_place`] (`Rig::partly_earned`): from a model far above its floor,
-/// BIC down by the margin and the structure down at all.
-fn partly_earns(current: &Fit, sig: &Signatures, refit: &Fit, refit_sig: &Signatures) -> bool {
-    far_above_floor(sig) && refit.bic() < current.bic() - BIC_MARGIN && refit_sig.structure_ratio < sig.structure_ratio
 }
 
 /// A screening refit (at most `SCREEN_ITERATIONS`) with its signatures, run on to convergence when
@@ -1149,32 +1143,6 @@ impl DeviceRig<'_, '_> {
         let sig = signatures(prob, &fit);
         Judged { fit, sig }
     }
-
-    /// A round's winner refitted on every sample to convergence, kept where `accept` says it still
-    /// earns its place against `m`. An effect can change which damping law the data favour
-    /// (friction read as frequency-dependent loss before it was in): re-chosen on the screening
-    /// share with it, so only the chosen structure is fitted on every sample.
-    fn converged(
-        &self,
-        m: &Judged,
-        winner: Judged,
-        round: usize,
-        accept: fn(&Fit, &Signatures, &Fit, &Signatures) -> bool,
-    ) -> Option<Judged> {
-        let screen = self.screen.borrow();
-        let f = match &*screen {
-            Some((sp, _, _)) => {
-                let stage = format!("round {round} (screening share)");
-                best_law(sp, None, winner.fit, &self.laws.allowed, &stage, &mut self.rows.borrow_mut())
-            }
-            None if winner.fit.iterations < SCREEN_ITERATIONS => return Some(winner),
-            None => winner.fit,
-        };
-        let done = levenberg_marquardt(self.prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS).ok()?;
-        debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
-        let s = signatures(self.prob, &done);
-        accept(&m.fit, &m.sig, &done, &s).then_some(Judged { fit: done, sig: s })
-    }
 }
 
 impl Rig for DeviceRig<'_, '_> {
@@ -1219,7 +1187,22 @@ impl Rig for DeviceRig<'_, '_> {
         self.with_screen(m, |_, c, s| verdict(c, s, &refit.fit, &refit.sig))
     }
     fn converge(&self, m: &Judged, winner: Judged, round: usize) -> Option<Judged> {
-        self.converged(m, winner, round, earns_its_place)
+        // an effect can change which damping law the data favour (friction read as frequency-
+        // dependent loss before it was in): re-chosen on the screening share with it, so only the
+        // chosen structure is fitted on every sample
+        let screen = self.screen.borrow();
+        let f = match &*screen {
+            Some((sp, _, _)) => {
+                let stage = format!("round {round} (screening share)");
+                best_law(sp, None, winner.fit, &self.laws.allowed, &stage, &mut self.rows.borrow_mut())
+            }
+            None if winner.fit.iterations < SCREEN_ITERATIONS => return Some(winner),
+            None => winner.fit,
+        };
+        let done = levenberg_marquardt(self.prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS).ok()?;
+        debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
+        let s = signatures(self.prob, &done);
+        earns_its_place(&m.fit, &m.sig, &done, &s).then_some(Judged { fit: done, sig: s })
     }
     fn partly_earned(&self, m: &Judged, v: &Verdict<Evidence>) -> bool {
         let (before, after) = v.detail.structure;
@@ -1227,9 +1210,6 @@ impl Rig for DeviceRig<'_, '_> {
             && v.bic_after < v.bic_before - BIC_MARGIN
             && after < before
             && v.detail.newly_near_bound.unwrap_or(0) == 0
-    }
-    fn converge_partly(&self, m: &Judged, winner: Judged, round: usize) -> Option<Judged> {
-        self.converged(m, winner, round, partly_earns)
     }
     fn adopt(&self, m: Judged, round: usize) -> Judged {
         // without a screening share the structure is re-chosen here, on every sample

@@ -225,7 +225,7 @@ pub struct Verdict<D> {
 /// One refit tried, of one effect or several at once.
 #[derive(Clone, Debug)]
 pub struct Attempt<E, D> {
-    /// "round", "swap after a round", "pair after a round", or the rig's combination stage
+    /// "round", "swap after a round", "pair after a round", "after a partial gain", or the rig's combination stage
     /// ("baseline", "after the rounds").
     pub stage: &'static str,
     pub effects: Vec<E>,
@@ -276,14 +276,10 @@ pub trait Rig {
     fn converge(&self, m: &Self::Model, winner: Self::Model, round: usize) -> Option<Self::Model>;
     /// Whether a refit that did not earn its place (`v`, against `m`) still lowered the BIC by the
     /// margin and some of the residual's structure while `m` sits far above its noise floor: where
-    /// nothing in a round earned its place, the best of these is taken (`search`). Never, by default.
+    /// nothing in a round earned its place, the best of these is ranked in its turn and refitted
+    /// with what it ranks first (`search`). Never, by default.
     fn partly_earned(&self, _m: &Self::Model, _v: &Verdict<Self::Detail>) -> bool {
         false
-    }
-    /// [`Rig::converge`] for a refit that only `partly_earned` its place: None where, on every
-    /// sample, it no longer does.
-    fn converge_partly(&self, _m: &Self::Model, _winner: Self::Model, _round: usize) -> Option<Self::Model> {
-        None
     }
     /// The model a round accepted, with the rig's structure re-chosen for it where it has a choice.
     fn adopt(&self, m: Self::Model, round: usize) -> Self::Model;
@@ -534,14 +530,6 @@ fn pair_pool<'c, E: Copy + PartialEq, D>(
     predicted.into_iter().chain(gained.into_iter().map(|(c, _)| c).take(PAIR_POOL)).collect()
 }
 
-/// Where a refit of a round sits in the search's record: a round's attempt or a combination (a
-/// swap or a pair), by index.
-#[derive(Clone, Copy, Debug)]
-enum Recorded {
-    Round(usize),
-    Combination(usize),
-}
-
 /// Whether two models hold the same effects, in any order.
 fn same_effects<E: PartialEq>(a: &[E], b: &[E]) -> bool {
     a.len() == b.len() && a.iter().all(|e| b.contains(e))
@@ -602,9 +590,8 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             // the round's single refits that earned their place on the screen, with their index in
             // `round.attempts`
             let mut earned: Vec<(usize, R::Model)> = Vec::new();
-            // the round's refits that only partly earned their place (`Rig::partly_earned`), where
-            // they were recorded
-            let mut partly: Vec<(Recorded, R::Model)> = Vec::new();
+            // the round's refits that only partly earned their place (`Rig::partly_earned`)
+            let mut partly: Vec<R::Model> = Vec::new();
             let mut single = |c: &Ranked<R::Effect>, round: &mut Round<R::Effect, R::State, R::Detail>| {
                 if !budget.allows("the rest of a round's refits") {
                     return false;
@@ -617,7 +604,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                 if keep {
                     earned.push((round.attempts.len() - 1, refit));
                 } else if partial {
-                    partly.push((Recorded::Round(round.attempts.len() - 1), refit));
+                    partly.push(refit);
                 }
                 true
             };
@@ -701,7 +688,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                         let Some((refit, verdict)) = budget.timed(|| rig.swap(&current, out, c)) else { continue };
                         debug(format_args!("swap {:?} for {:?}: kept {}", c.effect, out, verdict.keep));
                         if !verdict.keep && rig.partly_earned(&current, &verdict) {
-                            partly.push((Recorded::Combination(combinations.len()), refit.clone()));
+                            partly.push(refit.clone());
                         }
                         let attempt = Attempt {
                             stage: "swap after a round",
@@ -739,7 +726,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     let verdict = rig.judge(&current, &refit);
                     debug(format_args!("pair {:?} + {:?}: kept {}", a.effect, b.effect, verdict.keep));
                     if !verdict.keep && rig.partly_earned(&current, &verdict) {
-                        partly.push((Recorded::Combination(combinations.len()), refit.clone()));
+                        partly.push(refit.clone());
                     }
                     let attempt = Attempt {
                         stage: "pair after a round",
@@ -753,25 +740,48 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                     converged_combination(rig, &current, earned, budget, round_number, &mut combinations, first_pair);
             }
             // Where nothing earned its place but the model sits far above its floor, several missing
-            // effects share what is left: each alone removes its part of the structure, not the
-            // share asked of one (campaign rig 247: Coulomb friction in, the truth's 16 mrad
-            // backlash gained 4 083 in BIC and removed 17 % of the structure, where a third is
-            // asked; the gravity it left could then not show, and the search ended at 1.85× its
-            // floor, unexplained). The best refit by BIC that lowered both is taken then.
-            if accepted.is_none() && !partly.is_empty() && budget.allows("a partial gain far above the floor") {
-                partly.sort_by(|a, b| rig.bic(&a.1).total_cmp(&rig.bic(&b.1)));
-                for (i, (at, m)) in partly.into_iter().enumerate() {
-                    if i > 0 && !budget.allows("the next partial gain in line") {
-                        break;
+            // effects may share what is left: each alone removes its part of the structure, not the
+            // third asked of one, and the one that shows only beside another is not ranked until
+            // that one is in (campaign rig 247: with Coulomb friction in, the truth's 16 mrad
+            // backlash gained 4 083 in BIC and removed 17 % of the structure; the gravity beside it
+            // could not show, and the search ended at 1.85× its floor, unexplained). The round's
+            // best refit by BIC that lowered the BIC and the structure (`Rig::partly_earned`) is
+            // ranked in its turn, and its best candidates are refitted beside it: kept only where
+            // the two steps together earn their place against the current model, as a pair must.
+            // Taking the partial step alone brought library effects into outside-library rigs and
+            // a gravity beside rig 162's truth (measured, docs/calibration.md).
+            if accepted.is_none() && !partly.is_empty() && budget.allows("the effects after a partial gain") {
+                if let Some(first) = partly.into_iter().min_by(|a, b| rig.bic(a).total_cmp(&rig.bic(b))) {
+                    let in_first = rig.effects(&first);
+                    rig.moved_to(&first);
+                    let next: Vec<Ranked<R::Effect>> = rig
+                        .rank(&first)
+                        .into_iter()
+                        .filter(|c| !in_first.contains(&c.effect) && c.predicted_delta_bic < -BIC_MARGIN)
+                        .take(TRIES_PER_ROUND)
+                        .collect();
+                    rig.moved_to(&current);
+                    let from = combinations.len();
+                    let mut earned = Vec::new();
+                    let before = rig.effects(&current);
+                    for c in &next {
+                        if !budget.allows("the rest of the effects after a partial gain") {
+                            break;
+                        }
+                        let Some(refit) = budget.timed(|| rig.refit_with(&first, &[c])) else { continue };
+                        let verdict = rig.judge(&current, &refit);
+                        let after = rig.effects(&refit);
+                        debug(format_args!("{after:?} after a partial gain: kept {}", verdict.keep));
+                        let attempt = Attempt {
+                            stage: "after a partial gain",
+                            effects: after.iter().copied().filter(|e| !before.contains(e)).collect(),
+                            removed: before.iter().copied().filter(|e| !after.contains(e)).collect(),
+                            verdict,
+                        };
+                        record_combination(&mut combinations, attempt, refit, &mut earned);
                     }
-                    let Some(done) = budget.timed(|| rig.converge_partly(&current, m, round_number)) else { continue };
-                    debug(format_args!("partial gain far above the floor kept: {at:?}"));
-                    match at {
-                        Recorded::Round(k) => round.attempts[k].verdict.keep = true,
-                        Recorded::Combination(k) => combinations[k].verdict.keep = true,
-                    }
-                    accepted = Some(done);
-                    break;
+                    accepted =
+                        converged_combination(rig, &current, earned, budget, round_number, &mut combinations, from);
                 }
             }
             let Some(f) = accepted else {
@@ -1068,12 +1078,6 @@ mod tests {
         fn excess(&self, m: &Model) -> f64 {
             (m.sse / self.y.len() as f64 - self.noise_var).max(0.0)
         }
-        fn partly(&self, m: &Model, refit: &Model) -> bool {
-            self.partial
-                && m.sse / self.y.len() as f64 > 4.0 * self.noise_var
-                && self.bic(refit) < self.bic(m) - BIC_MARGIN
-                && self.excess(refit) < self.excess(m)
-        }
     }
 
     impl Rig for Linear {
@@ -1183,9 +1187,6 @@ mod tests {
             self.partial
                 && m.sse / self.y.len() as f64 > 4.0 * self.noise_var
                 && v.bic_after < v.bic_before - BIC_MARGIN
-        }
-        fn converge_partly(&self, m: &Model, winner: Model, _round: usize) -> Option<Model> {
-            self.partly(m, &winner).then_some(winner)
         }
         fn adopt(&self, m: Model, _round: usize) -> Model {
             m
@@ -1316,10 +1317,11 @@ mod tests {
 
     /// Seven effects of one size: each alone removes a seventh of the excess and any pair two,
     /// short of the third asked (the device's rig 247, where three effects share the residual).
-    /// Far above the noise, the best partial gain is taken in each round, up to `MAX_EFFECTS`, and
-    /// only effects the data hold come in; without the partial rule nothing does.
+    /// Far above the noise, the best partial gain is ranked in its turn and refitted with what it
+    /// ranks first: three sevenths together earn their place. Only effects the data hold come in;
+    /// without the partial rule nothing does.
     #[test]
-    fn far_above_the_noise_effects_that_share_the_residual_come_in_one_by_one() {
+    fn far_above_the_noise_effects_that_share_the_residual_come_in_together() {
         let x: Vec<Vec<f64>> = (0..9).map(|k| normals(k + 1, N)).collect();
         let y = |i: usize| (0..7).map(|k| 0.05 * x[k][i]).sum::<f64>();
         let (mut r, start) = rig(x.clone(), y);
@@ -1339,6 +1341,22 @@ mod tests {
             .map(|a| a.effects.clone())
             .collect();
         assert_eq!(kept.len(), s.path.len() - 1, "each step is marked kept in the record: {kept:?}");
+    }
+
+    /// A partial gain is never taken alone: twelve effects of one size, where the best partial
+    /// refit (a pair, two twelfths) with the next in line removes a quarter of the excess, not a
+    /// third, leave the model as it was (outside-library rigs took library effects one partial
+    /// gain at a time when the partial step alone was taken).
+    #[test]
+    fn a_partial_gain_the_next_effect_does_not_complete_is_not_taken() {
+        let x: Vec<Vec<f64>> = (0..14).map(|k| normals(k + 1, N)).collect();
+        let y = |i: usize| (0..12).map(|k| 0.05 * x[k][i]).sum::<f64>();
+        let (mut r, start) = rig(x.clone(), y);
+        r.partial = true;
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert!(s.model.cols.is_empty(), "{:?}", s.model.cols);
+        let tried = s.record.combinations.iter().filter(|c| c.stage == "after a partial gain").count();
+        assert!(tried > 0, "the steps after the partial gain were tried and refused");
     }
 
     /// Near the noise (rms under twice its), a partial gain is not taken: there the structure rule
