@@ -1092,7 +1092,17 @@ impl DeviceRig<'_, '_> {
     /// `m` without the effects `drop`, with the candidates `added` (and without what they take the
     /// place of, `Effect::takes_place_of`: both in at once would be one column twice), refitted on
     /// the screening share from `m`'s values (`candidate_starts`).
-    fn screened_refit(&self, m: &Judged, drop: &[Effect], added: &[&Ranked<Effect>]) -> Option<Judged> {
+    /// A single candidate (`as_single`) is refitted under every structure the data allow and run on
+    /// past the screening iterations where the cap cut off a promising refit (`unless_cut_off`);
+    /// otherwise (several candidates, or a step judged as a pair is) under the current structure,
+    /// capped.
+    fn screened_refit(
+        &self,
+        m: &Judged,
+        drop: &[Effect],
+        added: &[&Ranked<Effect>],
+        as_single: bool,
+    ) -> Option<Judged> {
         let drop: Vec<Effect> =
             drop.iter().copied().chain(added.iter().filter_map(|c| c.effect.takes_place_of())).collect();
         let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
@@ -1102,7 +1112,8 @@ impl DeviceRig<'_, '_> {
         // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
-        let structures: Vec<Structure> = if added.len() == 1 {
+        let single = as_single && added.len() == 1;
+        let structures: Vec<Structure> = if single {
             std::iter::once((spec.law, spec.springs))
                 .chain(self.laws.allowed.iter().copied().filter(|&s| s != (spec.law, spec.springs)))
                 .collect()
@@ -1121,7 +1132,7 @@ impl DeviceRig<'_, '_> {
                 .min_by(|a, b| a.bic().total_cmp(&b.bic()))?;
             // (a pair is a fallback for effects that show only together: run on, two effects find
             // a valley of their own more often than the truth's; measured on campaign rig 23)
-            let (refit, sig) = if added.len() == 1 {
+            let (refit, sig) = if single {
                 unless_cut_off(sprob, current, current_sig, screened)
             } else {
                 let sig = signatures(sprob, &screened);
@@ -1181,7 +1192,12 @@ impl Rig for DeviceRig<'_, '_> {
         out
     }
     fn refit_with(&self, m: &Judged, added: &[&Ranked<Effect>]) -> Option<Judged> {
-        self.screened_refit(m, &[], added)
+        self.screened_refit(m, &[], added, true)
+    }
+    fn refit_beside(&self, m: &Judged, added: &[&Ranked<Effect>]) -> Option<Judged> {
+        // judged against the model before `m` (a big BIC gain already in), a single's run-on
+        // would take every refit to the iteration cap: rig 144's Stribeck excess, 41 s
+        self.screened_refit(m, &[], added, false)
     }
     fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<Evidence> {
         self.with_screen(m, |_, c, s| verdict(c, s, &refit.fit, &refit.sig))
@@ -1266,7 +1282,7 @@ impl Rig for DeviceRig<'_, '_> {
         e.defined_over()
     }
     fn swap(&self, m: &Judged, out: Effect, c: &Ranked<Effect>) -> Option<(Judged, Verdict<Evidence>)> {
-        let refit = self.screened_refit(m, &[out], &[c])?;
+        let refit = self.screened_refit(m, &[out], &[c], true)?;
         // a swap changes the model as a combination does: the bound rule applies
         let v =
             self.with_screen(m, |_, current, sig| combination_verdict(self.prob, current, sig, &refit.fit, &refit.sig));

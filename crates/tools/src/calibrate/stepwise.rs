@@ -270,6 +270,12 @@ pub trait Rig {
     fn rank(&self, m: &Self::Model) -> Vec<Ranked<Self::Effect>>;
     /// `m` refitted with the candidates' effects added (a screening refit where the rig has one).
     fn refit_with(&self, m: &Self::Model, added: &[&Ranked<Self::Effect>]) -> Option<Self::Model>;
+    /// `m` refitted with the candidates' effects added, as a step judged together with how `m` was
+    /// reached (after a partial gain): a screening refit and no more, where the rig runs single
+    /// refits on. [`Rig::refit_with`] by default.
+    fn refit_beside(&self, m: &Self::Model, added: &[&Ranked<Self::Effect>]) -> Option<Self::Model> {
+        self.refit_with(m, added)
+    }
     /// `refit` against `m`, on the same data.
     fn judge(&self, m: &Self::Model, refit: &Self::Model) -> Verdict<Self::Detail>;
     /// A round's winner on every sample, to convergence: None when it no longer earns its place.
@@ -768,7 +774,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
                         if !budget.allows("the rest of the effects after a partial gain") {
                             break;
                         }
-                        let Some(refit) = budget.timed(|| rig.refit_with(&first, &[c])) else { continue };
+                        let Some(refit) = budget.timed(|| rig.refit_beside(&first, &[c])) else { continue };
                         let verdict = rig.judge(&current, &refit);
                         let after = rig.effects(&refit);
                         debug(format_args!("{after:?} after a partial gain: kept {}", verdict.keep));
@@ -1053,6 +1059,8 @@ mod tests {
         /// refits that lower the BIC and some of the excess count as partly earned where the model's
         /// rms is over twice the noise's (the device's `partly_earned`)
         partial: bool,
+        /// how many refits were made as steps after a partial gain (`Rig::refit_beside`)
+        beside: std::cell::Cell<usize>,
     }
 
     impl Linear {
@@ -1174,6 +1182,10 @@ mod tests {
             cols.extend(added.iter().map(|c| c.effect));
             Some(self.fit(cols))
         }
+        fn refit_beside(&self, m: &Model, added: &[&Ranked<usize>]) -> Option<Model> {
+            self.beside.set(self.beside.get() + 1);
+            self.refit_with(m, added)
+        }
         fn judge(&self, m: &Model, refit: &Model) -> Verdict<()> {
             let keep = self.bic(refit) < self.bic(m) - BIC_MARGIN && self.excess(refit) <= 2.0 / 3.0 * self.excess(m);
             Verdict { keep, bic_before: self.bic(m), bic_after: self.bic(refit), detail: () }
@@ -1243,6 +1255,7 @@ mod tests {
             unseen: None,
             understated: None,
             partial: false,
+            beside: std::cell::Cell::new(0),
         };
         let start = r.fit(vec![]);
         (r, start)
@@ -1341,6 +1354,9 @@ mod tests {
             .map(|a| a.effects.clone())
             .collect();
         assert_eq!(kept.len(), s.path.len() - 1, "each step is marked kept in the record: {kept:?}");
+        let beside = s.record.combinations.iter().filter(|c| c.stage == "after a partial gain").count();
+        assert_eq!(r.beside.get(), beside, "every step after a partial gain is a refit beside it (no run-on)");
+        assert!(beside > 0);
     }
 
     /// A partial gain is never taken alone: twelve effects of one size, where the best partial
