@@ -581,7 +581,7 @@ const FAR_ABOVE_NOISE: f64 = 1.5;
 /// [`FAR_ABOVE_NOISE`] where the floor takes the motor count's q_m/√12 in place of the simulated
 /// input error (no time left to simulate it): the rule before the simulation, whose floor a right
 /// model could stand 1.52× above (held-out rig 93).
-const FAR_ABOVE_COUNT_FLOOR: f64 = 2.0;
+pub(super) const FAR_ABOVE_COUNT_FLOOR: f64 = 2.0;
 
 /// The drive loop (drive.rs) on runs driven by torque or by a reference, rigid or linear.
 fn calibrate_drive(

@@ -271,7 +271,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "method": {
             "fit": "per temperature the transmission's stiffness K and damping C (log-parameters; springs and PCL scaled together), plus the effects' parameters; the baseline starts from the best of a closed form (frequency response K* = Jω²H/(H−1) for sinusoidal runs, equation error otherwise), the material table and a mix, then Levenberg–Marquardt on every sample, the FMU simulated through the harness with the measured motor angle as input; forward-difference Jacobians",
             "standard_errors": format!("block sandwich: (JᵀJ)⁻¹ Σ_b s_b s_bᵀ (JᵀJ)⁻¹ over {} contiguous blocks per run, so residuals correlated within a block do not shrink them", super::fit::COVARIANCE_BLOCKS),
-            "acceptance": format!("ΔBIC < −{} and at least {:.0}% of the residual's low-frequency structure over white noise removed; where nothing in a round does and the model's rms is over {} times its noise floor, the refit with the lowest BIC that lowered the BIC by the margin and the structure at all; stop when the residual is white (structure ratio < {})", super::stepwise::BIC_MARGIN, 100.0 * super::search::STRUCTURE_DROP, super::search::FAR_ABOVE_FLOOR, super::diagnose::STRUCTURE_LIMIT),
+            "acceptance": format!("ΔBIC < −{} and at least {:.0}% of the residual's low-frequency structure over white noise removed; where nothing in a round does and the model's rms is over {} times its noise floor, the round's refit with the lowest BIC that lowered the BIC by the margin and the structure at all is ranked in its turn and its best candidates refitted beside it, kept where the two together meet the same rule against the model before both (stage `after a partial gain`); stop when the residual is white (structure ratio < {})", super::stepwise::BIC_MARGIN, 100.0 * super::search::STRUCTURE_DROP, super::search::FAR_ABOVE_FLOOR, super::diagnose::STRUCTURE_LIMIT),
             "simulations": prob.sim.simulations.load(std::sync::atomic::Ordering::Relaxed),
             "seconds": seconds,
         },
@@ -548,9 +548,12 @@ fn identified_markdown(j: &Value) -> String {
         s += &format!("\nBacklash law: **{}** ({}).\n", law["chosen"].as_str().unwrap_or("?"), rows.join("; "));
         if let Some(scan) = law.get("width_scan").and_then(Value::as_object) {
             let rad = |k: &str| scan.get(k).and_then(Value::as_f64).unwrap_or(f64::NAN);
+            let factors = super::search::WIDTH_SCAN;
             s += &format!(
-                "The final backlash width was scanned over a tenth of itself and refitted from the best: \
+                "The final backlash width was scanned at {}–{} of itself and refitted from the best: \
                  {:.4e} → {:.4e} rad (the cost is rugged at a difference step's scale, docs/calibration.md).\n",
+                factors[0],
+                factors[factors.len() - 1],
                 rad("from_rad"),
                 rad("to_rad")
             );

@@ -17,9 +17,9 @@ use nalgebra::{DMatrix, DVector};
 pub const STRUCTURE_DROP: f64 = 1.0 / 3.0;
 /// How far above its noise floor (the link sensor's, `Signatures::noise_floor`) a model's rms must
 /// be for a refit that lowered the BIC and some of the structure to be ranked in its turn where
-/// nothing earned its place (`Rig::partly_earned`): the factor the unexplained rule uses against that floor without the motor log's
-/// simulated error (`FAR_ABOVE_COUNT_FLOOR` in mod.rs), where a right model has stood 1.52× above.
-pub const FAR_ABOVE_FLOOR: f64 = 2.0;
+/// nothing earned its place (`Rig::partly_earned`): the factor the unexplained rule uses against
+/// that floor without the motor log's simulated error, where a right model has stood 1.52× above.
+pub const FAR_ABOVE_FLOOR: f64 = super::FAR_ABOVE_COUNT_FLOOR;
 pub const MAX_ITERATIONS: usize = 25;
 /// Levenberg–Marquardt iterations a shortlisted candidate gets before the comparison; the
 /// winner then runs to convergence (speed: most of a search is spent on losers).
@@ -169,7 +169,7 @@ pub struct BacklashLawChoice {
 }
 
 /// Factors the backlash width is scanned by around the fit's own, each with the rest held.
-const WIDTH_SCAN: [f64; 4] = [0.8, 0.9, 1.1, 1.25];
+pub const WIDTH_SCAN: [f64; 4] = [0.8, 0.9, 1.1, 1.25];
 /// Rounds of the scan at most (each a simulation per factor and a refit).
 const WIDTH_SCAN_ROUNDS: usize = 4;
 
