@@ -563,7 +563,7 @@ fn try_combination(
 }
 
 /// Starting points for refitting `current` with the candidates' effects added: the current
-/// transmission (the table's for a group at a bound) and the closed-form one (the transmission
+/// transmission (the table's for a group at a bound or dragging, where `replace_no_start`) and the closed-form one (the transmission
 /// fitted without an effect may have absorbed it: friction mimicked by a softer, more damped link;
 /// gravity by a rigid one), each with
 /// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
