@@ -393,6 +393,25 @@ fn below_noise(fit: &Fit, n_groups: usize, floor: f64) -> Vec<Effect> {
     fit.spec.effects.iter().copied().filter(|&e| effect_share(fit, n_groups, e).is_some_and(|s| s <= floor)).collect()
 }
 
+/// How far `fit`'s gravity moves the link beyond what a constant load would: its torque
+/// −A sin(θ − θ0) less that torque's mean over every measured link angle, rms, through the softest
+/// fitted stiffness (a quasi-static deflection, the convention of the report's equivalent forms,
+/// `report::gravity_offset_form`). None without a gravity.
+fn gravity_beyond_a_load(prob: &Problem, fit: &Fit) -> Option<f64> {
+    let o = fit.spec.offset_of(Effect::Gravity, prob.n_groups)?;
+    // (a, b) = A (cos θ0, sin θ0): −A sin(θ − θ0) = −a sin θ + b cos θ
+    let (a, b) = (fit.p[o], fit.p[o + 1]);
+    let torque = || prob.measured.iter().flatten().map(|t| -a * t.sin() + b * t.cos());
+    let n = prob.measured.iter().map(Vec::len).sum::<usize>();
+    if n == 0 {
+        return None;
+    }
+    let mean = torque().sum::<f64>() / n as f64;
+    let spread = (torque().map(|t| (t - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
+    let softest = (0..prob.n_groups).map(|g| fit.p[2 * g].exp()).fold(f64::INFINITY, f64::min);
+    Some(spread / softest)
+}
+
 /// `fit`'s model and parameters without the effects `drop` (the backlash law re-chosen later).
 fn spec_without(fit: &Fit, n_groups: usize, drop: &[Effect]) -> (ModelSpec, Vec<f64>) {
     let spec = ModelSpec {
@@ -1299,6 +1318,9 @@ impl Rig for DeviceRig<'_, '_> {
     }
     fn visible(&self, m: &Judged, e: Effect) -> bool {
         effect_share(&m.fit, self.prob.n_groups, e).is_none_or(|share| share > m.sig.noise_floor)
+    }
+    fn lighter_hidden(&self, m: &Judged, e: Effect) -> bool {
+        e == Effect::Gravity && gravity_beyond_a_load(self.prob, &m.fit).is_some_and(|moved| moved < m.sig.noise_floor)
     }
     fn defined_over(&self, e: Effect) -> Option<Effect> {
         e.defined_over()

@@ -324,6 +324,13 @@ pub trait Rig {
     fn lighter(&self, _m: &Self::Model, _e: Self::Effect) -> Option<(Self::Effect, Self::Model)> {
         None
     }
+    /// Whether what `e` does in `m` beyond its lighter form moves the link by less than the noise,
+    /// so that no sample shows the difference (a gravity whose torque over the link's measured
+    /// angles is a constant to within what the noise hides): then the lighter form takes its place
+    /// whatever the BIC, as an effect no sample shows goes (`visible`). False by default.
+    fn lighter_hidden(&self, _m: &Self::Model, _e: Self::Effect) -> bool {
+        false
+    }
     /// `m` with effect `out` taken out and candidate `c` put in, refitted from `m`'s values without
     /// `out` (a screening refit), and its verdict against `m`; None where the rig offers no swaps.
     #[allow(clippy::type_complexity)]
@@ -366,12 +373,14 @@ pub struct Pruned<E> {
     pub bic_with: f64,
     /// BIC without it (with its lighter form, where one replaced it).
     pub bic_without: f64,
-    /// Removed because no sample could show it (`Rig::visible`), whatever the BIC said.
+    /// Removed because no sample could show it (`Rig::visible`), or, with `replaced_by`, what it
+    /// did beyond its lighter form (`Rig::lighter_hidden`), whatever the BIC said.
     pub below_noise: bool,
 }
 
 /// One step of the backward check on `current`: the first effect that goes (or gives way to its
-/// lighter form), refitted without it; with `below_noise_only`, only an effect no sample can show.
+/// lighter form), refitted without it; with `below_noise_only`, only an effect no sample can show,
+/// or whose difference from its lighter form none can (`Rig::lighter_hidden`).
 fn backward_step<R: Rig>(
     rig: &R,
     current: &R::Model,
@@ -380,7 +389,8 @@ fn backward_step<R: Rig>(
 ) -> Option<(Pruned<R::Effect>, R::Model)> {
     for e in rig.effects(current) {
         let below_noise = !rig.visible(current, e);
-        if below_noise_only && !below_noise {
+        let hidden = !below_noise && rig.lighter_hidden(current, e);
+        if below_noise_only && !below_noise && !hidden {
             continue;
         }
         // far beyond the margin the effect is plainly needed: a refit without it would only
@@ -391,31 +401,35 @@ fn backward_step<R: Rig>(
         // is the current one less a level at or near nothing: a refit from there is short), up to
         // the budget's hard end, in the final check as in the search's steps (campaign rig 173: a
         // gravity of 1 mN.m left in when the share ran out before its turn); the rest of the
-        // check keeps to the search's share.
-        if below_noise && budget.past_end() {
+        // check keeps to the search's share. So does an effect that gives way to its lighter form
+        // where no sample shows the difference (campaign rig 252: its budget ran out in a round).
+        let unseen = below_noise || hidden;
+        if unseen && budget.past_end() {
             return None;
         }
-        if !below_noise && !budget.allows("the rest of the backward check") {
+        if !unseen && !budget.allows("the rest of the backward check") {
             continue;
         }
-        let removal = if needed { None } else { budget.timed(|| rig.without(current, e)).map(|m| (None, m)) };
+        let try_removal = !needed && (below_noise || !below_noise_only);
+        let removal = if try_removal { budget.timed(|| rig.without(current, e)).map(|m| (None, m)) } else { None };
         let removal = removal.filter(|(_, m)| below_noise || rig.bic(m) < rig.bic(current) + BIC_MARGIN);
+        let removal = removal.map(|(l, m)| (l, m, false));
         let step = removal.or_else(|| {
-            if below_noise_only {
+            if below_noise_only && !hidden {
                 return None;
             }
             let (lighter, m) = budget.timed(|| rig.lighter(current, e))?;
-            (rig.bic(&m) < rig.bic(current) + BIC_MARGIN).then_some((Some(lighter), m))
+            (hidden || rig.bic(&m) < rig.bic(current) + BIC_MARGIN).then_some((Some(lighter), m, hidden))
         });
-        let Some((lighter, screen)) = step else { continue };
+        let Some((lighter, screen, hidden)) = step else { continue };
         let Some(refit) = budget.timed(|| rig.polish(screen)) else { continue };
-        if below_noise || rig.bic(&refit) < rig.bic(current) + BIC_MARGIN {
+        if below_noise || hidden || rig.bic(&refit) < rig.bic(current) + BIC_MARGIN {
             let p = Pruned {
                 effect: e,
                 replaced_by: lighter,
                 bic_with: rig.bic(current),
                 bic_without: rig.bic(&refit),
-                below_noise: below_noise && lighter.is_none(),
+                below_noise: (below_noise && lighter.is_none()) || hidden,
             };
             return Some((p, refit));
         }
@@ -983,6 +997,13 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
                 f(&p["bic_with"]),
                 f(&p["bic_without"])
             ),
+            Some(l) if p["below_noise"] == true => format!(
+                "Backward check: **{}** gave way to its lighter form **{l}** (BIC {} with it, {} with {l}): what it \
+                 does beyond {l} moves the link by less than the noise floor, so no sample shows the difference.\n\n",
+                p["effect"].as_str().unwrap_or(""),
+                f(&p["bic_with"]),
+                f(&p["bic_without"])
+            ),
             Some(l) => format!(
                 "Backward check: **{}** gave way to its lighter form **{l}** (BIC {} with it, {} with {l}: the runs \
                  show no more of it than that).\n\n",
@@ -1232,6 +1253,13 @@ mod tests {
         fn lighter(&self, m: &Model, e: usize) -> Option<(usize, Model)> {
             let (_, l) = self.lighter.filter(|&(h, l)| h == e && !m.cols.contains(&l))?;
             Some((l, self.fit(m.cols.iter().map(|&c| if c == e { l } else { c }).collect())))
+        }
+        fn lighter_hidden(&self, m: &Model, e: usize) -> bool {
+            // what e's column does beyond its lighter form's, at e's coefficient, against the noise
+            let Some((_, l)) = self.lighter.filter(|&(h, _)| h == e) else { return false };
+            let i = m.cols.iter().position(|&c| c == e).unwrap();
+            let beyond = self.x[e].iter().zip(&self.x[l]).map(|(a, b)| ((a - b) * m.p[i]).powi(2)).sum::<f64>();
+            beyond / self.y.len() as f64 <= self.noise_var
         }
     }
 
@@ -1583,6 +1611,27 @@ mod tests {
         let s = search(&r, start, &Budget::seconds(60.0));
         assert_eq!(s.model.cols, vec![0], "a lighter form that does worse leaves the effect be");
         assert!(s.record.pruned.is_empty());
+    }
+
+    #[test]
+    fn an_effect_gives_way_to_its_lighter_form_where_no_sample_shows_the_difference() {
+        // x1 follows the truth's x0 to 0.3 of the noise: over 2000 samples the BIC keeps x0 by far,
+        // yet no sample shows what x0 does beyond x1 (a gravity whose torque over the measured
+        // angles is a constant to within the noise, against a constant load)
+        let (x0, z) = (normals(61, N), normals(62, N));
+        let x1: Vec<f64> = (0..N).map(|i| x0[i] + 0.3 * NOISE * z[i]).collect();
+        let (mut r, _) = rig(vec![x0.clone(), x1], |i| x0[i]);
+        r.lighter = Some((0, 1));
+        let start = r.fit(vec![0]);
+        assert!(r.bic(&r.fit(vec![1])) > r.bic(&start) + 10.0 * BIC_MARGIN, "the BIC alone keeps x0");
+        let s = search(&r, start, &Budget::seconds(60.0));
+        assert_eq!(s.model.cols, vec![1]);
+        let p = &s.record.pruned[0];
+        assert_eq!((p.effect, p.replaced_by, p.below_noise), (0, Some(1), true));
+        assert!(p.bic_without > p.bic_with + BIC_MARGIN, "replaced whatever the BIC: {p:?}");
+        let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
+        let md = record_markdown(&j, |_| String::new(), |_| String::new());
+        assert!(md.contains("no sample shows the difference"), "{md}");
     }
 
     #[test]
