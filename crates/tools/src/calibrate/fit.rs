@@ -522,6 +522,12 @@ impl<'a> Problem<'a> {
         ((STIFFNESS_RANGE.0, k_hi), (DAMPING_RANGE.0, c_hi))
     }
 
+    /// The smallest K of the temperature groups in `p`, N·m/rad: what a torque on the link deflects
+    /// it through at the least (the report's and the backward check's quasi-static convention).
+    pub fn softest_stiffness(&self, p: &[f64]) -> f64 {
+        (0..self.n_groups).map(|g| p[2 * g].exp()).fold(f64::INFINITY, f64::min)
+    }
+
     /// Whether group g's stiffness or damping in `p` sits on its bound.
     pub fn transmission_at_bound(&self, g: usize, p: &[f64]) -> bool {
         let ((k_lo, k_hi), (c_lo, c_hi)) = self.transmission_range(g);

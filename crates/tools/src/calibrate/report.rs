@@ -227,7 +227,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         .collect();
     let record = record_json(o);
     let mut forms = equivalent_forms(&added);
-    let softest = (0..prob.n_groups).map(|g| o.final_fit.p[2 * g].exp()).fold(f64::INFINITY, f64::min);
+    let softest = prob.softest_stiffness(&o.final_fit.p);
     let links: Vec<&[f64]> = runs.iter().map(|r| &r.link[..]).collect();
     let floor = o.final_signatures.noise_floor;
     if let (Some(form), Value::Array(list)) = (gravity_offset_form(&added, &links, softest, floor), &mut forms) {

@@ -408,8 +408,7 @@ fn gravity_beyond_a_load(prob: &Problem, fit: &Fit) -> Option<f64> {
     }
     let mean = torque().sum::<f64>() / n as f64;
     let spread = (torque().map(|t| (t - mean).powi(2)).sum::<f64>() / n as f64).sqrt();
-    let softest = (0..prob.n_groups).map(|g| fit.p[2 * g].exp()).fold(f64::INFINITY, f64::min);
-    Some(spread / softest)
+    Some(spread / prob.softest_stiffness(&fit.p))
 }
 
 /// `fit`'s model and parameters without the effects `drop` (the backlash law re-chosen later).
@@ -582,11 +581,11 @@ fn try_combination(
 }
 
 /// Starting points for refitting `current` with the candidates' effects added: the current
-/// transmission (the table's for a group at a bound or dragging, where `replace_no_start`) and the closed-form one (the transmission
-/// fitted without an effect may have absorbed it: friction mimicked by a softer, more damped link;
-/// gravity by a rigid one), each with
-/// the linearised effect values and with the effects' typical sizes (a linearisation at a rigid or
-/// bounded fit can be absurd); and the equation error with the effects' torques as regressors
+/// transmission (the table's for a group at a bound or dragging, where `replace_no_start`) and the
+/// closed-form one (the transmission fitted without an effect may have absorbed it: friction
+/// mimicked by a softer, more damped link; gravity by a rigid one), each with the linearised effect
+/// values and with the effects' typical sizes (a linearisation at a rigid or bounded fit can be
+/// absurd); and the equation error with the effects' torques as regressors
 /// (transmission and effects estimated together, so neither absorbs the other).
 fn candidate_starts(
     prob: &Problem,
@@ -1138,6 +1137,7 @@ impl DeviceRig<'_, '_> {
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
         let single = as_single && added.len() == 1;
+        let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
         let structures: Vec<Structure> = if single {
             std::iter::once((spec.law, spec.springs))
                 .chain(self.laws.allowed.iter().copied().filter(|&s| s != (spec.law, spec.springs)))
@@ -1161,9 +1161,7 @@ impl DeviceRig<'_, '_> {
                     // it (a link damper that took the transmission's damping, rig 185: C → 0): where
                     // the table's start ends above the current model, the current transmission's
                     // start is refitted too, and the lower BIC kept
-                    let here = if (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p))
-                        && table.as_ref().is_none_or(|t| t.bic() >= current.bic())
-                    {
+                    let here = if any_no_start && table.as_ref().is_none_or(|t| t.bic() >= current.bic()) {
                         fit(false)
                     } else {
                         None
