@@ -411,17 +411,18 @@ fn backward_step<R: Rig>(
             continue;
         }
         let try_removal = !needed && (below_noise || !below_noise_only);
-        let removal = if try_removal { budget.timed(|| rig.without(current, e)).map(|m| (None, m)) } else { None };
-        let removal = removal.filter(|(_, m)| below_noise || rig.bic(m) < rig.bic(current) + BIC_MARGIN);
-        let removal = removal.map(|(l, m)| (l, m, false));
+        let removal = if try_removal { budget.timed(|| rig.without(current, e)) } else { None };
+        let removal = removal.filter(|m| below_noise || rig.bic(m) < rig.bic(current) + BIC_MARGIN).map(|m| (None, m));
         let step = removal.or_else(|| {
             if below_noise_only && !hidden {
                 return None;
             }
             let (lighter, m) = budget.timed(|| rig.lighter(current, e))?;
-            (hidden || rig.bic(&m) < rig.bic(current) + BIC_MARGIN).then_some((Some(lighter), m, hidden))
+            (hidden || rig.bic(&m) < rig.bic(current) + BIC_MARGIN).then_some((Some(lighter), m))
         });
-        let Some((lighter, screen, hidden)) = step else { continue };
+        let Some((lighter, screen)) = step else { continue };
+        // a removal taken instead is judged as any other
+        let hidden = hidden && lighter.is_some();
         let Some(refit) = budget.timed(|| rig.polish(screen)) else { continue };
         if below_noise || hidden || rig.bic(&refit) < rig.bic(current) + BIC_MARGIN {
             let p = Pruned {
