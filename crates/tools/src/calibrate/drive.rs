@@ -750,7 +750,8 @@ impl<'a> DriveProblem<'a> {
         let delta = DVector::from_iterator(k, force.iter().map(|&i| taken.p[i] - fit.p[i]));
         let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(force[a], force[b])]);
         let wald = (delta.transpose() * spd_inverse(&cov) * &delta)[(0, 0)];
-        Some(ForceLevels { wald, limit: chi_square_quantile(k), fit: taken })
+        let rms_ratio = (taken.sse / fit.sse).sqrt();
+        Some(ForceLevels { wald, limit: chi_square_quantile(k), rms_ratio, fit: taken })
     }
 
     /// The friction sign's smoothing speeds a fit may take: from a hard sign (a millionth of the
@@ -829,13 +830,18 @@ pub struct ForceLevels {
     pub wald: f64,
     /// χ² at p = 0.001 for as many degrees of freedom as force parameters.
     pub limit: f64,
+    /// The position rms with the logged force's parameters over the output error's.
+    pub rms_ratio: f64,
     pub fit: DriveFit,
 }
 
 impl ForceLevels {
-    /// The positions cannot tell the logged force's parameters from their own.
+    /// The positions cannot tell the logged force's parameters from their own, or prefer them: a
+    /// ratio at most 1 says the output error stopped short of its own minimum (drive rig 6: its
+    /// Coulomb/Stribeck split 11 standard errors from the truth's, the force log's nearer and
+    /// fitting the positions better), so its confidence region is not the positions' word.
     pub fn taken(&self) -> bool {
-        self.wald <= self.limit
+        self.wald <= self.limit || self.rms_ratio <= 1.0
     }
 }
 
@@ -1643,9 +1649,9 @@ pub struct DriveOutcome {
     pub residual_corr_sign: f64,
     pub final_corr_sign: f64,
     /// A closed loop's force parameters from the logged force (`DriveProblem::with_force_levels`):
-    /// their Wald distance from the search's model and its limit. The final model has them when
-    /// the distance is within the limit.
-    pub force_levels: Option<(f64, f64)>,
+    /// their Wald distance from the search's model, its limit, their position rms over the
+    /// model's and whether the final model has them (`ForceLevels::taken`).
+    pub force_levels: Option<(f64, f64, f64, bool)>,
 }
 
 /// corr(e, sign q̇) of a fit's position residual (q̇ of the measured motor position).
@@ -2229,7 +2235,7 @@ pub fn calibrate(
         load_column,
         // the friction library is exhausted when a sign-of-speed pattern remains in the residual
         unexplained: final_corr.abs() > 0.3,
-        force_levels: force_levels.map(|f| (f.wald, f.limit)),
+        force_levels: force_levels.map(|f| (f.wald, f.limit, f.rms_ratio, f.taken())),
         residual_corr_sign: residual_corr,
         final_corr_sign: final_corr,
     })
@@ -2449,7 +2455,7 @@ pub fn report_json(
             "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
             "fit": if o.equation_error {
                 "the equation error (IDIM-LS on the logged torque, `inverse_model`) chooses and estimates; the output error on the positions (Levenberg–Marquardt through the FMU) simulates the result"
-            } else if o.force_levels.is_some_and(|(wald, limit)| wald <= limit) {
+            } else if o.force_levels.is_some_and(|f| f.3) {
                 "output error on the positions (Levenberg–Marquardt through the FMU, forward differences) chooses the effects; the final model's force parameters are the equation error's on the logged force at its inertia, the inertia, initial speeds and smoothing fitted again to the positions (`inverse_model.force_levels`)"
             } else {
                 "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)"
@@ -2493,12 +2499,13 @@ pub fn report_json(
             "with_coulomb": {"inertia": iv.with_coulomb_inertia, "viscous": iv.with_coulomb_viscous, "constant_load": iv.with_coulomb_load, "coulomb": iv.coulomb},
             "residual_corr_sign_speed": iv.corr_sign,
         });
-        if let Some((wald, limit)) = o.force_levels {
+        if let Some((wald, limit, rms_ratio, taken)) = o.force_levels {
             j["inverse_model"]["force_levels"] = json!({
                 "wald_chi2": wald,
                 "limit": limit,
-                "taken": wald <= limit,
-                "note": "a position controller turns a force into a tracking error of force/kp, under the encoder's noise, while the logged force carries it whole: the search's model's force parameters (all but the inertia, the initial speeds and the sign's smoothing) from the equation error at its inertia, those three fitted again to the positions; taken when they lie inside the output error's confidence region (Wald χ² in its block-sandwich covariance at most the p = 0.001 quantile)",
+                "position_rms_ratio": rms_ratio,
+                "taken": taken,
+                "note": "a position controller turns a force into a tracking error of force/kp, under the encoder's noise, while the logged force carries it whole: the search's model's force parameters (all but the inertia, the initial speeds and the sign's smoothing) from the equation error at its inertia, those three fitted again to the positions; taken when they lie inside the output error's confidence region (Wald χ² in its block-sandwich covariance at most the p = 0.001 quantile) or fit the positions at least as well (position_rms_ratio, theirs over the output error's, at most 1: the output error stopped short of its own minimum)",
             });
         }
     }
@@ -2780,9 +2787,13 @@ pub fn report_markdown(j: &Value) -> String {
         s += &format!("\n{}\n", form["note"].as_str().unwrap_or_default());
     }
     let levels = &j["inverse_model"]["force_levels"];
-    if let (Some(wald), Some(limit)) = (levels["wald_chi2"].as_f64(), levels["limit"].as_f64()) {
+    if let (Some(wald), Some(limit), Some(ratio)) =
+        (levels["wald_chi2"].as_f64(), levels["limit"].as_f64(), levels["position_rms_ratio"].as_f64())
+    {
         s += &if wald <= limit {
             format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, inside its confidence region ({limit:.2}): the positions cannot tell them apart, and the force log measures them whole, so the final model has them.\n")
+        } else if ratio <= 1.0 {
+            format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, outside its confidence region ({limit:.2}), yet fit the positions better (rms {ratio:.4}× the output error's): the output error stopped short of its own minimum, so the final model has them.\n")
         } else {
             format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, outside its confidence region ({limit:.2}): the positions tell them apart, and the final model keeps the output error's.\n")
         };
