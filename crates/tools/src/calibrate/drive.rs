@@ -751,7 +751,10 @@ impl<'a> DriveProblem<'a> {
         let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(force[a], force[b])]);
         let wald = (delta.transpose() * spd_inverse(&cov) * &delta)[(0, 0)];
         let rms_ratio = (taken.sse / fit.sse).sqrt();
-        Some(ForceLevels { wald, limit: chi_square_quantile(k), rms_ratio, fit: taken })
+        Some(ForceLevels {
+            against_output_error: ForceLevelsTest { wald, limit: chi_square_quantile(k), rms_ratio },
+            fit: taken,
+        })
     }
 
     /// The friction sign's smoothing speeds a fit may take: from a hard sign (a millionth of the
@@ -824,18 +827,25 @@ fn fitted_to_positions(q: Param) -> bool {
 }
 
 /// A closed loop's model with its force parameters from the logged force (`with_force_levels`),
-/// and how far they lie from the output error's in its covariance.
+/// and how they compare with the output error's.
 pub struct ForceLevels {
+    pub against_output_error: ForceLevelsTest,
+    pub fit: DriveFit,
+}
+
+/// How the logged force's parameters compare with the output error's: the report's
+/// `inverse_model.force_levels`.
+#[derive(Clone, Copy, Debug)]
+pub struct ForceLevelsTest {
     /// (θ_force − θ_output)ᵀ Σ⁻¹ (θ_force − θ_output), Σ the output error's block sandwich.
     pub wald: f64,
     /// χ² at p = 0.001 for as many degrees of freedom as force parameters.
     pub limit: f64,
     /// The position rms with the logged force's parameters over the output error's.
     pub rms_ratio: f64,
-    pub fit: DriveFit,
 }
 
-impl ForceLevels {
+impl ForceLevelsTest {
     /// The positions cannot tell the logged force's parameters from their own, or prefer them: a
     /// ratio at most 1 says the output error stopped short of its own minimum (drive rig 6: its
     /// Coulomb/Stribeck split 11 standard errors from the truth's, the force log's nearer and
@@ -1649,9 +1659,9 @@ pub struct DriveOutcome {
     pub residual_corr_sign: f64,
     pub final_corr_sign: f64,
     /// A closed loop's force parameters from the logged force (`DriveProblem::with_force_levels`):
-    /// their Wald distance from the search's model, its limit, their position rms over the
-    /// model's and whether the final model has them (`ForceLevels::taken`).
-    pub force_levels: Option<(f64, f64, f64, bool)>,
+    /// how they compare with the search's model; the final model has them where
+    /// `ForceLevelsTest::taken`.
+    pub force_levels: Option<ForceLevelsTest>,
 }
 
 /// corr(e, sign q̇) of a fit's position residual (q̇ of the measured motor position).
@@ -2197,7 +2207,7 @@ pub fn calibrate(
     };
     sim.clear_deadline();
     let current = match &force_levels {
-        Some(f) if f.taken() => f.fit.clone(),
+        Some(f) if f.against_output_error.taken() => f.fit.clone(),
         _ => found.model,
     };
     let mut validation_sims = None;
@@ -2235,7 +2245,7 @@ pub fn calibrate(
         load_column,
         // the friction library is exhausted when a sign-of-speed pattern remains in the residual
         unexplained: final_corr.abs() > 0.3,
-        force_levels: force_levels.map(|f| (f.wald, f.limit, f.rms_ratio, f.taken())),
+        force_levels: force_levels.map(|f| f.against_output_error),
         residual_corr_sign: residual_corr,
         final_corr_sign: final_corr,
     })
@@ -2455,7 +2465,7 @@ pub fn report_json(
             "simulation": "the packaged FMU through the harness: motor_drive = 0, transmission rigid or compliant; drive=reference: the master applies sat(kp (r − q) − kd q̇) every controller period with q̇ from qf(k) = (q(k) + q(k−1))/2, q̇(k) = (qf(k) − qf(k−1))/T; drive=motor_torque: the measured torque held over each sample",
             "fit": if o.equation_error {
                 "the equation error (IDIM-LS on the logged torque, `inverse_model`) chooses and estimates; the output error on the positions (Levenberg–Marquardt through the FMU) simulates the result"
-            } else if o.force_levels.is_some_and(|f| f.3) {
+            } else if o.force_levels.is_some_and(|f| f.taken()) {
                 "output error on the positions (Levenberg–Marquardt through the FMU, forward differences) chooses the effects; the final model's force parameters are the equation error's on the logged force at its inertia, the inertia, initial speeds and smoothing fitted again to the positions (`inverse_model.force_levels`)"
             } else {
                 "output error on the positions (Levenberg–Marquardt through the FMU, forward differences)"
@@ -2499,12 +2509,12 @@ pub fn report_json(
             "with_coulomb": {"inertia": iv.with_coulomb_inertia, "viscous": iv.with_coulomb_viscous, "constant_load": iv.with_coulomb_load, "coulomb": iv.coulomb},
             "residual_corr_sign_speed": iv.corr_sign,
         });
-        if let Some((wald, limit, rms_ratio, taken)) = o.force_levels {
+        if let Some(f) = o.force_levels {
             j["inverse_model"]["force_levels"] = json!({
-                "wald_chi2": wald,
-                "limit": limit,
-                "position_rms_ratio": rms_ratio,
-                "taken": taken,
+                "wald_chi2": f.wald,
+                "limit": f.limit,
+                "position_rms_ratio": f.rms_ratio,
+                "taken": f.taken(),
                 "note": "a position controller turns a force into a tracking error of force/kp, under the encoder's noise, while the logged force carries it whole: the search's model's force parameters (all but the inertia, the initial speeds and the sign's smoothing) from the equation error at its inertia, those three fitted again to the positions; taken when they lie inside the output error's confidence region (Wald χ² in its block-sandwich covariance at most the p = 0.001 quantile) or fit the positions at least as well (position_rms_ratio, theirs over the output error's, at most 1: the output error stopped short of its own minimum)",
             });
         }
