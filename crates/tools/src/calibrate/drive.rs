@@ -2797,12 +2797,16 @@ pub fn report_markdown(j: &Value) -> String {
         s += &format!("\n{}\n", form["note"].as_str().unwrap_or_default());
     }
     let levels = &j["inverse_model"]["force_levels"];
-    if let (Some(wald), Some(limit), Some(ratio)) =
-        (levels["wald_chi2"].as_f64(), levels["limit"].as_f64(), levels["position_rms_ratio"].as_f64())
-    {
-        s += &if wald <= limit {
+    // the words follow the report's `taken` (`ForceLevelsTest::taken`), not a rule of their own
+    if let (Some(wald), Some(limit), Some(ratio), Some(taken)) = (
+        levels["wald_chi2"].as_f64(),
+        levels["limit"].as_f64(),
+        levels["position_rms_ratio"].as_f64(),
+        levels["taken"].as_bool(),
+    ) {
+        s += &if taken && wald <= limit {
             format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, inside its confidence region ({limit:.2}): the positions cannot tell them apart, and the force log measures them whole, so the final model has them.\n")
-        } else if ratio <= 1.0 {
+        } else if taken {
             format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, outside its confidence region ({limit:.2}), yet fit the positions better (rms {ratio:.4}× the output error's): the output error stopped short of its own minimum, so the final model has them.\n")
         } else {
             format!("\nForce parameters from the logged force: the equation error's at the fitted inertia lie {wald:.3} (Wald χ²) from the output error's, outside its confidence region ({limit:.2}): the positions tell them apart, and the final model keeps the output error's.\n")
