@@ -786,15 +786,11 @@ impl<'a> DriveProblem<'a> {
         costs.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map_or(grid[grid.len() / 2], |c| c.0)
     }
 
-    /// How far an effect of `fit` moves the simulated positions against what the noise can hide:
-    /// its linearised share s = J_e·p_e (its levels; a Stribeck speed only shapes one), sample by
-    /// sample against the position noise, and at its own time scale against the refit's residual,
-    /// the larger. At its time scale both are averaged over blocks as long as s holds (the lag at
-    /// which its autocorrelation falls to ½), rms against rms. A closed loop turns Coulomb friction
-    /// into a tracking offset that holds for a whole stroke, under an encoder's noise sample by
-    /// sample; averaged over the stroke the white noise falls by its square root and the offset
-    /// does not, while a coloured residual (a controller's dither, a model error) keeps its slow
-    /// part. An effect is visible above 1.
+    /// How far an effect of `fit` moves the simulated positions against what the noise can hide
+    /// (`fit::visibility`: sample by sample against the position noise, and at its own time scale
+    /// against the refit's residual), from its linearised share s = J_e·p_e (its levels; a Stribeck
+    /// speed only shapes one). A closed loop turns Coulomb friction into a tracking offset that holds
+    /// for a whole stroke. An effect is visible above 1.
     pub fn share_over_noise(&self, fit: &DriveFit, effect: DriveEffect) -> f64 {
         let cols: Vec<usize> = drive_levels(effect).filter_map(|q| fit.spec.iter().position(|&x| x == q)).collect();
         let rows = fit.jacobian.nrows();
@@ -802,8 +798,7 @@ impl<'a> DriveProblem<'a> {
             return f64::INFINITY;
         }
         let share = super::fit::linearised_shares(&fit.jacobian, &fit.p, &cols);
-        let per_sample = super::fit::rms(&share) / self.position_noise;
-        per_sample.max(own_time_scale_share(&share, &fit.residual, &self.lengths(), fit.p.len()))
+        super::fit::visibility(&share, self.position_noise, &fit.residual, &self.lengths(), fit.p.len())
     }
 
     /// The declared inertia every run shares (None when any run leaves it to the fit).
@@ -865,53 +860,6 @@ pub fn chi_square_quantile(dof: usize) -> f64 {
     let z = 3.090_232; // the standard normal's 0.999 quantile
     let h = 2.0 / (9.0 * k);
     k * (1.0 - h + z * h.sqrt()).powi(3)
-}
-
-/// rms(s̄) / rms(r̄) for `share` s and `residual` r averaged over blocks of the lag at which s's
-/// autocorrelation falls to ½, runs (`lengths`) apart. The block is at most the length that leaves
-/// ten blocks per fitted parameter (`parameters`): a fit nulls its residual's slowest blocks (the
-/// initial speeds, a load), and over a few long blocks any residual would read as no noise.
-fn own_time_scale_share(share: &[f64], residual: &[f64], lengths: &[usize], parameters: usize) -> f64 {
-    let runs: Vec<std::ops::Range<usize>> = lengths
-        .iter()
-        .scan(0, |start, &l| {
-            *start += l;
-            Some(*start - l..*start)
-        })
-        .collect();
-    let autocorrelation = |lag: usize| {
-        let (mut lagged, mut energy) = (0.0, 0.0);
-        for run in &runs {
-            let x = &share[run.clone()];
-            energy += x.iter().map(|v| v * v).sum::<f64>();
-            lagged += x.iter().zip(x.iter().skip(lag)).map(|(a, b)| a * b).sum::<f64>();
-        }
-        if energy > 0.0 {
-            lagged / energy
-        } else {
-            0.0
-        }
-    };
-    let longest = (share.len() / (10 * parameters.max(1))).max(1);
-    let mut block = 1;
-    while block < longest && autocorrelation(block) > 0.5 {
-        block = (block + block.div_ceil(4)).min(longest);
-    }
-    let block_rms = |x: &[f64]| {
-        let means: Vec<f64> = runs
-            .iter()
-            .flat_map(|run| x[run.clone()].chunks_exact(block).map(|c| c.iter().sum::<f64>() / block as f64))
-            .collect();
-        super::fit::rms(&means)
-    };
-    let (signal, noise) = (block_rms(share), block_rms(residual));
-    if noise > 0.0 {
-        signal / noise
-    } else if signal > 0.0 {
-        f64::INFINITY
-    } else {
-        0.0
-    }
 }
 
 /// Error metrics of simulated runs against their measurements, positions stacked.
@@ -2915,42 +2863,6 @@ mod tests {
         // and the model loses both parameters: the cost is the level's Δ SSE less two ln n
         let one_level = super::super::stepwise::removal_delta_bic(&jacobian, &fit_with_speed(0.05).p, 1e-4, &[3], 1);
         assert!((one_level - a - (n as f64).ln()).abs() <= 1e-9 * a.abs().max(1.0), "{one_level} against {a}");
-    }
-
-    /// A friction-like share that holds for each stroke (alternating sign every `stroke` samples)
-    /// at `level`, and a residual of white noise of rms 1 (a fixed linear congruential stream).
-    fn strokes_in_noise(level: f64, stroke: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
-        let share = (0..n).map(|i| if (i / stroke).is_multiple_of(2) { level } else { -level }).collect();
-        let mut state = 12345u64;
-        let mut uniform = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 11) as f64 / (1u64 << 53) as f64
-        };
-        // a sum of 12 uniforms less 6: near-Gaussian, variance 1
-        let residual = (0..n).map(|_| (0..12).map(|_| uniform()).sum::<f64>() - 6.0).collect();
-        (share, residual)
-    }
-
-    #[test]
-    fn a_stroke_long_offset_under_the_noise_is_visible_at_its_own_time_scale() {
-        // a fifth of the noise, sample by sample; strokes of 400 samples hold over a lag of 100
-        // (their autocorrelation 1 − lag/200 falls to ½ there), over which the noise's block means
-        // fall to a tenth of it and the offset's stay
-        let (share, residual) = strokes_in_noise(0.2, 400, 40_000);
-        let seen = own_time_scale_share(&share, &residual, &[20_000, 20_000], 5);
-        assert!(seen > 1.6 && seen < 2.4, "own time scale share {seen}");
-        // the same offset for a tenth of the samples: fewer blocks, the same answer within its spread
-        let short = own_time_scale_share(&share[..4000], &residual[..4000], &[4000], 5);
-        assert!(short > 1.4 && short < 2.8, "own time scale share over 4000 samples {short}");
-        // a share that changes every sample has no time scale to average over: sample by sample
-        let (flicker, _) = strokes_in_noise(0.2, 1, 40_000);
-        let white = own_time_scale_share(&flicker, &residual, &[40_000], 5);
-        assert!((white - 0.2).abs() < 0.01, "a flickering share {white}");
-        // the block stops at ten per fitted parameter: a share constant over the whole record is
-        // averaged over 40 000 / (10 × 400) = 10 samples, not over the record
-        let constant = vec![0.2; 40_000];
-        let capped = own_time_scale_share(&constant, &residual, &[40_000], 400);
-        assert!(capped > 0.4 && capped < 0.9, "a constant share over capped blocks {capped}");
     }
 
     #[test]

@@ -1350,6 +1350,96 @@ pub fn linearised_share(jacobian: &DMatrix<f64>, p: &[f64], cols: &[usize]) -> f
     rms(&linearised_shares(jacobian, p, cols))
 }
 
+/// How far an effect shows in a fit's outputs, from its linearised share s (`linearised_shares`):
+/// sample by sample against the noise (rms s over `noise`) and at its own time scale against the
+/// fit's residual (`own_time_scale_share`), the larger. Above 1 the samples, or their averages over
+/// the time the effect holds, show it. A stiff loop's friction offset, or a friction's asymmetry
+/// under a coarse encoder, moves the output by less than the noise sample by sample but holds for
+/// a whole stroke; averaged over it white noise falls by its square root and the effect does not,
+/// while a coloured residual (a controller's dither, a model error) keeps its slow part.
+pub fn visibility(share: &[f64], noise: f64, residual: &[f64], lengths: &[usize], parameters: usize) -> f64 {
+    (rms(share) / noise).max(own_time_scale_share(share, residual, lengths, parameters))
+}
+
+/// The part of an effect's linearised share that the model's other parameters cannot take over:
+/// `share` less its least-squares projection on the Jacobian's columns outside `own` (every
+/// parameter the effect brings). A gravity beside a constant load shares its mean with the load and
+/// its slope with the stiffness; what is left is what only the gravity does. The share itself where
+/// the projection is singular.
+pub fn share_beyond_the_rest(jacobian: &DMatrix<f64>, share: &[f64], own: &[usize]) -> Vec<f64> {
+    let others: Vec<usize> = (0..jacobian.ncols()).filter(|j| !own.contains(j)).collect();
+    if others.is_empty() || jacobian.nrows() != share.len() {
+        return share.to_vec();
+    }
+    // the normal equations over the other columns, each scaled to unit norm (the parameters' units
+    // differ by orders of magnitude), without copying the Jacobian
+    let k = others.len();
+    let norms: Vec<f64> = others.iter().map(|&j| jacobian.column(j).norm()).collect();
+    if norms.iter().any(|&n| !(n > 0.0 && n.is_finite())) {
+        return share.to_vec();
+    }
+    let s = DVector::from_column_slice(share);
+    let gram = DMatrix::from_fn(k, k, |a, b| {
+        jacobian.column(others[a]).dot(&jacobian.column(others[b])) / (norms[a] * norms[b])
+    });
+    let rhs = DVector::from_fn(k, |a, _| jacobian.column(others[a]).dot(&s) / norms[a]);
+    let Some(beta) = gram.cholesky().map(|ch| ch.solve(&rhs)) else {
+        return share.to_vec();
+    };
+    let mut left = s;
+    for (a, &j) in others.iter().enumerate() {
+        left.axpy(-beta[a] / norms[a], &jacobian.column(j), 1.0);
+    }
+    left.iter().copied().collect()
+}
+
+/// rms(s̄) / rms(r̄) for `share` s and `residual` r averaged over blocks of the lag at which s's
+/// autocorrelation falls to ½, runs (`lengths`) apart. The block is at most the length that leaves
+/// ten blocks per fitted parameter (`parameters`): a fit nulls its residual's slowest blocks (the
+/// initial speeds, a load), and over a few long blocks any residual would read as no noise.
+pub fn own_time_scale_share(share: &[f64], residual: &[f64], lengths: &[usize], parameters: usize) -> f64 {
+    let runs: Vec<std::ops::Range<usize>> = lengths
+        .iter()
+        .scan(0, |start, &l| {
+            *start += l;
+            Some(*start - l..*start)
+        })
+        .collect();
+    let autocorrelation = |lag: usize| {
+        let (mut lagged, mut energy) = (0.0, 0.0);
+        for run in &runs {
+            let x = &share[run.clone()];
+            energy += x.iter().map(|v| v * v).sum::<f64>();
+            lagged += x.iter().zip(x.iter().skip(lag)).map(|(a, b)| a * b).sum::<f64>();
+        }
+        if energy > 0.0 {
+            lagged / energy
+        } else {
+            0.0
+        }
+    };
+    let longest = (share.len() / (10 * parameters.max(1))).max(1);
+    let mut block = 1;
+    while block < longest && autocorrelation(block) > 0.5 {
+        block = (block + block.div_ceil(4)).min(longest);
+    }
+    let block_rms = |x: &[f64]| {
+        let means: Vec<f64> = runs
+            .iter()
+            .flat_map(|run| x[run.clone()].chunks_exact(block).map(|c| c.iter().sum::<f64>() / block as f64))
+            .collect();
+        rms(&means)
+    };
+    let (signal, noise) = (block_rms(share), block_rms(residual));
+    if noise > 0.0 {
+        signal / noise
+    } else if signal > 0.0 {
+        f64::INFINITY
+    } else {
+        0.0
+    }
+}
+
 /// Root mean square (0 for no values).
 pub fn rms(x: &[f64]) -> f64 {
     (x.iter().map(|v| v * v).sum::<f64>() / x.len().max(1) as f64).sqrt()
@@ -1522,6 +1612,70 @@ fn frequency_response(inp: &SimInput, link: &[f64], inertia: f64) -> Option<(f64
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A gravity-like share (a constant and a slope in the angle) beside a load's and a stiffness's
+    /// columns is theirs to take over: nothing is left of it. A share none of the other columns can
+    /// make is left whole, and the effect's own columns are not the others.
+    #[test]
+    fn a_share_the_other_columns_can_make_leaves_nothing_beyond_them() {
+        let n = 2000;
+        let angle: Vec<f64> = (0..n).map(|i| (i as f64 * 0.01).sin()).collect();
+        let sign: Vec<f64> = (0..n).map(|i| (i as f64 * 0.01).cos().signum()).collect();
+        // columns: a load (1), a stiffness (the angle, in other units), the effect's level
+        let jac = DMatrix::from_fn(n, 3, |i, j| [1.0, 1e4 * angle[i], 0.3 + 0.5 * angle[i]][j]);
+        let share: Vec<f64> = (0..n).map(|i| 2.0 * jac[(i, 2)]).collect();
+        let beyond = share_beyond_the_rest(&jac, &share, &[2]);
+        assert!(rms(&beyond) < 1e-9 * rms(&share), "left {} of {}", rms(&beyond), rms(&share));
+        // a friction-like share: the constant and the angle take only their projections of it
+        let friction: Vec<f64> = sign.iter().map(|s| 0.1 * s).collect();
+        let left = share_beyond_the_rest(&jac, &friction, &[2]);
+        assert!(rms(&left) > 0.5 * rms(&friction), "left {} of {}", rms(&left), rms(&friction));
+        // with every column the effect's own there is nothing to project on
+        assert_eq!(share_beyond_the_rest(&jac, &share, &[0, 1, 2]), share);
+    }
+
+    /// A friction-like share that holds for each stroke (alternating sign every `stroke` samples)
+    /// at `level`, and a residual of white noise of rms 1 (a fixed linear congruential stream).
+    fn strokes_in_noise(level: f64, stroke: usize, n: usize) -> (Vec<f64>, Vec<f64>) {
+        let share = (0..n).map(|i| if (i / stroke).is_multiple_of(2) { level } else { -level }).collect();
+        let mut state = 12345u64;
+        let mut uniform = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        // a sum of 12 uniforms less 6: near-Gaussian, variance 1
+        let residual = (0..n).map(|_| (0..12).map(|_| uniform()).sum::<f64>() - 6.0).collect();
+        (share, residual)
+    }
+
+    #[test]
+    fn a_stroke_long_offset_under_the_noise_is_visible_at_its_own_time_scale() {
+        // a fifth of the noise, sample by sample; strokes of 400 samples hold over a lag of 100
+        // (their autocorrelation 1 − lag/200 falls to ½ there), over which the noise's block means
+        // fall to a tenth of it and the offset's stay
+        let (share, residual) = strokes_in_noise(0.2, 400, 40_000);
+        let seen = own_time_scale_share(&share, &residual, &[20_000, 20_000], 5);
+        assert!(seen > 1.6 && seen < 2.4, "own time scale share {seen}");
+        // the same offset for a tenth of the samples: fewer blocks, the same answer within its spread
+        let short = own_time_scale_share(&share[..4000], &residual[..4000], &[4000], 5);
+        assert!(short > 1.4 && short < 2.8, "own time scale share over 4000 samples {short}");
+        // a share that changes every sample has no time scale to average over: sample by sample
+        let (flicker, _) = strokes_in_noise(0.2, 1, 40_000);
+        let white = own_time_scale_share(&flicker, &residual, &[40_000], 5);
+        assert!((white - 0.2).abs() < 0.01, "a flickering share {white}");
+        // the block stops at ten per fitted parameter: a share constant over the whole record is
+        // averaged over 40 000 / (10 × 400) = 10 samples, not over the record
+        let constant = vec![0.2; 40_000];
+        let capped = own_time_scale_share(&constant, &residual, &[40_000], 400);
+        assert!(capped > 0.4 && capped < 0.9, "a constant share over capped blocks {capped}");
+        // visibility takes the larger of the two readings: the flicker by its samples against the
+        // noise (0.2 / 0.1 = 2), the strokes by their time scale (2 against 0.2 / 1 sample by sample)
+        let lengths = [20_000, 20_000];
+        let by_samples = visibility(&flicker, 0.1, &residual, &lengths, 5);
+        assert!((by_samples - 2.0).abs() < 1e-9, "a flickering share over a tenth of its noise {by_samples}");
+        let by_strokes = visibility(&share, 1.0, &residual, &lengths, 5);
+        assert!((by_strokes - seen).abs() < 1e-12, "strokes {by_strokes} against their time scale's {seen}");
+    }
 
     /// A mean over 10 clusters of 100 samples whose residuals share one offset per cluster: the
     /// sandwich's variance is the clusters' (about 1/9), the white σ²/n a hundred times smaller;
