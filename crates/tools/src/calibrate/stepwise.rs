@@ -305,9 +305,10 @@ pub trait Rig {
     fn without(&self, m: &Self::Model, e: Self::Effect) -> Option<Self::Model>;
     /// A screening refit run to convergence on every sample.
     fn polish(&self, m: Self::Model) -> Option<Self::Model>;
-    /// Whether effect `e` of `m` moves the measured output by more than the noise can hide: one
-    /// below it may still lower the BIC over many samples, but no sample shows it (issue 28: an
-    /// effect stays only where both hold).
+    /// Whether effect `e` of `m` moves the measured output by more than the noise can hide, sample
+    /// by sample or averaged over the time the effect holds (`fit::visibility`): one below it may
+    /// still lower the BIC over many samples, but neither a sample nor such an average shows it
+    /// (issue 28: an effect stays only where both hold).
     fn visible(&self, _m: &Self::Model, _e: Self::Effect) -> bool {
         true
     }
@@ -993,7 +994,8 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
         s += &match p["replaced_by"].as_str() {
             None if p["below_noise"] == true => format!(
                 "Backward check: **{}** removed again (BIC {} with it, {} without): it moves the link by less than \
-                 the noise floor, so no sample shows it.\n\n",
+                 the noise floor sample by sample, and less than the residual averaged over the time it holds, \
+                 so neither a sample nor such an average shows it.\n\n",
                 p["effect"].as_str().unwrap_or(""),
                 f(&p["bic_with"]),
                 f(&p["bic_without"])
