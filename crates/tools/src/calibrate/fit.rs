@@ -1344,12 +1344,6 @@ pub fn minimize<S>(ls: &LeastSquares<S>, p0: Vec<f64>, max_iter: usize) -> Resul
 /// Broyden updates in a row before the Jacobian is differenced again.
 pub const MAX_BROYDEN_UPDATES: usize = 3;
 
-/// The rms over the Jacobian's rows of the linearised share Σ_j J_ij p_j of the parameters `cols`:
-/// how far they move the output (an effect's levels, judged against the noise).
-pub fn linearised_share(jacobian: &DMatrix<f64>, p: &[f64], cols: &[usize]) -> f64 {
-    rms(&linearised_shares(jacobian, p, cols))
-}
-
 /// How far an effect shows in a fit's outputs, from its linearised share s (`linearised_shares`):
 /// sample by sample against the noise (rms s over `noise`) and at its own time scale against the
 /// fit's residual (`own_time_scale_share`), the larger. Above 1 the samples, or their averages over

@@ -372,13 +372,8 @@ fn visibility(prob: &Problem, fit: &Fit, floor: f64, e: Effect) -> Option<f64> {
     if rows != fit.residual.len() || lengths.iter().sum::<usize>() != rows {
         return Some(per_sample);
     }
-    let own: Vec<usize> = fit
-        .spec
-        .offsets(prob.n_groups)
-        .into_iter()
-        .filter(|&(_, x)| x == e)
-        .flat_map(|(o, x)| o..o + x.params().len())
-        .collect();
+    let own: Vec<usize> =
+        fit.spec.offset_of(e, prob.n_groups).map_or_else(Vec::new, |o| (o..o + e.params().len()).collect());
     let beyond = super::fit::share_beyond_the_rest(&fit.jacobian, &share, &own);
     Some(per_sample.max(super::fit::own_time_scale_share(&beyond, &fit.residual, &lengths, fit.p.len())))
 }
