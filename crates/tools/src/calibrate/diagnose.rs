@@ -71,25 +71,29 @@ pub struct Signatures {
 }
 
 /// A residual harmonic at 2ω, 3ω or 5ω this many times what white noise at the floor leaves in a
-/// least-squares harmonic over the run's samples (σ √(2/N)) is structure, not noise.
+/// least-squares harmonic over the run's samples (σ √(2/N)), or what the link encoder's count
+/// leaves there where that is more ([`count_overtones`]), is structure, not noise.
 pub const NONLINEAR_HARMONIC_LIMIT: f64 = 10.0;
 
 impl Signatures {
     /// The nonlinear reference (issue 18): the harmonics at 2ω, 3ω and 5ω left in the residual of
-    /// the sinusoidal runs, over what white noise at the floor would leave (σ √(2/N) for N samples),
+    /// the sinusoidal runs, over what noise would leave there: white noise at the floor (σ √(2/N)
+    /// for N samples) or, where larger, the run's link encoder (`count`, from [`count_overtones`]);
     /// the median over those runs; None without a sinusoidal run. The transmission's K and C are
     /// linear and leave the 1ω alone: what remains above at the harmonics is a nonlinearity the
     /// model lacks, the library's or another (a hardening spring, a stiffness that depends on the
     /// link angle).
-    pub fn leftover_harmonics(&self, lengths: &[usize], sinusoidal: &[bool]) -> Option<f64> {
+    pub fn leftover_harmonics(&self, lengths: &[usize], sinusoidal: &[bool], count: &[f64]) -> Option<f64> {
         let mut ratios: Vec<f64> = self
             .runs
             .iter()
             .zip(lengths)
             .zip(sinusoidal)
-            .filter(|(_, &s)| s)
-            .map(|((r, &n), _)| {
-                let noise = self.noise_floor * (2.0 / n.max(1) as f64).sqrt();
+            .enumerate()
+            .filter(|(_, (_, &s))| s)
+            .map(|(i, ((r, &n), _))| {
+                let white = self.noise_floor * (2.0 / n.max(1) as f64).sqrt();
+                let noise = white.max(count.get(i).copied().unwrap_or(0.0));
                 r.harmonics[2..].iter().fold(0.0_f64, |m, &h| m.max(h)) / noise.max(1e-300)
             })
             .collect();
@@ -103,6 +107,93 @@ impl Signatures {
     pub fn white(&self) -> bool {
         self.structure_ratio < STRUCTURE_LIMIT
     }
+}
+
+/// Where a run's harmonics are read: whole cycles after the first, at the orders 1, 2, 3 and 5 below
+/// the Nyquist frequency (above it they alias onto others: never evidence).
+struct HarmonicWindow {
+    w0: f64,
+    orders: Vec<usize>,
+    t0: f64,
+    t1: f64,
+}
+
+impl HarmonicWindow {
+    fn of(t: &[f64], f: f64) -> Self {
+        let n = t.len();
+        let span = t[n - 1] - t[0];
+        let period = 1.0 / f;
+        let cycles = ((span - period) / period).floor().max(0.0);
+        let nyquist = 0.5 * (n - 1) as f64 / span;
+        HarmonicWindow {
+            w0: 2.0 * std::f64::consts::PI * f,
+            orders: [1, 2, 3, 5].into_iter().filter(|&k| (k as f64) * f < nyquist).collect(),
+            t0: t[0] + period,
+            t1: t[0] + period * (1.0 + cycles),
+        }
+    }
+
+    /// The largest amplitude at 2ω, 3ω or 5ω of `e`.
+    fn largest_overtone(&self, t: &[f64], e: &[f64]) -> f64 {
+        let (_, hs) = harmonics(t, e, self.w0, &self.orders, self.t0, self.t1);
+        self.orders.iter().zip(hs).filter(|(&k, _)| k > 1).fold(0.0_f64, |m, (_, (c, s))| m.max(c.hypot(s)))
+    }
+}
+
+/// What a perfect model leaves at 2ω, 3ω or 5ω through each run's link encoder (the largest of
+/// the three, rad; 0 for a column that is not quantised). A count's error on a periodic angle is
+/// itself periodic and lands on the harmonics, where white noise would spread: rig 267 (the truth's
+/// effects within 1 %, 1.02× its floor) left 24× what white noise at its floor leaves there, and
+/// rig 297 41× (docs/calibration.md). The model's link angle with the sensor's noise under the
+/// count added (σ such that the reading's cubic-residual noise is the measured column's: noise
+/// dithers the count and takes the period out of its error), read to the column's counts on its
+/// grid, less the model's angle: what the residual of a model that is right would hold.
+pub fn count_overtones(prob: &Problem, fit: &Fit) -> Vec<f64> {
+    (0..prob.inputs.len())
+        .map(|r| {
+            let inp = &prob.inputs[r];
+            let seed = 0x9E37_79B9_7F4A_7C15 ^ (r as u64 + 1);
+            fit.outputs
+                .get(r)
+                .map_or(0.0, |model| count_overtone(&inp.time, &prob.measured[r], model, inp.frequency_hz, seed))
+        })
+        .collect()
+}
+
+/// [`count_overtones`] for one run: `measured` the link column, `model` the model's link angle.
+fn count_overtone(time: &[f64], measured: &[f64], model: &[f64], frequency_hz: f64, seed: u64) -> f64 {
+    let q = super::signal::quantum(measured);
+    if q == 0.0 || measured.len() != model.len() || time.len() != model.len() || time.len() < 5 {
+        return 0.0;
+    }
+    let grid = measured[0] - q * (measured[0] / q).round();
+    let read = |x: f64| grid + q * ((x - grid) / q).round();
+    let mut rng = super::signal::Rng(seed);
+    let draws: Vec<f64> = (0..model.len()).map(|_| rng.normal()).collect();
+    let reading = |sigma: f64| -> Vec<f64> { model.iter().zip(&draws).map(|(m, z)| read(m + sigma * z)).collect() };
+    let cubic_noise = |x: &[f64]| {
+        let (sum, n) = super::signal::cubic_residuals(time, x).fold((0.0, 0usize), |(s, n), r| (s + r * r, n + 1));
+        (sum / n.max(1) as f64).sqrt()
+    };
+    let target = cubic_noise(measured);
+    // bisection on σ (the reading's cubic-residual noise grows with it); none where the count
+    // alone reads as noisy as the column
+    let sigma = if cubic_noise(&reading(0.0)) >= target {
+        0.0
+    } else {
+        let (mut lo, mut hi) = (0.0, 2.0 * target.max(q));
+        for _ in 0..16 {
+            let mid = 0.5 * (lo + hi);
+            if cubic_noise(&reading(mid)) < target {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        0.5 * (lo + hi)
+    };
+    let error: Vec<f64> = reading(sigma).iter().zip(model).map(|(a, m)| a - m).collect();
+    HarmonicWindow::of(time, frequency_hz).largest_overtone(time, &error)
 }
 
 /// Pearson correlation of two equally long series (0 when either is constant).
@@ -185,15 +276,7 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
                 *den += var;
             }
         }
-        // whole cycles after the first
-        let f = inp.frequency_hz;
-        let period = 1.0 / f;
-        let cycles = ((span - period) / period).floor().max(0.0);
-        let (t0, t1) = (t[0] + period, t[0] + period * (1.0 + cycles));
-        let w0 = 2.0 * std::f64::consts::PI * f;
-        // harmonics at or above the Nyquist frequency alias onto others: never evidence
-        let nyquist = 0.5 * (n - 1) as f64 / span;
-        let orders: Vec<usize> = [1, 2, 3, 5].into_iter().filter(|&k| (k as f64) * f < nyquist).collect();
+        let HarmonicWindow { w0, orders, t0, t1 } = HarmonicWindow::of(t, inp.frequency_hz);
         let (dc, hs_below) = harmonics(t, e, w0, &orders, t0, t1);
         let hs: Vec<(f64, f64)> = [1, 2, 3, 5]
             .iter()
@@ -437,4 +520,62 @@ fn evidence_text(prob: &Problem, effect: Effect, sig: &Signatures, score: f64, d
 /// Report-friendly spec of a model.
 pub fn spec_names(spec: &ModelSpec) -> Vec<&'static str> {
     spec.effects.iter().map(|e| e.name()).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::calibrate::signal::Rng;
+    use std::f64::consts::PI;
+
+    /// A 0.5 Hz sine read at 1 kHz by a 2 000-count encoder with 2e-5 rad of noise under the count:
+    /// the count's error on the true angle lands on the harmonics, far above what white noise at
+    /// the floor (q/√12) leaves there; the reference read off the model's own angle takes it as
+    /// noise, and still sees a third harmonic the model lacks.
+    #[test]
+    fn a_count_on_a_periodic_angle_is_noise_at_the_harmonics_and_a_missing_overtone_is_not() {
+        let (f, amplitude, q) = (0.5, 0.05, 2.0 * PI / 2000.0);
+        let time: Vec<f64> = (0..20_000).map(|k| k as f64 * 1e-3).collect();
+        let sine: Vec<f64> = time.iter().map(|t| amplitude * (2.0 * PI * f * t).sin()).collect();
+        let mut rng = Rng(7);
+        let read = |x: &[f64], rng: &mut Rng| -> Vec<f64> {
+            x.iter().map(|a| q * ((a + 2e-5 * rng.normal()) / q).round() + 0.3 * q).collect()
+        };
+        let white = q / 12f64.sqrt() * (2.0 / time.len() as f64).sqrt();
+        let window = HarmonicWindow::of(&time, f);
+        let overtone_left = |measured: &[f64], model: &[f64]| {
+            let residual: Vec<f64> = measured.iter().zip(model).map(|(y, m)| y - m).collect();
+            window.largest_overtone(&time, &residual)
+        };
+
+        // the right model: its residual is the count's error alone
+        let measured = read(&sine, &mut rng);
+        let left = overtone_left(&measured, &sine);
+        let count = count_overtone(&time, &measured, &sine, f, 1);
+        assert!(
+            left / white > NONLINEAR_HARMONIC_LIMIT,
+            "the count's error reads as structure to white noise's test: {}",
+            left / white
+        );
+        assert!(
+            left / white.max(count) < NONLINEAR_HARMONIC_LIMIT / 2.0,
+            "the count's reference takes it as noise: {} ({left:.2e} against {count:.2e})",
+            left / white.max(count)
+        );
+
+        // a third harmonic of about one count the model lacks stays structure
+        let truth: Vec<f64> = time.iter().zip(&sine).map(|(t, s)| s + 3e-3 * (6.0 * PI * f * t).sin()).collect();
+        let measured = read(&truth, &mut rng);
+        let left = overtone_left(&measured, &sine);
+        let count = count_overtone(&time, &measured, &sine, f, 1);
+        assert!(
+            left / white.max(count) > NONLINEAR_HARMONIC_LIMIT,
+            "a missing overtone: {} ({left:.2e} against {count:.2e})",
+            left / white.max(count)
+        );
+
+        // a column that is not quantised has no count to leave anything
+        let smooth: Vec<f64> = sine.iter().map(|s| s + 1e-4 * rng.normal()).collect();
+        assert_eq!(count_overtone(&time, &smooth, &sine, f, 1), 0.0);
+    }
 }

@@ -404,8 +404,11 @@ fn calibrate_device(
     let model_rmse = outcome.final_fit.rmse();
     let (trivial, arx) = &references;
     let box_beats_model = excess(model_rmse) > REFERENCE_MARGIN * excess(arx.rmse);
-    let leftover = outcome.final_signatures.leftover_harmonics(&prob.lengths(), prob.sinusoidal());
-    stepwise::debug(format_args!("leftover harmonics over noise: {leftover:?}"));
+    let count_overtones = diagnose::count_overtones(&prob, &outcome.final_fit);
+    let leftover = outcome.final_signatures.leftover_harmonics(&prob.lengths(), prob.sinusoidal(), &count_overtones);
+    stepwise::debug(format_args!(
+        "leftover harmonics over noise: {leftover:?} (the counts' overtones {count_overtones:?})"
+    ));
     let harmonics_left = leftover.is_some_and(|r| r > diagnose::NONLINEAR_HARMONIC_LIMIT);
     // a structured residual this far above the data's own noise floor is unexplained even where no
     // linear box or harmonic points at its kind: the library's effects were tried and it stayed.
@@ -439,7 +442,8 @@ fn calibrate_device(
         "explained_share": reference::explained_share(trivial.rmse, model_rmse, arx.rmse, floor),
         "words": reference::words(model_rmse, trivial.rmse, arx, floor),
         "nonlinear": {"leftover_harmonics_over_noise": leftover, "limit": diagnose::NONLINEAR_HARMONIC_LIMIT,
-            "what": "the largest residual harmonic at 2ω, 3ω or 5ω over what white noise at the floor leaves (σ √(2/N)), median over the sinusoidal runs: a nonlinearity the model lacks, in the library or not"},
+            "what": "the largest residual harmonic at 2ω, 3ω or 5ω over what noise leaves there, median over the sinusoidal runs: a nonlinearity the model lacks, in the library or not. The noise's is white noise's at the floor (σ √(2/N)) or, where larger, what the link encoder's count leaves on the model's own angle (count_overtones_rad: a count's error on a periodic angle is periodic)",
+            "count_overtones_rad": count_overtones},
         "rule": format!("unexplained when the residual is not white (structure ratio ≥ {}) and either the black box's rms above the noise floor is below the model's by more than a factor {REFERENCE_MARGIN}, or harmonics at 2ω, 3ω or 5ω are left above {} times the noise's, or the model's rms is above {FAR_ABOVE_NOISE} times the noise floor taken with what the motor log's own error moves the model's link by (input_error_rad; {FAR_ABOVE_COUNT_FLOOR} times the floor taken with the motor count's q_m/√12 where the budget left no time to simulate it and input_error_rad is null: the measured motor angle drives the model)", diagnose::STRUCTURE_LIMIT, diagnose::NONLINEAR_HARMONIC_LIMIT),
         "input_error_rad": simulated,
         "motor_quantisation_floor_rad": count_floor,
