@@ -147,10 +147,15 @@ impl HarmonicWindow {
 /// rig 297 41× (docs/calibration.md). The model's link angle with the sensor's noise under the
 /// count added (σ such that the reading's cubic-residual noise is the measured column's: noise
 /// dithers the count and takes the period out of its error), read to the column's counts on its
-/// grid, less the model's angle: what the residual of a model that is right would hold.
+/// grid, less the model's angle: what the residual of a model that is right would hold. Read on
+/// the sinusoidal runs only, as the harmonic test is (0 for the others).
 pub fn count_overtones(prob: &Problem, fit: &Fit) -> Vec<f64> {
+    let sinusoidal = prob.sinusoidal();
     (0..prob.inputs.len())
         .map(|r| {
+            if !sinusoidal.get(r).copied().unwrap_or(false) {
+                return 0.0;
+            }
             let inp = &prob.inputs[r];
             let seed = 0x9E37_79B9_7F4A_7C15 ^ (r as u64 + 1);
             fit.outputs

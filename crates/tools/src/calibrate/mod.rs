@@ -404,10 +404,12 @@ fn calibrate_device(
     let model_rmse = outcome.final_fit.rmse();
     let (trivial, arx) = &references;
     let box_beats_model = excess(model_rmse) > REFERENCE_MARGIN * excess(arx.rmse);
+    let counted = std::time::Instant::now();
     let count_overtones = diagnose::count_overtones(&prob, &outcome.final_fit);
     let leftover = outcome.final_signatures.leftover_harmonics(&prob.lengths(), prob.sinusoidal(), &count_overtones);
     stepwise::debug(format_args!(
-        "leftover harmonics over noise: {leftover:?} (the counts' overtones {count_overtones:?})"
+        "leftover harmonics over noise: {leftover:?} (the counts' overtones {count_overtones:?}, read in {:?})",
+        counted.elapsed()
     ));
     let harmonics_left = leftover.is_some_and(|r| r > diagnose::NONLINEAR_HARMONIC_LIMIT);
     // a structured residual this far above the data's own noise floor is unexplained even where no
