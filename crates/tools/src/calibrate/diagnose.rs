@@ -173,7 +173,7 @@ fn count_overtone(time: &[f64], measured: &[f64], model: &[f64], frequency_hz: f
     }
     let grid = measured[0] - q * (measured[0] / q).round();
     let read = |x: f64| grid + q * ((x - grid) / q).round();
-    let mut rng = super::signal::Rng(seed);
+    let mut rng = super::synthetic::SplitMix::new(seed);
     let draws: Vec<f64> = (0..model.len()).map(|_| rng.normal()).collect();
     let reading = |sigma: f64| -> Vec<f64> { model.iter().zip(&draws).map(|(m, z)| read(m + sigma * z)).collect() };
     let cubic_noise = |x: &[f64]| {
@@ -530,7 +530,7 @@ pub fn spec_names(spec: &ModelSpec) -> Vec<&'static str> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::calibrate::signal::Rng;
+    use crate::calibrate::synthetic::SplitMix;
     use std::f64::consts::PI;
 
     /// A 0.5 Hz sine read at 1 kHz by a 2 000-count encoder with 2e-5 rad of noise under the count:
@@ -542,8 +542,8 @@ mod tests {
         let (f, amplitude, q) = (0.5, 0.05, 2.0 * PI / 2000.0);
         let time: Vec<f64> = (0..20_000).map(|k| k as f64 * 1e-3).collect();
         let sine: Vec<f64> = time.iter().map(|t| amplitude * (2.0 * PI * f * t).sin()).collect();
-        let mut rng = Rng(7);
-        let read = |x: &[f64], rng: &mut Rng| -> Vec<f64> {
+        let mut rng = SplitMix::new(7);
+        let read = |x: &[f64], rng: &mut SplitMix| -> Vec<f64> {
             x.iter().map(|a| q * ((a + 2e-5 * rng.normal()) / q).round() + 0.3 * q).collect()
         };
         let white = q / 12f64.sqrt() * (2.0 / time.len() as f64).sqrt();

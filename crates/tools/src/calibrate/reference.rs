@@ -510,7 +510,19 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
-    use crate::calibrate::signal::Rng;
+    /// xorshift64* and Box–Muller: reproducible Gaussian noise without a dependency.
+    struct Rng(u64);
+    impl Rng {
+        fn uniform(&mut self) -> f64 {
+            self.0 ^= self.0 >> 12;
+            self.0 ^= self.0 << 25;
+            self.0 ^= self.0 >> 27;
+            ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+        }
+        fn normal(&mut self) -> f64 {
+            (-2.0 * self.uniform().ln()).sqrt() * (2.0 * PI * self.uniform()).cos()
+        }
+    }
 
     /// The link on a spring–damper driven by the motor angle: J θl'' = K(θm − θl) + C(θm' − θl'),
     /// RK4 at 0.1 ms, sampled every `stride` steps; noise σ on both measured angles.

@@ -645,21 +645,6 @@ pub fn cubic_residuals<'a>(t: &'a [f64], x: &'a [f64]) -> impl Iterator<Item = f
     })
 }
 
-/// xorshift64* and Box–Muller: reproducible Gaussian draws without a dependency.
-pub struct Rng(pub u64);
-
-impl Rng {
-    pub fn uniform(&mut self) -> f64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-    }
-    pub fn normal(&mut self) -> f64 {
-        (-2.0 * self.uniform().ln()).sqrt() * (2.0 * std::f64::consts::PI * self.uniform()).cos()
-    }
-}
-
 /// The quantum of a quantised signal: its resolution where at least nine steps in ten are whole
 /// multiples of it (an encoder's counts, a logger's last digit), else 0. A continuous signal's
 /// smallest step is chance: a 117 rad/s multisine at 500 Hz steps by no less than 5e-4 rad near its
