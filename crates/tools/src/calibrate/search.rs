@@ -1165,6 +1165,7 @@ impl DeviceRig<'_, '_> {
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
         let single = as_single && added.len() == 1;
         let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
+        let takes_nothing_out = !drop.iter().any(|e| m.fit.spec.effects.contains(e));
         let structures: Vec<Structure> = if single {
             std::iter::once((spec.law, spec.springs))
                 .chain(self.laws.allowed.iter().copied().filter(|&s| s != (spec.law, spec.springs)))
@@ -1201,8 +1202,7 @@ impl DeviceRig<'_, '_> {
                     // it (rig 276). Under the current structure, and where it takes out no effect
                     // of the current model, it is refitted from the current model with the
                     // candidates' levels at zero, and the lower BIC kept.
-                    let nested = !drop.iter().any(|e| m.fit.spec.effects.contains(e))
-                        && (law, springs) == (m.fit.spec.law, m.fit.spec.springs);
+                    let nested = takes_nothing_out && (law, springs) == (m.fit.spec.law, m.fit.spec.springs);
                     let lost = nested && best.as_ref().is_none_or(|b| b.bic() >= current.bic());
                     let from_here = lost
                         .then(|| levenberg_marquardt(sprob, spec.clone(), off(&p, added), SCREEN_ITERATIONS).ok())
