@@ -13,7 +13,9 @@
 //! compliant transmission) fitted by output error, Levenberg–Marquardt through the FMU; the
 //! residual diagnosed (inverse-model regression of the measured force on the motion, and a score
 //! test of each friction effect through the FMU); the best effect refitted and kept when BIC falls
-//! by more than 10 and a Wald test passes. A held-out set is scored, never consulted.
+//! by more than 10, a Wald test passes and its share shows above the noise (a closed loop's Wald
+//! test and share read its logged force too: `DriveRig::judge`). A held-out set is scored, never
+//! consulted.
 
 use super::signal::derivatives;
 use nalgebra::{DMatrix, DVector};
@@ -1013,6 +1015,8 @@ struct Window {
     /// The block of its run the window's centre falls in (blocks as wide as the run's widest
     /// window): the sandwich covariance's clusters.
     block: usize,
+    /// Its half-width's rank, 0 for the narrowest (8 sample periods), each next one twice as wide.
+    scale: usize,
 }
 
 /// The modulating function φ(s) = (1 − s²)³ on s ∈ [−1, 1] with its first two derivatives in s:
@@ -1042,7 +1046,7 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], rest: &[bool], stribeck_gri
     let half_widths: Vec<f64> =
         std::iter::successors(Some(8.0 * period), |h| Some(2.0 * h)).take_while(|&h| h <= 0.25 * span).collect();
     let widest = half_widths.last().copied().unwrap_or(8.0 * period);
-    for &h in &half_widths {
+    for (scale, &h) in half_widths.iter().enumerate() {
         let mut centre = t[0] + h;
         let mut lo = 0;
         while centre + h <= t[n - 1] {
@@ -1133,6 +1137,7 @@ fn windows(inp: &DriveInput, tau: &[f64], v: &[f64], rest: &[bool], stribeck_gri
                         q_noise: qn / (w_int * w_int),
                         tau_noise: tn / (w_int * w_int),
                         block: ((centre - t[0]) / (2.0 * widest)) as usize,
+                        scale,
                     });
                 }
             }
@@ -1487,13 +1492,11 @@ impl InverseModel {
         }
     }
 
-    /// corr(equation error, sign q̇) over the windows of a model with parameters `p` in `spec`'s
-    /// terms (the inertia by its ln, the Stribeck speed at the grid's nearest, the sign's smoothing
-    /// left out: the equations' sign is hard), in the least squares' own weights: a model whose
-    /// columns hold the sign and a constant leaves none of it, so the check reads a sign pattern the
-    /// model has no column for. None without windows or for a model whose Stribeck speed the grid
-    /// lacks.
-    pub fn equation_corr_sign(&self, spec: &[Param], p: &[f64], declared_inertia: Option<f64>) -> Option<f64> {
+    /// The windows' equation error of a model with parameters `p` in `spec`'s terms (the inertia by
+    /// its ln, the Stribeck speed at the grid's nearest, the sign's smoothing left out: the
+    /// equations' sign is hard), and the grid speed it was read at. None for a model whose Stribeck
+    /// speed the grid lacks.
+    fn equation_residual(&self, spec: &[Param], p: &[f64], declared_inertia: Option<f64>) -> Option<(Vec<f64>, usize)> {
         let grid_at = |speed: f64| {
             (0..self.stribeck_grid.len()).min_by(|&a, &b| {
                 (self.stribeck_grid[a].ln() - speed).abs().total_cmp(&(self.stribeck_grid[b].ln() - speed).abs())
@@ -1504,7 +1507,7 @@ impl InverseModel {
             None => 0,
         };
         let value = |q: Param, x: f64| if q == Param::LnInertia { x.exp() } else { x };
-        let residual: Vec<f64> = self
+        let residual = self
             .windows
             .iter()
             .map(|w| {
@@ -1515,6 +1518,15 @@ impl InverseModel {
                 w.rhs - declared - spec.iter().zip(p).map(|(&q, &x)| value(q, x) * Self::column(w, q, g)).sum::<f64>()
             })
             .collect();
+        Some((residual, g))
+    }
+
+    /// corr(equation error, sign q̇) over the windows of a model with parameters `p` in `spec`'s
+    /// terms (`equation_residual`), in the least squares' own weights: a model whose columns hold
+    /// the sign and a constant leaves none of it, so the check reads a sign pattern the model has
+    /// no column for. None without windows or for a model whose Stribeck speed the grid lacks.
+    pub fn equation_corr_sign(&self, spec: &[Param], p: &[f64], declared_inertia: Option<f64>) -> Option<f64> {
+        let (residual, _) = self.equation_residual(spec, p, declared_inertia)?;
         let sign: Vec<f64> = self.windows.iter().map(|w| w.row[3]).collect();
         let inertia = spec.iter().position(|&q| q == Param::LnInertia).map_or(0.0, |i| p[i].exp());
         let w2: Vec<f64> = self.weights(inertia).iter().map(|w| w * w).collect();
@@ -1523,6 +1535,36 @@ impl InverseModel {
             return None;
         }
         Some(weighted_corr(&residual, &sign, Some(&w2)))
+    }
+
+    /// What the logged force says of an effect of a closed loop's model `spec` (its force
+    /// parameters at the equation error's estimates, at `inertia`): how far the effect moves the
+    /// force against what the force log leaves unexplained (at each window scale, the rms of the
+    /// effect's window-mean force over the rms of the equation error there, the largest over the
+    /// scales: above 1 the effect takes out more than it leaves at that time scale), and the Wald
+    /// χ² of its levels (`EquationError::wald`). None where the equation error has no estimate.
+    /// A closed loop carries a force into its positions only as a tracking error of force/kp,
+    /// under the encoder's noise; the logged force carries it whole.
+    pub fn force_evidence(&self, spec: &[Param], inertia: f64, effect: DriveEffect) -> Option<(f64, f64)> {
+        let force_spec: Vec<Param> = spec.iter().copied().filter(|&q| !fitted_to_positions(q)).collect();
+        let ee = self.parameters(&force_spec, Some(inertia))?;
+        let (residual, g) = self.equation_residual(&force_spec, &ee.p, Some(inertia))?;
+        let levels: Vec<(Param, f64)> = drive_levels(effect)
+            .filter_map(|q| force_spec.iter().position(|&x| x == q).map(|i| (q, ee.p[i])))
+            .collect();
+        let scales = self.windows.iter().map(|w| w.scale + 1).max().unwrap_or(0);
+        let (mut share, mut left, mut count) = (vec![0.0; scales], vec![0.0; scales], vec![0usize; scales]);
+        for (w, r) in self.windows.iter().zip(&residual) {
+            let s: f64 = levels.iter().map(|&(q, x)| x * Self::column(w, q, g)).sum();
+            share[w.scale] += s * s;
+            left[w.scale] += r * r;
+            count[w.scale] += 1;
+        }
+        let visible = (0..scales)
+            .filter(|&k| count[k] > 0 && left[k] > 0.0)
+            .map(|k| (share[k] / left[k]).sqrt())
+            .fold(0.0, f64::max);
+        Some((visible, ee.wald(effect)))
     }
 
     /// A level's typical size in the equations (to compare how negative two levels are).
@@ -1545,7 +1587,8 @@ pub struct DriveDetail {
     /// The limit the smallest Wald χ² had to pass (its effect's degrees of freedom).
     pub wald_limit: f64,
     /// The added effects' smallest share of the simulated positions over what the noise hides
-    /// (`DriveProblem::share_over_noise`).
+    /// (`DriveProblem::share_over_noise`); a closed loop's of its logged force
+    /// (`InverseModel::force_evidence`).
     pub share_over_noise: f64,
     /// Whether the refit passed each of `SELECTION_TESTS`.
     pub passed: [bool; 3],
@@ -1893,6 +1936,9 @@ pub struct DriveRig<'p, 'a> {
     /// Every model's parameters from the inverse model's equation error, simulated, not fitted by
     /// output error (rigid drives on their logged torque: open loop, see `calibrate`).
     equation_error: bool,
+    /// Every run rigid and reference-driven: the positions carry a force only as the loop's
+    /// tracking error, the logged force carries it whole (`judge`'s visibility reads both).
+    closed_loop: bool,
     /// Held-out relerr of the models scored so far, by BIC (a model is scored once).
     held_scores: std::cell::RefCell<Vec<(u64, Option<f64>)>>,
 }
@@ -1998,17 +2044,34 @@ impl Rig for DriveRig<'_, '_> {
     }
     fn judge(&self, m: &DriveFit, refit: &DriveFit) -> Verdict<DriveDetail> {
         let added: Vec<DriveEffect> = refit.effects.iter().copied().filter(|e| !m.effects.contains(e)).collect();
+        // a closed loop's force effects judged on the logged force: where the inverse model has no
+        // physical estimate with them (a Stribeck speed off its grid, a level below zero), the force
+        // log does not show them
+        let force: Vec<Option<(f64, f64)>> = match (self.closed_loop, self.inverse) {
+            (true, Some(iv)) => {
+                let inertia = self.prob.model(&refit.spec, &refit.p, 0).inertia;
+                added.iter().map(|&e| Some(iv.force_evidence(&refit.spec, inertia, e).unwrap_or((0.0, 0.0)))).collect()
+            }
+            _ => vec![None; added.len()],
+        };
         // the equation error's own covariance where its estimates are the model's (the output
         // error's sandwich at a point it did not fit measures the drift, not the estimate)
         let equation_error = refit.equation_error.as_ref();
         let walds: Vec<(f64, usize)> = added
             .iter()
-            .map(|&e| {
+            .zip(&force)
+            .map(|(&e, f)| {
                 let w = equation_error.map_or_else(|| wald(refit, e), |ee| ee.wald(e));
+                // a closed loop's level is significant in its positions or in its logged force
+                let w = f.map_or(w, |(_, force)| w.max(force));
                 (w, drive_levels(e).count())
             })
             .collect();
-        let shares: Vec<f64> = added.iter().map(|&e| self.prob.share_over_noise(refit, e)).collect();
+        let shares: Vec<f64> = added
+            .iter()
+            .zip(&force)
+            .map(|(&e, f)| f.map_or_else(|| self.prob.share_over_noise(refit, e), |(share, _)| share))
+            .collect();
         let visible = shares.iter().all(|&share| share > 1.0);
         let lowers_bic = refit.bic() < m.bic() - BIC_MARGIN;
         let significant = walds.iter().all(|&(w, dof)| w > wald_limit(dof));
@@ -2020,12 +2083,13 @@ impl Rig for DriveRig<'_, '_> {
             .min_by(|a, b| (a.0 / a.1).total_cmp(&(b.0 / b.1)))
             .unwrap_or((f64::INFINITY, wald_limit(1)));
         super::stepwise::debug(format_args!(
-            "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, share/noise {:?}, noise {:.3e}, rms {:.3e} -> {:.3e}",
+            "judge {:?}: bic {:.1} -> {:.1}, walds {:?}, share/noise {:?} (force {:?}), noise {:.3e}, rms {:.3e} -> {:.3e}",
             added,
             m.bic(),
             refit.bic(),
             walds,
             shares,
+            force,
             self.prob.position_noise,
             (m.sse / m.n() as f64).sqrt(),
             (refit.sse / refit.n() as f64).sqrt()
@@ -2145,10 +2209,16 @@ pub fn calibrate(
     if let Some(end) = budget.end() {
         sim.tighten_deadline(end);
     }
-    let rig =
-        DriveRig { prob, held, inverse: &inverse, equation_error, held_scores: std::cell::RefCell::new(Vec::new()) };
-    let found = super::stepwise::search(&rig, baseline.clone(), budget);
     let closed_loop = prob.inputs.iter().all(|i| i.rigid && i.drive == DriveKind::Reference);
+    let rig = DriveRig {
+        prob,
+        held,
+        inverse: &inverse,
+        equation_error,
+        closed_loop,
+        held_scores: std::cell::RefCell::new(Vec::new()),
+    };
+    let found = super::stepwise::search(&rig, baseline.clone(), budget);
     let force_levels = match &inverse {
         Some(iv) if closed_loop => prob.with_force_levels(&found.model, iv),
         _ => None,
@@ -2987,6 +3057,87 @@ mod tests {
             let case = format!("h {h}: Fc {fc}, Fs {fs}, v_st {vst}");
             assert!((fc - 5e-3).abs() < 0.05 * 5e-3, "{case}");
             assert!((fs - 5e-3).abs() < 0.1 * 5e-3 && (vst - 4.0).abs() < 0.1 * 4.0, "{case}");
+        }
+    }
+
+    /// A rigid rotary drive under a stiff PD position loop (kp 1.6 N·m/rad, kd 0.0175 N·m·s/rad on
+    /// 1e-4 kg·m²: about 20 Hz), tracking two sines; the logged force is the controller's output,
+    /// held over each 1 ms period; positions on a 1e5-count encoder. Friction as in
+    /// `sine_driven_servo`, with a Stribeck excess (level, speed).
+    fn position_loop_servo(stribeck: (f64, f64)) -> DriveInput {
+        let (j, fv, fc, vs, h) = (1e-4, 2e-4, 5e-3, 1e-2, 1e-3);
+        let (kp, kd) = (1.6, 0.0175);
+        let friction = |v: f64| (fc + stribeck.0 * (-(v / stribeck.1).powi(2)).exp()) * (v / vs).tanh();
+        let accel = |v: f64, u: f64| (u - fv * v - friction(v)) / j;
+        let q = std::f64::consts::TAU / 1e5;
+        let tau = std::f64::consts::TAU;
+        let reference = |t: f64| 2.0 * (tau * 0.5 * t).sin() + (tau * 1.3 * t).sin();
+        let reference_speed = |t: f64| 2.0 * tau * 0.5 * (tau * 0.5 * t).cos() + tau * 1.3 * (tau * 1.3 * t).cos();
+        let (mut x, mut v, mut previous) = (0.0f64, 0.0f64, 0.0f64);
+        let (mut time, mut motor, mut torque, mut refs) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        for k in 0..20_000 {
+            let t = k as f64 * h;
+            let measured = (x / q).round() * q;
+            let u = kp * (reference(t) - measured) + kd * (reference_speed(t) - (measured - previous) / h);
+            previous = measured;
+            time.push(t);
+            motor.push(measured);
+            torque.push(u);
+            refs.push(reference(t));
+            let dt = h / 20.0;
+            for _ in 0..20 {
+                let k1 = (v, accel(v, u));
+                let k2 = (v + 0.5 * dt * k1.1, accel(v + 0.5 * dt * k1.1, u));
+                let k3 = (v + 0.5 * dt * k2.1, accel(v + 0.5 * dt * k2.1, u));
+                let k4 = (v + dt * k3.1, accel(v + dt * k3.1, u));
+                x += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+                v += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+            }
+        }
+        DriveInput {
+            drive: DriveKind::Reference,
+            reference: Some(refs),
+            controller: Some(super::super::data::Controller { kp, kd, saturation: 1.0, period: h }),
+            time,
+            motor,
+            torque: Some(torque),
+            frequency_hz: 0.5,
+            ..sine_driven_servo((0.0, 1.0), 1e-2, 1e5)
+        }
+    }
+
+    /// A closed loop carries a force into its positions only as a tracking error of force/kp; the
+    /// logged force carries it whole, and judges it (`DriveRig::judge`): a Stribeck excess the
+    /// servo has takes out more of the force log's equation error than it leaves, at a Wald χ² past
+    /// its limit; one the servo lacks does not.
+    #[test]
+    fn a_closed_loops_force_log_shows_the_friction_it_has_and_not_the_friction_it_lacks() {
+        use Param::{ConstantLoad, Coulomb, LnInertia, LnStribeckVelocity, Stribeck, Viscous};
+        let spec = [LnInertia, Viscous, ConstantLoad, Coulomb, Stribeck, LnStribeckVelocity];
+        let evidence = |stribeck: (f64, f64)| {
+            let inp = position_loop_servo(stribeck);
+            let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
+            iv.force_evidence(&spec, 1e-4, DriveEffect::StribeckFriction)
+        };
+        let (share, wald) = evidence((5e-3, 2.0)).expect("the excess is estimated");
+        assert!(share > 1.0 && wald > wald_limit(1), "with the excess: share {share}, Wald {wald}");
+        // (without it the equation error finds no excess inside its speed grid: no estimate)
+        let (share, wald) = evidence((0.0, 2.0)).unwrap_or((0.0, 0.0));
+        assert!(share < 1.0, "without it: share {share}, Wald {wald}");
+        // Coulomb friction, which both servos have, shows in either; an asymmetry, which neither
+        // has, in neither
+        for stribeck in [(5e-3, 2.0), (0.0, 2.0)] {
+            let inp = position_loop_servo(stribeck);
+            let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
+            let (share, wald) = iv
+                .force_evidence(&[LnInertia, Viscous, ConstantLoad, Coulomb], 1e-4, DriveEffect::CoulombFriction)
+                .expect("Coulomb friction is estimated");
+            assert!(share > 1.0 && wald > wald_limit(1), "Coulomb beside {stribeck:?}: share {share}, Wald {wald}");
+            let asymmetric = [LnInertia, Viscous, ConstantLoad, Coulomb, Param::AsymCoulomb, Param::AsymViscous];
+            let (share, wald) = iv
+                .force_evidence(&asymmetric, 1e-4, DriveEffect::AsymmetricFriction)
+                .expect("the asymmetry is estimated");
+            assert!(share < 1.0, "an asymmetry beside {stribeck:?}: share {share}, Wald {wald}");
         }
     }
 
