@@ -2966,6 +2966,19 @@ mod tests {
         }
     }
 
+    /// One sample period `h` of x'' = a(x') with the torque held: RK4 in 20 sub-steps.
+    fn held_for(x: &mut f64, v: &mut f64, h: f64, a: impl Fn(f64) -> f64) {
+        let dt = h / 20.0;
+        for _ in 0..20 {
+            let k1 = (*v, a(*v));
+            let k2 = (*v + 0.5 * dt * k1.1, a(*v + 0.5 * dt * k1.1));
+            let k3 = (*v + 0.5 * dt * k2.1, a(*v + 0.5 * dt * k2.1));
+            let k4 = (*v + dt * k3.1, a(*v + dt * k3.1));
+            *x += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
+            *v += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
+        }
+    }
+
     /// A rigid rotary drive on a logged two-sine torque: J q'' = τ − Fv q' − (Fc + Fs exp(−(q'/v_st)²))
     /// tanh(q'/v_s), RK4 with 20 sub-steps per sample period `h`, positions on an encoder of `counts`.
     fn sine_driven_servo(stribeck: (f64, f64), h: f64, counts: f64) -> DriveInput {
@@ -2982,15 +2995,7 @@ mod tests {
             time.push(t);
             motor.push((x / q).round() * q);
             torque.push(u);
-            let dt = h / 20.0;
-            for _ in 0..20 {
-                let k1 = (v, accel(v, u));
-                let k2 = (v + 0.5 * dt * k1.1, accel(v + 0.5 * dt * k1.1, u));
-                let k3 = (v + 0.5 * dt * k2.1, accel(v + 0.5 * dt * k2.1, u));
-                let k4 = (v + dt * k3.1, accel(v + dt * k3.1, u));
-                x += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-                v += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-            }
+            held_for(&mut x, &mut v, h, |v| accel(v, u));
         }
         DriveInput {
             name: "servo".into(),
@@ -3084,15 +3089,7 @@ mod tests {
             motor.push(measured);
             torque.push(u);
             refs.push(reference(t));
-            let dt = h / 20.0;
-            for _ in 0..20 {
-                let k1 = (v, accel(v, u));
-                let k2 = (v + 0.5 * dt * k1.1, accel(v + 0.5 * dt * k1.1, u));
-                let k3 = (v + 0.5 * dt * k2.1, accel(v + 0.5 * dt * k2.1, u));
-                let k4 = (v + dt * k3.1, accel(v + dt * k3.1, u));
-                x += dt / 6.0 * (k1.0 + 2.0 * k2.0 + 2.0 * k3.0 + k4.0);
-                v += dt / 6.0 * (k1.1 + 2.0 * k2.1 + 2.0 * k3.1 + k4.1);
-            }
+            held_for(&mut x, &mut v, h, |v| accel(v, u));
         }
         DriveInput {
             drive: DriveKind::Reference,
