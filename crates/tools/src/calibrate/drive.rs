@@ -2219,8 +2219,9 @@ pub fn calibrate(
         held_scores: std::cell::RefCell::new(Vec::new()),
     };
     let found = super::stepwise::search(&rig, baseline.clone(), budget);
+    // (its equation error alone takes seconds on a long log: left out once the fits' end has passed)
     let force_levels = match &inverse {
-        Some(iv) if closed_loop => prob.with_force_levels(&found.model, iv),
+        Some(iv) if closed_loop && !budget.past_end() => prob.with_force_levels(&found.model, iv),
         _ => None,
     };
     sim.clear_deadline();

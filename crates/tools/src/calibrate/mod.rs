@@ -652,6 +652,7 @@ fn calibrate_drive_with(
     let budget = stepwise::Budget::since(t0, args.search_budget);
     let outcome = drive::calibrate(&mut prob, held_prob.as_mut(), &budget)?;
     let seconds = t0.elapsed().as_secs_f64();
+    stepwise::debug(format_args!("calibrated: {seconds:.2} s"));
     let mut report = drive::report_json(&runs, &prob, &outcome, &temperatures, published.as_ref(), seconds);
     report["data_quality"] = data_quality_json(&runs.iter().chain(&held).collect::<Vec<_>>());
     if let Some(same) = published.as_ref().and_then(|p| drive::published_same_simulation(&prob, held_prob.as_ref(), p))
