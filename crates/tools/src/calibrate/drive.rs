@@ -1537,34 +1537,38 @@ impl InverseModel {
         Some(weighted_corr(&residual, &sign, Some(&w2)))
     }
 
-    /// What the logged force says of an effect of a closed loop's model `spec` (its force
-    /// parameters at the equation error's estimates, at `inertia`): how far the effect moves the
-    /// force against what the force log leaves unexplained (at each window scale, the rms of the
-    /// effect's window-mean force over the rms of the equation error there, the largest over the
-    /// scales: above 1 the effect takes out more than it leaves at that time scale), and the Wald
-    /// χ² of its levels (`EquationError::wald`). None where the equation error has no estimate.
-    /// A closed loop carries a force into its positions only as a tracking error of force/kp,
-    /// under the encoder's noise; the logged force carries it whole.
-    pub fn force_evidence(&self, spec: &[Param], inertia: f64, effect: DriveEffect) -> Option<(f64, f64)> {
+    /// What the logged force says of each of `effects` in a closed loop's model `spec` (its force
+    /// parameters at the equation error's estimates, at `inertia`, solved once for them all): how far
+    /// the effect moves the force against what the force log leaves unexplained (at each window
+    /// scale, the rms of the effect's window-mean force over the rms of the equation error there,
+    /// the largest over the scales: above 1 the effect takes out more than it leaves at that time
+    /// scale), and the Wald χ² of its levels (`EquationError::wald`). None where the equation error
+    /// has no estimate. A closed loop carries a force into its positions only as a tracking error of
+    /// force/kp, under the encoder's noise; the logged force carries it whole.
+    pub fn force_evidence(&self, spec: &[Param], inertia: f64, effects: &[DriveEffect]) -> Option<Vec<(f64, f64)>> {
         let force_spec: Vec<Param> = spec.iter().copied().filter(|&q| !fitted_to_positions(q)).collect();
         let ee = self.parameters(&force_spec, Some(inertia))?;
         let (residual, g) = self.equation_residual(&force_spec, &ee.p, Some(inertia))?;
-        let levels: Vec<(Param, f64)> = drive_levels(effect)
-            .filter_map(|q| force_spec.iter().position(|&x| x == q).map(|i| (q, ee.p[i])))
-            .collect();
         let scales = self.windows.iter().map(|w| w.scale + 1).max().unwrap_or(0);
-        let (mut share, mut left, mut count) = (vec![0.0; scales], vec![0.0; scales], vec![0usize; scales]);
+        let mut left = vec![0.0; scales];
         for (w, r) in self.windows.iter().zip(&residual) {
-            let s: f64 = levels.iter().map(|&(q, x)| x * Self::column(w, q, g)).sum();
-            share[w.scale] += s * s;
             left[w.scale] += r * r;
-            count[w.scale] += 1;
         }
-        let visible = (0..scales)
-            .filter(|&k| count[k] > 0 && left[k] > 0.0)
-            .map(|k| (share[k] / left[k]).sqrt())
-            .fold(0.0, f64::max);
-        Some((visible, ee.wald(effect)))
+        let evidence = |effect: DriveEffect| {
+            let levels: Vec<(Param, f64)> = drive_levels(effect)
+                .filter_map(|q| force_spec.iter().position(|&x| x == q).map(|i| (q, ee.p[i])))
+                .collect();
+            let mut share = vec![0.0; scales];
+            for w in &self.windows {
+                let s: f64 = levels.iter().map(|&(q, x)| x * Self::column(w, q, g)).sum();
+                share[w.scale] += s * s;
+            }
+            // (rms against rms over a scale's windows: the count cancels)
+            let visible =
+                (0..scales).filter(|&k| left[k] > 0.0).map(|k| (share[k] / left[k]).sqrt()).fold(0.0, f64::max);
+            (visible, ee.wald(effect))
+        };
+        Some(effects.iter().map(|&e| evidence(e)).collect())
     }
 
     /// A level's typical size in the equations (to compare how negative two levels are).
@@ -2047,30 +2051,31 @@ impl Rig for DriveRig<'_, '_> {
         // a closed loop's force effects judged on the logged force: where the inverse model has no
         // physical estimate with them (a Stribeck speed off its grid, a level below zero), the force
         // log does not show them
-        let force: Vec<Option<(f64, f64)>> = match (self.closed_loop, self.inverse) {
+        let force: Option<Vec<(f64, f64)>> = match (self.closed_loop, self.inverse) {
             (true, Some(iv)) => {
                 let inertia = self.prob.model(&refit.spec, &refit.p, 0).inertia;
-                added.iter().map(|&e| Some(iv.force_evidence(&refit.spec, inertia, e).unwrap_or((0.0, 0.0)))).collect()
+                Some(iv.force_evidence(&refit.spec, inertia, &added).unwrap_or_else(|| vec![(0.0, 0.0); added.len()]))
             }
-            _ => vec![None; added.len()],
+            _ => None,
         };
         // the equation error's own covariance where its estimates are the model's (the output
         // error's sandwich at a point it did not fit measures the drift, not the estimate)
         let equation_error = refit.equation_error.as_ref();
+        let force_of = |i: usize| force.as_ref().map(|f| f[i]);
         let walds: Vec<(f64, usize)> = added
             .iter()
-            .zip(&force)
-            .map(|(&e, f)| {
+            .enumerate()
+            .map(|(i, &e)| {
                 let w = equation_error.map_or_else(|| wald(refit, e), |ee| ee.wald(e));
                 // a closed loop's level is significant in its positions or in its logged force
-                let w = f.map_or(w, |(_, force)| w.max(force));
+                let w = force_of(i).map_or(w, |(_, force)| w.max(force));
                 (w, drive_levels(e).count())
             })
             .collect();
         let shares: Vec<f64> = added
             .iter()
-            .zip(&force)
-            .map(|(&e, f)| f.map_or_else(|| self.prob.share_over_noise(refit, e), |(share, _)| share))
+            .enumerate()
+            .map(|(i, &e)| force_of(i).map_or_else(|| self.prob.share_over_noise(refit, e), |(share, _)| share))
             .collect();
         let visible = shares.iter().all(|&share| share > 1.0);
         let lowers_bic = refit.bic() < m.bic() - BIC_MARGIN;
@@ -3115,7 +3120,7 @@ mod tests {
         let evidence = |stribeck: (f64, f64)| {
             let inp = position_loop_servo(stribeck);
             let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
-            iv.force_evidence(&spec, 1e-4, DriveEffect::StribeckFriction)
+            iv.force_evidence(&spec, 1e-4, &[DriveEffect::StribeckFriction]).map(|e| e[0])
         };
         let (share, wald) = evidence((5e-3, 2.0)).expect("the excess is estimated");
         assert!(share > 1.0 && wald > wald_limit(1), "with the excess: share {share}, Wald {wald}");
@@ -3128,13 +3133,13 @@ mod tests {
             let inp = position_loop_servo(stribeck);
             let iv = inverse_model(std::slice::from_ref(&inp)).expect("an inverse model");
             let (share, wald) = iv
-                .force_evidence(&[LnInertia, Viscous, ConstantLoad, Coulomb], 1e-4, DriveEffect::CoulombFriction)
-                .expect("Coulomb friction is estimated");
+                .force_evidence(&[LnInertia, Viscous, ConstantLoad, Coulomb], 1e-4, &[DriveEffect::CoulombFriction])
+                .expect("Coulomb friction is estimated")[0];
             assert!(share > 1.0 && wald > wald_limit(1), "Coulomb beside {stribeck:?}: share {share}, Wald {wald}");
             let asymmetric = [LnInertia, Viscous, ConstantLoad, Coulomb, Param::AsymCoulomb, Param::AsymViscous];
             let (share, wald) = iv
-                .force_evidence(&asymmetric, 1e-4, DriveEffect::AsymmetricFriction)
-                .expect("the asymmetry is estimated");
+                .force_evidence(&asymmetric, 1e-4, &[DriveEffect::AsymmetricFriction])
+                .expect("the asymmetry is estimated")[0];
             assert!(share < 1.0, "an asymmetry beside {stribeck:?}: share {share}, Wald {wald}");
         }
     }
