@@ -510,19 +510,7 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
 
-    /// xorshift64* and Box–Muller: reproducible Gaussian noise without a dependency.
-    struct Rng(u64);
-    impl Rng {
-        fn uniform(&mut self) -> f64 {
-            self.0 ^= self.0 >> 12;
-            self.0 ^= self.0 << 25;
-            self.0 ^= self.0 >> 27;
-            ((self.0.wrapping_mul(0x2545_F491_4F6C_DD1D) >> 11) as f64 + 0.5) / (1u64 << 53) as f64
-        }
-        fn normal(&mut self) -> f64 {
-            (-2.0 * self.uniform().ln()).sqrt() * (2.0 * PI * self.uniform()).cos()
-        }
-    }
+    use crate::calibrate::synthetic::SplitMix;
 
     /// The link on a spring–damper driven by the motor angle: J θl'' = K(θm − θl) + C(θm' − θl'),
     /// RK4 at 0.1 ms, sampled every `stride` steps; noise σ on both measured angles.
@@ -538,7 +526,7 @@ mod tests {
         duration: f64,
         stride: usize,
         sigma: f64,
-        rng: &mut Rng,
+        rng: &mut SplitMix,
     ) -> Run {
         let dt = 1e-4;
         let acc = |t: f64, x: f64, v: f64| {
@@ -570,7 +558,7 @@ mod tests {
         move |t| (amp * (w * t).sin(), amp * w * (w * t).cos())
     }
 
-    fn multisine(rng: &mut Rng) -> impl Fn(f64) -> (f64, f64) {
+    fn multisine(rng: &mut SplitMix) -> impl Fn(f64) -> (f64, f64) {
         let parts: Vec<(f64, f64)> =
             [0.2, 0.5, 1.1, 1.7, 2.3, 3.0].iter().map(|&f| (2.0 * PI * f, 2.0 * PI * rng.uniform())).collect();
         move |t| {
@@ -589,7 +577,7 @@ mod tests {
 
     #[test]
     fn the_black_box_reaches_the_noise_on_a_sine_and_a_multisine() {
-        let mut rng = Rng(0x9E37_79B9_7F4A_7C15);
+        let mut rng = SplitMix::new(0x9E37_79B9_7F4A_7C15);
         let ms = multisine(&mut rng);
         let runs = vec![
             mass_spring_damper(sine(0.3, 1.0), PLANT, 10.0, 10, SIGMA, &mut rng),
@@ -610,7 +598,7 @@ mod tests {
 
     #[test]
     fn a_sine_alone_and_mixed_sample_rates_with_jitter() {
-        let mut rng = Rng(42);
+        let mut rng = SplitMix::new(42);
         let mut fast = mass_spring_damper(sine(0.3, 0.5), PLANT, 8.0, 10, SIGMA, &mut rng); // 1 kHz
         let slow = mass_spring_damper(sine(0.3, 2.0), (60.0, 0.4, 0.018), 8.0, 20, SIGMA, &mut rng); // 500 Hz, other plant
         for (i, t) in fast.time.iter_mut().enumerate().skip(1) {
@@ -625,7 +613,7 @@ mod tests {
 
     #[test]
     fn a_run_that_starts_moving_is_fitted_from_its_own_initial_state() {
-        let mut rng = Rng(11);
+        let mut rng = SplitMix::new(11);
         let mut run = mass_spring_damper(
             |t| {
                 let w = 2.0 * PI;
@@ -648,7 +636,7 @@ mod tests {
 
     #[test]
     fn groups_give_each_plant_its_own_model() {
-        let mut rng = Rng(7);
+        let mut rng = SplitMix::new(7);
         let ms = multisine(&mut rng);
         let runs = vec![
             mass_spring_damper(sine(0.3, 1.0), PLANT, 8.0, 10, SIGMA, &mut rng),
