@@ -73,9 +73,10 @@ pub struct CalibrateArgs {
     /// Smooth the measured motor angle instead of band-limiting it: the half-width in seconds of a
     /// zero-phase quintic Savitzky–Golay window (0: the raw samples). Default: per run, band-limited
     /// to its motion, zero phase, flat up to where its variance falls to twice its white noise's
-    /// (a sinusoid's half-power point at most ten times its frequency), zero at twice that
-    /// (runs[].input_band_hz), so a coarse motor encoder's steps do not ring the model's resonance;
-    /// off when the motor angle carries no noise.
+    /// (a sinusoid's half-power point at most ten times its frequency), zero at twice that, except
+    /// where a non-sinusoid's motion stands out of a dithered encoder's noise above it
+    /// (runs[].input_band_hz), so a coarse motor encoder's steps do not ring the model's
+    /// resonance; off when the motor angle carries no noise.
     #[cfg_attr(feature = "cli", arg(long, value_name = "SECONDS"))]
     pub input_smoothing: Option<f64>,
     /// Run the loop on the paper's summary numbers instead of run files: writes paper.json and
