@@ -262,15 +262,7 @@ pub fn band_limited(t: &[f64], x: &[f64], most_hz: Option<f64>) -> Option<(Vec<f
             })
             .collect()
     });
-    let first_df = 1.0 / (size as f64 * dt);
-    let wiener = |f: f64| {
-        gains.as_ref().map(|g| {
-            let x = f / first_df;
-            let k = (x.floor() as usize).min(g.len() - 1);
-            let next = (k + 1).min(g.len() - 1);
-            g[k] + (g[next] - g[k]) * (x - k as f64).min(1.0)
-        })
-    };
+    let gain_freqs: Vec<f64> = (0..bins).map(freq).collect();
     // filtered with each end reflected oddly about the end's value a as a quadratic over a
     // quarter period of the band's edge reads it (x(−τ) = 2a − x(τ)), its curvature c put back
     // near the end (+2cτ², faded out over one period of the edge): value, slope and curvature run
@@ -305,14 +297,15 @@ pub fn band_limited(t: &[f64], x: &[f64], most_hz: Option<f64>) -> Option<(Vec<f
     let mut buf: Vec<Complex<f64>> =
         (0..size).map(|k| Complex::new(if k < m { extended[k] - trend(k) } else { 0.0 }, 0.0)).collect();
     fft(&mut buf, false);
-    let freq = |k: usize| k as f64 / (size as f64 * dt);
-    for k in 0..=size / 2 {
-        let f = freq(k);
+    let freqs: Vec<f64> = (0..=size / 2).map(|k| k as f64 / (size as f64 * dt)).collect();
+    // the gains, read on this transform's bins
+    let wiener = gains.map(|g| interpolate(&gain_freqs, &g, &freqs));
+    for (k, &f) in freqs.iter().enumerate() {
         let w = if f <= edge {
             1.0
         } else {
             let taper = 0.5 * (1.0 + (std::f64::consts::PI * ((f - edge) / edge).min(1.0)).cos());
-            wiener(f).map_or(taper, |g| g.max(taper))
+            wiener.as_ref().map_or(taper, |g| g[k].max(taper))
         };
         buf[k] *= w;
         if k > 0 && k < size - k {
