@@ -343,7 +343,9 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
 pub type Candidate = super::stepwise::Ranked<Effect>;
 
 /// Score test of every effect not yet in the model; best first.
-pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
+/// `frequency_dependence_shows`: false where the runs cannot show a Maxwell branch (sinusoids at
+/// one frequency per temperature, `LawChoice::undecided`): it is listed, not probed.
+pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, frequency_dependence_shows: bool) -> Vec<Candidate> {
     let lin = super::stepwise::Linearised::new(&fit.jacobian, &fit.residual);
     let sse_now = lin.sse;
     // a lag behind a constant thermocouple changes nothing: no simulation needed to know that
@@ -362,6 +364,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
         // the Maxwell branch's λ is scanned over a grid with K_M probed.
         let mut settings: Vec<(f64, f64)> = Vec::new(); // (size factor, λ)
         match effect {
+            Effect::FrequencyDependentModulus if !frequency_dependence_shows => {}
             Effect::FrequencyDependentModulus => settings.extend(MAXWELL_TIME_GRID.iter().map(|&l| (1.0, l))),
             Effect::CoulombFriction | Effect::Backlash => settings.extend([1.0, 5.0].map(|f| (f, f64::NAN))),
             Effect::ThermalLag if !heating => {}
@@ -433,12 +436,22 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures) -> Vec<Candidate> {
         let (gain, start) = best.unwrap_or((0.0, vec![0.0; k]));
         let score = gain / sse_now.max(1e-300);
         let predicted_delta_bic = super::stepwise::predicted_delta_bic(fit.n, sse_now, gain, k);
-        let evidence = evidence_text(prob, effect, sig, score, predicted_delta_bic, &start);
+        let evidence = if effect == Effect::FrequencyDependentModulus && !frequency_dependence_shows {
+            MAXWELL_UNSEEN.to_string()
+        } else {
+            evidence_text(prob, effect, sig, score, predicted_delta_bic, &start)
+        };
         out.push(Candidate { effect, score, predicted_delta_bic, start, evidence });
     }
     out.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(std::cmp::Ordering::Equal));
     out
 }
+
+/// Why a Maxwell branch is not tried on sinusoids at one frequency per temperature.
+pub const MAXWELL_UNSEEN: &str =
+    "not tried: every run is a sinusoid at its temperature's one frequency, where a Maxwell \
+    branch's steady state is a change of that temperature's K and C, which the fit already has (only start transients \
+    and the harmonics of other effects could show it, and those are what it would stand in for)";
 
 /// True when some run's thermocouple moves by more than 0.05 K.
 pub fn thermocouple_varies(prob: &Problem) -> bool {

@@ -1163,6 +1163,10 @@ impl DeviceRig<'_, '_> {
         // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
+        // (`diagnose::MAXWELL_UNSEEN`; the ranking lists it unprobed, and no pair or swap brings it in either)
+        if self.laws.undecided && spec.effects.contains(&Effect::FrequencyDependentModulus) {
+            return None;
+        }
         let single = as_single && added.len() == 1;
         let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
         let takes_nothing_out = !drop.iter().any(|e| m.fit.spec.effects.contains(e));
@@ -1267,7 +1271,8 @@ impl Rig for DeviceRig<'_, '_> {
     fn rank(&self, m: &Judged) -> Vec<Ranked<Effect>> {
         let t = std::time::Instant::now();
         // ranked on the screening share (the linearised projections need no more)
-        let out = self.with_screen(m, rank);
+        let shows = !self.laws.undecided;
+        let out = self.with_screen(m, |p, f, s| rank(p, f, s, shows));
         debug(format_args!("rank took {:?}", t.elapsed()));
         out
     }
