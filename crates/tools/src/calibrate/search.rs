@@ -1134,6 +1134,17 @@ pub struct DeviceRig<'p, 'a> {
 
 impl DeviceRig<'_, '_> {
     /// The problem, fit and signatures to screen `m` on.
+    /// An effect these runs cannot show: a Maxwell branch on sinusoids at one frequency per
+    /// temperature (`diagnose::MAXWELL_UNSEEN`), a thermal lag behind a thermocouple that holds still
+    /// (the lag's refit only adds its parameter: campaign rig 287 spent three refits on it).
+    fn unseen(&self, e: Effect) -> bool {
+        match e {
+            Effect::FrequencyDependentModulus => self.laws.undecided,
+            Effect::ThermalLag => !super::diagnose::thermocouple_varies(self.prob),
+            _ => false,
+        }
+    }
+
     fn with_screen<T>(&self, m: &Judged, f: impl FnOnce(&Problem, &Fit, &Signatures) -> T) -> T {
         let screen = self.screen.borrow();
         let (p, c, s) = screened(&screen, self.prob, &m.fit, &m.sig);
@@ -1163,8 +1174,9 @@ impl DeviceRig<'_, '_> {
         // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
-        // (`diagnose::MAXWELL_UNSEEN`; the ranking lists it unprobed, and no pair or swap brings it in either)
-        if self.laws.undecided && spec.effects.contains(&Effect::FrequencyDependentModulus) {
+        // what the runs cannot show is never refitted, alone, in a pair or in a swap (the ranking
+        // lists it unprobed): its refit could only stand in for something else, or cost time for nothing
+        if added.iter().any(|c| self.unseen(c.effect)) {
             return None;
         }
         let single = as_single && added.len() == 1;
