@@ -1133,7 +1133,6 @@ pub struct DeviceRig<'p, 'a> {
 }
 
 impl DeviceRig<'_, '_> {
-    /// The problem, fit and signatures to screen `m` on.
     /// An effect these runs cannot show: a Maxwell branch on sinusoids at one frequency per
     /// temperature (`diagnose::MAXWELL_UNSEEN`), a thermal lag behind a thermocouple that holds still
     /// (the lag's refit only adds its parameter: campaign rig 287 spent three refits on it).
@@ -1145,6 +1144,7 @@ impl DeviceRig<'_, '_> {
         }
     }
 
+    /// The problem, fit and signatures to screen `m` on.
     fn with_screen<T>(&self, m: &Judged, f: impl FnOnce(&Problem, &Fit, &Signatures) -> T) -> T {
         let screen = self.screen.borrow();
         let (p, c, s) = screened(&screen, self.prob, &m.fit, &m.sig);
@@ -1169,16 +1169,16 @@ impl DeviceRig<'_, '_> {
             drop.iter().copied().chain(added.iter().filter_map(|c| c.effect.takes_place_of())).collect();
         let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
         spec.effects.extend(added.iter().map(|c| c.effect));
+        // What the runs cannot show is never refitted, alone, in a pair or in a swap (the ranking
+        // lists it unprobed): its refit could only stand in for something else, or cost time for nothing.
+        if added.iter().any(|c| self.unseen(c.effect)) {
+            return None;
+        }
         // A law chosen without the effect may be standing in for it (Coulomb friction's dissipation
         // per cycle falls with frequency as hysteretic damping's does; campaign rig 180): a single
         // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
-        // what the runs cannot show is never refitted, alone, in a pair or in a swap (the ranking
-        // lists it unprobed): its refit could only stand in for something else, or cost time for nothing
-        if added.iter().any(|c| self.unseen(c.effect)) {
-            return None;
-        }
         let single = as_single && added.len() == 1;
         let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
         let takes_nothing_out = !drop.iter().any(|e| m.fit.spec.effects.contains(e));
