@@ -343,13 +343,12 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
 pub type Candidate = super::stepwise::Ranked<Effect>;
 
 /// Score test of every effect not yet in the model; best first.
-/// `frequency_dependence_shows`: false where the runs cannot show a Maxwell branch (sinusoids at
-/// one frequency per temperature, `LawChoice::undecided`): it is listed, not probed.
-pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, frequency_dependence_shows: bool) -> Vec<Candidate> {
+/// An effect `unseen` names (one these runs cannot show: a lag behind a thermocouple that holds
+/// still, a Maxwell branch at one frequency per temperature) is listed, not probed: no simulation
+/// is needed to know that it changes nothing the fit does not already have.
+pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect) -> bool) -> Vec<Candidate> {
     let lin = super::stepwise::Linearised::new(&fit.jacobian, &fit.residual);
     let sse_now = lin.sse;
-    // a lag behind a constant thermocouple changes nothing: no simulation needed to know that
-    let heating = thermocouple_varies(prob);
     let mut out = Vec::new();
     for effect in Effect::ALL {
         if fit.spec.effects.contains(&effect) {
@@ -364,10 +363,9 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, frequency_dependence_sh
         // the Maxwell branch's λ is scanned over a grid with K_M probed.
         let mut settings: Vec<(f64, f64)> = Vec::new(); // (size factor, λ)
         match effect {
-            Effect::FrequencyDependentModulus if !frequency_dependence_shows => {}
+            e if unseen(e) => {}
             Effect::FrequencyDependentModulus => settings.extend(MAXWELL_TIME_GRID.iter().map(|&l| (1.0, l))),
             Effect::CoulombFriction | Effect::Backlash => settings.extend([1.0, 5.0].map(|f| (f, f64::NAN))),
-            Effect::ThermalLag if !heating => {}
             // an excess is ranked only over its base (`Effect::defined_over`); the search pairs them
             e if e.defined_over().is_some_and(|b| !fit.spec.effects.contains(&b)) => {}
             Effect::StribeckFriction => settings.extend(stribeck_velocity_grid(prob).map(|v| (1.0, v))),
@@ -436,7 +434,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, frequency_dependence_sh
         let (gain, start) = best.unwrap_or((0.0, vec![0.0; k]));
         let score = gain / sse_now.max(1e-300);
         let predicted_delta_bic = super::stepwise::predicted_delta_bic(fit.n, sse_now, gain, k);
-        let evidence = if effect == Effect::FrequencyDependentModulus && !frequency_dependence_shows {
+        let evidence = if effect == Effect::FrequencyDependentModulus && unseen(effect) {
             MAXWELL_UNSEEN.to_string()
         } else {
             evidence_text(prob, effect, sig, score, predicted_delta_bic, &start)

@@ -806,8 +806,9 @@ fn through_the_load(added: &[Value], gravity_form: &Value) -> Vec<Value> {
         .map(|f| {
             let mut found = gravity_form["found"].clone();
             let mut equivalent = json!({"gravity": upright});
+            // (the load is the gravity form's, already in its `found` where the search kept one)
             for (name, value) in f["found"].as_object().into_iter().flatten() {
-                if name != "constant_load" && name != "gravity" {
+                if name != "constant_load" {
                     found[name] = value.clone();
                 }
             }

@@ -1133,13 +1133,14 @@ pub struct DeviceRig<'p, 'a> {
 }
 
 impl DeviceRig<'_, '_> {
-    /// An effect these runs cannot show: a Maxwell branch on sinusoids at one frequency per
-    /// temperature (`diagnose::MAXWELL_UNSEEN`), a thermal lag behind a thermocouple that holds still
-    /// (the lag's refit only adds its parameter: campaign rig 287 spent three refits on it).
-    fn unseen(&self, e: Effect) -> bool {
+    /// An effect `prob`'s runs cannot show, which the ranking lists unprobed and no refit brings in:
+    /// a Maxwell branch on sinusoids at one frequency per temperature (`diagnose::MAXWELL_UNSEEN`), a
+    /// thermal lag behind a thermocouple that holds still (the lag's refit only adds its parameter:
+    /// campaign rig 287 spent three refits on it).
+    fn unseen(&self, prob: &Problem, e: Effect) -> bool {
         match e {
             Effect::FrequencyDependentModulus => self.laws.undecided,
-            Effect::ThermalLag => !super::diagnose::thermocouple_varies(self.prob),
+            Effect::ThermalLag => !super::diagnose::thermocouple_varies(prob),
             _ => false,
         }
     }
@@ -1171,7 +1172,7 @@ impl DeviceRig<'_, '_> {
         spec.effects.extend(added.iter().map(|c| c.effect));
         // What the runs cannot show is never refitted, alone, in a pair or in a swap (the ranking
         // lists it unprobed): its refit could only stand in for something else, or cost time for nothing.
-        if added.iter().any(|c| self.unseen(c.effect)) {
+        if added.iter().any(|c| self.unseen(self.prob, c.effect)) {
             return None;
         }
         // A law chosen without the effect may be standing in for it (Coulomb friction's dissipation
@@ -1283,8 +1284,7 @@ impl Rig for DeviceRig<'_, '_> {
     fn rank(&self, m: &Judged) -> Vec<Ranked<Effect>> {
         let t = std::time::Instant::now();
         // ranked on the screening share (the linearised projections need no more)
-        let shows = !self.laws.undecided;
-        let out = self.with_screen(m, |p, f, s| rank(p, f, s, shows));
+        let out = self.with_screen(m, |p, f, s| rank(p, f, s, |e| self.unseen(p, e)));
         debug(format_args!("rank took {:?}", t.elapsed()));
         out
     }

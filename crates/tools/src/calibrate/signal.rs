@@ -262,7 +262,6 @@ pub fn band_limited(t: &[f64], x: &[f64], most_hz: Option<f64>) -> Option<(Vec<f
             })
             .collect()
     });
-    let gain_freqs: Vec<f64> = (0..bins).map(freq).collect();
     // filtered with each end reflected oddly about the end's value a as a quadratic over a
     // quarter period of the band's edge reads it (x(−τ) = 2a − x(τ)), its curvature c put back
     // near the end (+2cτ², faded out over one period of the edge): value, slope and curvature run
@@ -299,7 +298,7 @@ pub fn band_limited(t: &[f64], x: &[f64], most_hz: Option<f64>) -> Option<(Vec<f
     fft(&mut buf, false);
     let freqs: Vec<f64> = (0..=size / 2).map(|k| k as f64 / (size as f64 * dt)).collect();
     // the gains, read on this transform's bins
-    let wiener = gains.map(|g| interpolate(&gain_freqs, &g, &freqs));
+    let wiener = gains.map(|g| interpolate(&(0..bins).map(freq).collect::<Vec<_>>(), &g, &freqs));
     for (k, &f) in freqs.iter().enumerate() {
         let w = if f <= edge {
             1.0
