@@ -36,10 +36,18 @@ def test_the_draws_cover_every_range_and_class():
     assert min(ratios) < 4 and max(ratios) > 20, "natural frequencies from a few to many times the excitation"
     classes = {d["class"] for d in DRAWS}
     assert {"0 effects", "1 effect", "2 effects", "3 effects", "outside library"} <= classes, classes
-    for key, share in [("jitter", 0.5), ("dropout_s", 1 / 3)]:
+    for key, share in [("jitter", 0.5), ("dropout_s", 1 / 3), ("drift_k", 1 / 3)]:
         seen = sum(d["rig"][key] > 0 for d in DRAWS) / len(DRAWS)
         assert abs(seen - share) < 0.1, (key, seen)
     assert {d["rig"]["excitation"] for d in DRAWS} == {"sine", "multisine", "steps"}
+    drifts = [d["rig"] for d in DRAWS if d["rig"]["drift_k"]]
+    assert all(1.0 <= r["drift_k"] <= 8.0 and 0.3 <= r["drift_time_constant_s"] / r["duration_s"] <= 3.0
+               for r in drifts)
+    assert {len(r["temperatures"]) for r in drifts} == {1, 2, 3, 4}
+    # a thermal lag only behind a drift, on a share of the drifting rigs
+    lagged = [d for d in DRAWS if "thermal_lag" in d["expected"]]
+    assert all(d["rig"]["drift_k"] and 0 < d["rig"]["thermal_lag_s"] <= d["rig"]["duration_s"] for d in lagged)
+    assert 0.1 * len(drifts) < len(lagged) < 0.5 * len(drifts), len(lagged)
     # an effect moves the link by 20× the noise floor (half a tenth of the amplitude where the floor is
     # that high) up to a tenth of the amplitude
     for d in DRAWS:
@@ -141,6 +149,77 @@ def test_rigs_that_pass_keep_passing(tmp_path, seed):
     result = campaign.run_rig(campaign.draw(seed), tmp_path, 120.0)
     assert result["passed"], result["why"]
     assert math.isfinite(result["seconds"])
+
+
+def test_drift_leaves_every_other_draw_as_it_was(monkeypatch):
+    # drift comes from a stream of its own: drawn from another, the drifts change and nothing else does
+    def without_drift(d):
+        args = list(d["truth_args"])
+        if "--drift" in args:
+            i = args.index("--drift")
+            del args[i:i + 4]
+        for i in [i for i, x in enumerate(args) if x.startswith("thermal_lag=")][::-1]:
+            del args[i - 1:i + 1]
+        return args, {k: v for k, v in d["expected"].items() if k != "thermal_lag"}
+    monkeypatch.setattr(campaign, "DRIFT_STREAM", 2)
+    other = [campaign.draw(s) for s in range(1, 61)]
+    assert [d["rig"]["drift_k"] for d in other] != [d["rig"]["drift_k"] for d in DRAWS[:60]]
+    for d, o in zip(DRAWS[:60], other):
+        assert without_drift(d) == without_drift(o), d["seed"]
+        assert d["samples"] == o["samples"]
+
+
+def test_a_drifting_thermocouple_is_followed_as_the_pcl_softens(tmp_path):
+    # two temperatures heating by 6 K through each run (47 → 53 and 57 → 63 °C): K and C change by up to
+    # 2.4× and 5× within a run (Table 2's E'' falls tenfold from 50 to 60 °C). The loop drives its FMU
+    # with the logged thermocouple and must read each temperature's K and C at its nominal one
+    args = ["--declare-inertia", "--replay", "--seed", "3", "--temperatures", "50,60", "--frequencies", "1",
+            "--stiffness", "20,12", "--damping", "0.12,0.05", "--duration", "10", "--noise", "1e-4",
+            "--drift", "6", "--drift-time-constant", "4"]
+    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *args])
+    header = [l for l in (tmp_path / "runs" / "run_50C_1Hz.csv").read_text().splitlines() if not l.startswith("#")]
+    temps = [float(l.split(",")[3]) for l in header[1:]]
+    assert header[0].endswith(",temperature_c") and temps[0] == 47.0 and temps[-1] == 53.0
+    assert all(b >= a for a, b in zip(temps, temps[1:]))
+    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "runs"), "--out",
+                          str(tmp_path / "calibration"), "--no-plots"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    report = json.loads((tmp_path / "calibration" / "report.json").read_text())
+    assert report["added_effects"] == [], report["added_effects"]
+    for g, (k, c) in zip(report["identified"], [(20.0, 0.12), (12.0, 0.05)]):
+        assert abs(g["stiffness"] / k - 1) < 0.02 and abs(g["damping"] / c - 1) < 0.02, g
+    floor = math.sqrt(1e-4 ** 2 + campaign.truth_model.ENCODER_QUANTUM ** 2 / 12)
+    assert report["final"]["rmse_rad"] < 1.1 * floor, report["final"]["rmse_rad"] / floor
+    # the same runs without their thermocouple column (steady at the nominal temperature) fit far worse
+    (tmp_path / "steady").mkdir()
+    for f in (tmp_path / "runs").glob("*.csv"):
+        lines = f.read_text().splitlines()
+        (tmp_path / "steady" / f.name).write_text(
+            "\n".join(l if l.startswith("#") else l.rsplit(",", 1)[0] for l in lines) + "\n")
+    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "steady"), "--out",
+                          str(tmp_path / "steady-calibration"), "--no-plots"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    steady = json.loads((tmp_path / "steady-calibration" / "report.json").read_text())
+    assert steady["baseline"]["rmse_rad"] > 3 * floor, steady["baseline"]["rmse_rad"] / floor
+
+
+def test_a_thermal_lag_behind_a_drifting_thermocouple_is_found(tmp_path):
+    # the same heating, the PCL 1.5 s behind the thermocouple (the truth's closed-form first-order lag):
+    # the loop must add the lag and read its time constant, with K and C still at their nominal temperatures
+    args = ["--declare-inertia", "--seed", "3", "--temperatures", "50,60", "--frequencies", "1",
+            "--stiffness", "20,12", "--damping", "0.12,0.05", "--duration", "10", "--noise", "1e-4",
+            "--drift", "6", "--drift-time-constant", "4", "--effect", "thermal_lag=1.5"]
+    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *args])
+    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "runs"), "--out",
+                          str(tmp_path / "calibration"), "--no-plots"], capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    report = json.loads((tmp_path / "calibration" / "report.json").read_text())
+    assert [e["effect"] for e in report["added_effects"]] == ["thermal_lag"], report["added_effects"]
+    lag = report["added_effects"][0]["parameters"]["time_constant_s"]
+    assert abs(lag / 1.5 - 1) < 0.1, lag
+    for g, (k, c) in zip(report["identified"], [(20.0, 0.12), (12.0, 0.05)]):
+        assert abs(g["stiffness"] / k - 1) < 0.02 and abs(g["damping"] / c - 1) < 0.02, g
+    assert report["final"]["rmse_rad"] < 0.6 * report["baseline"]["rmse_rad"]
 
 
 def test_coulomb_friction_is_not_read_as_hysteretic_damping(tmp_path):

@@ -10,6 +10,11 @@ A rig draws (every draw from the rig's own seed):
 - the logger: 200 Hz–5 kHz (at least 10 samples per period of the natural frequency), runs of 5–60 s,
   noise 1e-5–1e-3 rad, encoders of 1k–100k counts per turn, timestamp jitter up to ±20 % of the period
   on half the rigs, a dropout of up to 0.5 s per run on a third;
+- on a third of the rigs, a drifting temperature: each run's thermocouple heats by 1–8 K through the run
+  (a first-order approach, time constant 0.3–3× the run), and K and C follow the paper's device's shape in
+  temperature (tests/truth/truth_model.py), the rig's K and C holding at the drift's midpoint; on half of
+  those, a thermal lag of the PCL behind the thermocouple, sized as every effect is (below), where the drift
+  lets it move the link that far;
 - 0–3 effects of the library with sizes drawn against the rig's noise floor and stiffness (every effect
   moves the link by 20× the floor to a tenth of the amplitude), pairs and triples included; or, on a share of the rigs, an effect
   outside the library (a stiffness that depends on the link's angle).
@@ -65,10 +70,48 @@ RATES = (200, 250, 400, 500, 1000, 2000, 2500, 5000)  # divisors of the truth mo
 # sample budget of the CI subset: the first rigs whose runs add up to at most this many samples
 CI_RIGS, CI_SAMPLES = 30, 60_000
 CI_DRIVE_RIGS = 10
+DRIFT_STREAM = 1  # the second key of a rig's drift draws (`draw`)
 
 
 def log_uniform(rng, lo, hi):
     return math.exp(rng.uniform(math.log(lo), math.log(hi)))
+
+
+def lag_shift(lag, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude):
+    """How far a thermal lag moves the link, rad: the link's response θl = H θm, H = Z/(Z − Jω²) with
+    Z = K + iωC, changed by the largest δZ the lag makes over the run (the PCL's K and C behind the
+    thermocouple's), |δθl| = amplitude Jω² |δZ| / |Z − Jω²|², at the top frequency w, over the rig's
+    temperatures (quasi-static: the lag is slow beside the motion)."""
+    worst = 0.0
+    shape = truth_model.transmission_shape
+    for temp, k, c in zip(temps, ks, cs):
+        run = {"from_c": temp - drift / 2, "to_c": temp + drift / 2, "duration_s": duration,
+               "time_constant_s": drift_tau}
+        k0, c0 = shape(temp)
+        dz = 0.0
+        for t in np.linspace(0.0, duration, 201):
+            (kl, cl), (kh, ch) = shape(truth_model.pcl_temperature(run, t, lag)), shape(truth_model.housing_temperature(run, t))
+            dz = max(dz, abs(complex(k * (kl - kh) / k0, w * c * (cl - ch) / c0)))
+        worst = max(worst, amplitude * j * w * w * dz / abs(complex(k - j * w * w, w * c)) ** 2)
+    return worst
+
+
+def lag_for(rng, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude, lo, hi):
+    """A thermal lag that moves the link by a size drawn as every effect's is (`lo`–`hi`, log-uniform),
+    found by bisection on its time constant up to the heating's own; 0 where even that moves it by less
+    than `lo` (a drift through the flat of the PCL's curve hides any lag)."""
+    target = log_uniform(rng, lo, hi)
+    shift = lambda lag: lag_shift(lag, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude)  # noqa: E731
+    top = min(drift_tau, duration)
+    if shift(top) < lo:
+        return 0.0
+    if shift(top) <= target:
+        return top
+    a, b = 1e-3 * top, top
+    for _ in range(40):
+        mid = math.sqrt(a * b)
+        a, b = (mid, b) if shift(mid) < target else (a, mid)
+    return math.sqrt(a * b)
 
 
 def draw(seed):
@@ -159,6 +202,19 @@ def draw(seed):
                 tau = size() * rng.choice([-1.0, 1.0])
                 args += ["--effect", f"constant_load={tau}"]
                 expected["constant_load"] = {"torque_nm": tau}
+    # a drifting thermocouple on a third of the rigs (a heating run, K and C following the PCL's shape),
+    # drawn from a stream of its own, so every draw above stays what it was before drift was drawn
+    drift_rng = np.random.default_rng([seed, DRIFT_STREAM])
+    drift = drift_rng.uniform(1.0, 8.0) if drift_rng.uniform() < 1 / 3 else 0.0
+    drift_tau = log_uniform(drift_rng, 0.3, 3.0) * duration
+    lag = 0.0
+    if drift:
+        args += ["--drift", repr(drift), "--drift-time-constant", repr(drift_tau)]
+        if not outside and drift_rng.uniform() < 0.5:
+            lag = lag_for(drift_rng, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude, lo, hi)
+        if lag:
+            args += ["--effect", f"thermal_lag={lag!r}"]
+            expected["thermal_lag"] = {"time_constant_s": lag}
     truth_args = [
         "--declare-inertia", "--replay", "--seed", str(seed), "--excitation", str(excitation),
         "--temperatures", ",".join(f"{t:g}" for t in temps),
@@ -177,7 +233,8 @@ def draw(seed):
         "rig": {"inertia": j, "stiffness_22c_equivalent": k, "natural_frequency_hz": f_n, "zeta": zeta,
                 "temperatures": temps, "excitation": str(excitation), "frequencies_hz": freqs, "rate_hz": rate,
                 "duration_s": duration, "amplitude_rad": amplitude, "noise": noise, "counts_per_turn": counts, "jitter": jitter,
-                "dropout_s": dropout},
+                "dropout_s": dropout, "drift_k": drift, "drift_time_constant_s": drift_tau if drift else None,
+                "thermal_lag_s": lag},
     }
 
 
@@ -477,6 +534,57 @@ def print_offset_breakdown(drive_results):
                   f"{sum(r['passed'] for r in rs)}/{len(rs)} passed")
 
 
+def bins(x, edges, unit=""):
+    """The label of the bin of `edges` x falls in: '≤ e' for the first edge it does not pass, else '> last'."""
+    for e in edges:
+        if x <= e:
+            return f"≤ {e:g}{unit}"
+    return f"> {edges[-1]:g}{unit}"
+
+
+# Every way a campaign splits its rigs (the issue's classes): (name, rig -> label). Device rigs only.
+DEVICE_CLASSES = [
+    ("effects", lambda r: r["class"]),
+    ("excitation", lambda r: r["rig"]["excitation"]),
+    ("frequencies per temperature", lambda r: str(len(r["rig"]["frequencies_hz"]))),
+    ("rate", lambda r: bins(r["rig"]["rate_hz"], (500, 2000), " Hz")),
+    ("run length", lambda r: bins(r["rig"]["duration_s"], (10, 30), " s")),
+    ("timestamp jitter", lambda r: "with" if r["rig"]["jitter"] > 0 else "none"),
+    ("gaps", lambda r: "with" if r["rig"]["dropout_s"] > 0 else "none"),
+    ("link inertia", lambda r: bins(r["rig"]["inertia"], (0.01, 0.05), " kg·m²")),
+    ("natural frequency over the excitation's", lambda r: bins(
+        r["rig"]["natural_frequency_hz"] / max(r["rig"]["frequencies_hz"]), (5, 15))),
+    ("temperatures", lambda r: str(len(r["rig"]["temperatures"]))),
+    ("temperature", lambda r: "drifting" if r["rig"].get("drift_k") else "steady"),
+    ("encoder q/√12 over the noise", lambda r: bins(
+        2 * math.pi / r["rig"]["counts_per_turn"] / math.sqrt(12) / r["rig"]["noise"], (0.3, 1, 3, 10))),
+]
+DRIVE_CLASSES = [
+    ("kind", lambda r: r["class"]),
+    ("rate", lambda r: bins(r["rig"]["rate_hz"], (500, 2000), " Hz")),
+    ("timestamp jitter", lambda r: "with" if r["rig"]["jitter"] > 0 else "none"),
+    ("gaps", lambda r: "with" if r["rig"].get("dropout_s", 0) > 0 else "none"),
+    ("scale (kg·m² or kg)", lambda r: bins(r["rig"]["inertia"], (1e-3, 1))),
+]
+
+
+def print_classes(results, title, classes):
+    """Pass rates of `results` split every way `classes` splits them."""
+    if not results:
+        return
+    print(f"\n{title}")
+    for name, label in classes:
+        counts = {}
+        for r in results:
+            try:
+                key = label(r)
+            except (KeyError, TypeError, ZeroDivisionError):
+                key = "unknown"
+            passed, total = counts.get(key, (0, 0))
+            counts[key] = (passed + r["passed"], total + 1)
+        print(f"  {name}: " + ", ".join(f"{k} {p}/{n}" for k, (p, n) in sorted(counts.items())))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--out", type=Path, default=Path("out/campaign"), help="folder for the rigs and campaign.json")
@@ -524,7 +632,9 @@ def main(argv=None):
         equivalent = sum(r["passed"] and r.get("equivalent_form", False) for r in inside)
         if equivalent:
             print(f"  of which {equivalent} passed in the equivalent form of the truth's effects (equivalent_forms)")
+    print_classes(inside, "device rigs inside the library, per class (passed/rigs):", DEVICE_CLASSES)
     drive_results = [r for r in results if r["class"].startswith("drive")]
+    print_classes(drive_results, "drive rigs, per class (passed/rigs):", DRIVE_CLASSES)
     if drive_results:
         print(f"drive rigs: {100 * sum(r['passed'] for r in drive_results) / len(drive_results):.1f} %")
         print_offset_breakdown(drive_results)

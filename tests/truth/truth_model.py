@@ -20,6 +20,12 @@ defines them:
   K φ (1 + α φ²) (secant stiffness K(1 + α φ²)), on the excess beyond the play when there is backlash;
 - a stiffness that depends on the link's angle (outside the library too): K(θl) = K (1 + β θl²).
 
+A drifting temperature (`--drift`): each run's housing thermocouple heats through the run (a heater's
+first-order approach, logged as a `temperature_c` column), the PCL follows it, and K and C follow the
+paper's device's shape in temperature (Table 2, `transmission_shape`), scaled to the run's K and C at its
+nominal temperature (the `# temperature_c=` metadata, the drift's midpoint). `--effect thermal_lag=TAU`:
+the PCL follows the thermocouple through a first-order lag (starting level with it).
+
 Excitation of the motor angle (`--excitation`): `sine` (one run per temperature and frequency, the
 default), `multisine` (a few sines 0.2–3 Hz, random phases, amplitudes ∝ 1/√f scaled to the sine's rms),
 `steps` (random levels within ±amplitude, random dwell 0.8–2.5 s, each step smoothed by tanh over
@@ -109,6 +115,70 @@ STIFF_STEP = 1.0
 SIGN_ZONE = 20.0  # |θl'|/v_s beyond which tanh rounds to ±1 (its slope below 1e-16 of the peak)
 
 
+# A run's housing thermocouple may drift (`--drift`): the PCL follows it (no lag) and the transmission's
+# K and C follow the PCL as the paper's device does: the springs, 12 × 1.16 N/mm at r_s = 22.2 mm (Table 1),
+# beside κ r_p² E'(T) (κ = 0.064 m, r_p = 20.75 mm, docs/physics.md §3), and C ∝ E''(T), with E' and E''
+# from Table 2's experimental columns, the small entries read as MPa (physics.md §4, its repaired reading),
+# log E interpolated against T and held beyond 22–60 °C. Written from the paper and the physics notes,
+# not from the FMU's code. The rig's own K and C at its nominal temperature scale that shape.
+TABLE_C = (22.0, 40.0, 50.0, 60.0)
+TABLE_E1_KPA = (985.34, 920.0, 400.0, 180.0)
+TABLE_E2_KPA = (834.45, 1820.0, 1230.0, 120.0)
+SPRING_BANK = 12 * 1.16e3 * 0.0222 ** 2  # N·m/rad
+PCL_GEOMETRY = 0.064 * 0.02075 ** 2  # κ r_p², m³
+
+
+def table_modulus(column_kpa, temp_c):
+    """A Table 2 column at temp_c, Pa: log E piecewise linear in T between the rows, held beyond."""
+    if temp_c <= TABLE_C[0]:
+        return column_kpa[0] * 1e3
+    for i in range(1, len(TABLE_C)):
+        if temp_c <= TABLE_C[i]:
+            w = (temp_c - TABLE_C[i - 1]) / (TABLE_C[i] - TABLE_C[i - 1])
+            return column_kpa[i - 1] * 1e3 * (column_kpa[i] / column_kpa[i - 1]) ** w
+    return column_kpa[-1] * 1e3
+
+
+def transmission_shape(temp_c):
+    """(K, C) of the paper's device at temp_c up to one factor each: springs + κ r_p² E', and E''."""
+    return SPRING_BANK + PCL_GEOMETRY * table_modulus(TABLE_E1_KPA, temp_c), table_modulus(TABLE_E2_KPA, temp_c)
+
+
+def housing_temperature(drift, t):
+    """The thermocouple at t, °C, of a run whose `drift` is {"from_c", "to_c", "duration_s", "time_constant_s"}:
+    a heater's first-order approach, from_c at 0 and to_c at the run's end."""
+    tau, span = drift["time_constant_s"], drift["duration_s"]
+    return drift["from_c"] + (drift["to_c"] - drift["from_c"]) * (1.0 - math.exp(-t / tau)) / (1.0 - math.exp(-span / tau))
+
+
+def pcl_temperature(drift, t, lag):
+    """The PCL at t, °C: the thermocouple (`housing_temperature`) through a first-order lag of time
+    constant `lag` s (0: none), starting level with it. The housing is A − B e^{−t/τh}, so the PCL is
+    A − B' e^{−t/τh} + (B' − B) e^{−t/τ} with B' = B τh/(τh − τ) (τ = τh: A − B (1 + t/τ) e^{−t/τ})."""
+    if lag <= 0.0:
+        return housing_temperature(drift, t)
+    tau_h, span = drift["time_constant_s"], drift["duration_s"]
+    b = (drift["to_c"] - drift["from_c"]) / (1.0 - math.exp(-span / tau_h))
+    a = drift["from_c"] + b
+    if abs(tau_h - lag) < 1e-9 * tau_h:
+        return a - b * (1.0 + t / lag) * math.exp(-t / lag)
+    b_lag = b * tau_h / (tau_h - lag)
+    return a - b_lag * math.exp(-t / tau_h) + (b_lag - b) * math.exp(-t / lag)
+
+
+def transmission_schedule(k, c, temp_c, drift, lag=0.0):
+    """t -> (K, C) of a run whose K and C at its nominal temperature temp_c are k and c, its
+    thermocouple drifting as `drift` says and the PCL lagging it by `lag` s; None for a steady run."""
+    if drift is None:
+        return None
+    k0, c0 = transmission_shape(temp_c)
+
+    def at(t):
+        ks, cs = transmission_shape(pcl_temperature(drift, t, lag))
+        return k * ks / k0, c * cs / c0
+    return at
+
+
 def friction_rate(p):
     """λ = (F_c + F_s + the larger asymmetric level)/(v_s J), 1/s: how fast the friction's smoothed sign
     relaxes the link's speed near zero (0 without friction)."""
@@ -147,9 +217,10 @@ def rk4_step(acc, t, th, v, h, a1=None):
     return th + h / 6 * (v + 2 * (v + h / 2 * a1) + 2 * (v + h / 2 * a2) + (v + h * a3)), v + h / 6 * (a1 + 2 * a2 + 2 * a3 + a4)
 
 
-def simulate(p, t_end, dt, motor):
-    """RK4 of θl, θl' with the motor angle motor(t) -> (angle, speed). Returns the fine time grid
-    and the link angle and speed on it. Plain floats: numpy per step would cost more than the arithmetic."""
+def simulate(p, t_end, dt, motor, schedule=None):
+    """RK4 of θl, θl' with the motor angle motor(t) -> (angle, speed) and, where given, the transmission's
+    (K, C) schedule(t) (`transmission_schedule`). Returns the fine time grid and the link angle and speed
+    on it. Plain floats: numpy per step would cost more than the arithmetic."""
     n = int(round(t_end / dt))
     th, v = p.get("initial_link_angle", 0.0), p.get("initial_link_speed", 0.0)
     out, speed = np.empty(n + 1), np.empty(n + 1)
@@ -160,6 +231,8 @@ def simulate(p, t_end, dt, motor):
     def acc(t, th, v):
         m, dm = motor(t)
         p["theta_l"] = th
+        if schedule is not None:
+            p["stiffness"], p["damping"] = schedule(t)
         return link_torque(m - th, dm - v, v, p) / j
 
     for i in range(n):
@@ -168,7 +241,7 @@ def simulate(p, t_end, dt, motor):
     return np.arange(n + 1) * dt, out, speed
 
 
-def replay(p, t_log, m_log, vm_true, starts, dt):
+def replay(p, t_log, m_log, vm_true, starts, dt, schedule=None):
     """The truth's own link driven by the logged motor angle, as a calibration's model must be: the
     motor angle between two logged samples is the straight line through them, on the logged
     (jittered) times, in RK4 substeps of at most dt. The motor's speed is the truth's own
@@ -198,6 +271,8 @@ def replay(p, t_log, m_log, vm_true, starts, dt):
 
         def acc(t, th, v):
             p["theta_l"] = th
+            if schedule is not None:
+                p["stiffness"], p["damping"] = schedule(t)
             return link_torque(m_log[i] + slope * (t - t0) - th, vm_true[i] + dv * (t - t0) - v, v, p) / j
 
         for s in range(steps):
@@ -220,7 +295,9 @@ def replay_rms(folder):
         p = {"stiffness": run["stiffness"], "damping": run["damping"], "inertia": truth["inertia"],
              **parse_effects(truth["effect_options"])}
         starts = {int(i): (float(a), float(v)) for i, a, v in zip(d["starts"], d["start_angles"], d["start_speeds"])}
-        replayed = replay(p, d["time"], d["motor"], d["motor_speed"], starts, truth["dt"])
+        schedule = transmission_schedule(run["stiffness"], run["damping"], run["temperature_c"], run.get("drift"),
+                                         p.get("thermal_lag", 0.0))
+        replayed = replay(p, d["time"], d["motor"], d["motor_speed"], starts, truth["dt"], schedule)
         sse += float(np.sum((d["link"] - replayed) ** 2))
         samples += len(replayed)
     truth["replay_rms"] = math.sqrt(sse / samples)
@@ -239,7 +316,7 @@ def write_run(path, meta, columns):
 
 
 # One-value effect options: the key of the parameter dict they set.
-FLAT_EFFECTS = ("backlash", "elasto_backlash", "coulomb_friction", "stribeck_friction", "stribeck_velocity", "gravity_mgl",
+FLAT_EFFECTS = ("thermal_lag", "backlash", "elasto_backlash", "coulomb_friction", "stribeck_friction", "stribeck_velocity", "gravity_mgl",
                 "gravity_offset", "link_damping", "constant_load", "friction_smoothing")
 # Several-value effect options: the keys they set, in order.
 COMPOUND_EFFECTS = {
@@ -293,6 +370,8 @@ def effects_json(flat):
         out["gravity"] = {"mgl_nm": flat["gravity_mgl"], "offset_rad": flat.get("gravity_offset", 0.0)}
     if flat.get("link_damping", 0.0) > 0.0:
         out["link_damping"] = {"damping_nms": flat["link_damping"]}
+    if flat.get("thermal_lag", 0.0) > 0.0:
+        out["thermal_lag"] = {"time_constant_s": flat["thermal_lag"]}
     if flat.get("hardening_alpha", 0.0) != 0.0:
         out["hardening_spring"] = {"alpha_per_rad2": flat["hardening_alpha"], "out_of_library": True}
     if flat.get("angle_stiffness_beta", 0.0) != 0.0:
@@ -376,8 +455,14 @@ def main(argv=None):
     ap.add_argument("--dropout", type=float, default=0.0, metavar="SECONDS",
                     help="a logger's dropout: each run loses the samples of one stretch this long, placed at random "
                          "in its middle half (the time base keeps its gap)")
+    ap.add_argument("--drift", type=float, default=0.0, metavar="KELVIN",
+                    help="each run's thermocouple heats by this much, from its temperature − KELVIN/2 to + KELVIN/2, "
+                         "logged as a temperature_c column; K and C follow the paper's Table 2 shape (heating only)")
+    ap.add_argument("--drift-time-constant", type=float, default=None, metavar="SECONDS",
+                    help="the heating's first-order time constant (default: the run's duration)")
     ap.add_argument("--effect", action="append", default=[], metavar="NAME=VALUE[,VALUE...]",
-                    help="backlash=WIDTH, elasto_backlash=WIDTH (Modelica's ElastoBacklash), coulomb_friction=FC, stribeck_friction=FS, stribeck_velocity=VST, "
+                    help="thermal_lag=TAU (the PCL behind the thermocouple, first order; with --drift), "
+                         "backlash=WIDTH, elasto_backlash=WIDTH (Modelica's ElastoBacklash), coulomb_friction=FC, stribeck_friction=FS, stribeck_velocity=VST, "
                          "stribeck=FS,VST, asymmetric_friction=FCP,FCN,BVP,BVN, gravity_mgl=MGL, gravity_offset=RAD, "
                          "link_damping=B, constant_load=TAU, hardening=ALPHA (spring K φ(1 + α φ²), outside the "
                          "calibration's library), friction_smoothing=VS (repeatable)")
@@ -394,12 +479,18 @@ def main(argv=None):
     cs = [float(x) for x in a.damping.split(",")]
     if not (len(ks) == len(cs) == len(temps)):
         ap.error("--stiffness and --damping need one value per temperature")
+    if a.drift < 0.0:
+        ap.error("--drift must be ≥ 0: the truth heats only (cooling a melted PCL leaves Table 2's branch)")
+    if a.drift_time_constant is not None and not a.drift_time_constant > 0.0:
+        ap.error("--drift-time-constant must be > 0")
     if not 0.0 <= a.jitter < 0.5:
         ap.error("--jitter must be in [0, 0.5): the logged times must stay increasing")
     try:
         effects = parse_effects(a.effect)
     except ValueError as err:
         ap.error(str(err))
+    if "thermal_lag" in effects and not a.drift > 0.0:
+        ap.error("--effect thermal_lag needs --drift: behind a steady thermocouple a lag shows nothing")
     rng = np.random.default_rng(a.seed)
     a.out.mkdir(parents=True, exist_ok=True)
     stride = int(round(1.0 / (a.rate * a.dt)))
@@ -412,7 +503,12 @@ def main(argv=None):
             motor, described = excitation(a.excitation, a.amplitude, f, a.duration, rng, moving)
             p = {"stiffness": k, "damping": c, "inertia": a.inertia, **effects,
                  "initial_link_angle": motor(0.0)[0], "initial_link_speed": a.initial_speed or 0.0}
-            t, link, speed = simulate(p, a.duration, a.dt, motor)
+            drift = None
+            if a.drift > 0.0:
+                drift = {"from_c": temp - a.drift / 2, "to_c": temp + a.drift / 2, "duration_s": a.duration,
+                         "time_constant_s": a.drift_time_constant or a.duration}
+            schedule = transmission_schedule(k, c, temp, drift, effects.get("thermal_lag", 0.0))
+            t, link, speed = simulate(p, a.duration, a.dt, motor, schedule)
             ts, ls, vs = t[::stride], link[::stride], speed[::stride]
             ms, vms = np.array([motor(x) for x in ts]).T
 
@@ -430,9 +526,13 @@ def main(argv=None):
             if a.declare_inertia:
                 meta["link_inertia_kgm2"] = a.inertia
             motor_log, link_log = measure(ms)[keep], measure(ls)[keep]
-            write_run(a.out / name, meta, {"time_s": tm[keep], "motor_angle_rad": motor_log,
-                                           "link_angle_rad": link_log})
+            columns = {"time_s": tm[keep], "motor_angle_rad": motor_log, "link_angle_rad": link_log}
+            if drift is not None:  # the thermocouple read at the encoders' instants, to a millikelvin
+                columns["temperature_c"] = np.round([housing_temperature(drift, x) for x in ts[keep]], 3)
+            write_run(a.out / name, meta, columns)
             run = {"file": name, "temperature_c": temp, "stiffness": k, "damping": c, "excitation": described}
+            if drift is not None:
+                run["drift"] = drift
             if a.replay:
                 # what the replay needs, kept beside the run (replayed on demand: `replay_rms`)
                 kept = np.flatnonzero(keep)
