@@ -29,6 +29,26 @@ pub fn stribeck_velocity_grid(prob: &Problem) -> [f64; 4] {
     STRIBECK_VELOCITY_SHARES.map(|share| share * scale)
 }
 
+/// Thermal lags probed before the lag's own fit, as shares of the runs' median span. The PCL starts
+/// level with the thermocouple and falls behind it by its drift rate times the lag, so the lag's
+/// effect on a run changes shape with its size, not only its scale: one secant of 0.5 s projected
+/// campaign rig 55's 2.5 s lag (a 5 K heating over 17 s) on the wrong sign, and it was never refitted.
+/// (A lag as long as the run is plausible: the paper heats its PCL over 30–90 s.)
+pub const THERMAL_LAG_SHARES: [f64; 5] = [0.01, 0.03, 0.1, 0.3, 1.0];
+
+/// The thermal lags probed for `prob`'s runs, s (`THERMAL_LAG_SHARES` of their median span).
+pub fn thermal_lag_grid(prob: &Problem) -> [f64; 5] {
+    let mut spans: Vec<f64> = prob
+        .inputs
+        .iter()
+        .filter(|i| i.time.len() > 1)
+        .map(|i| i.time[i.time.len() - 1] - i.time[0])
+        .collect();
+    spans.sort_by(f64::total_cmp);
+    let span = spans.get(spans.len() / 2).copied().unwrap_or(1.0);
+    THERMAL_LAG_SHARES.map(|share| share * span)
+}
+
 /// Window of the moving average that exposes low-frequency structure, samples.
 pub const STRUCTURE_WINDOW: usize = 25;
 /// Smoothed residual above this many times the white-noise expectation is "structure".
@@ -369,6 +389,10 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
             // an excess is ranked only over its base (`Effect::defined_over`); the search pairs them
             e if e.defined_over().is_some_and(|b| !fit.spec.effects.contains(&b)) => {}
             Effect::StribeckFriction => settings.extend(stribeck_velocity_grid(prob).map(|v| (1.0, v))),
+            Effect::ThermalLag => {
+                let typical = effect.params()[0].1;
+                settings.extend(thermal_lag_grid(prob).map(|lag| (lag / typical, f64::NAN)))
+            }
             // an asymmetry shows only on top of friction the model already has
             Effect::AsymmetricFriction
                 if !fit.spec.effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::LinkDamping)) => {}
@@ -376,7 +400,6 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
             e if fit.spec.effects.iter().any(|x| x.takes_place_of() == Some(e)) => {}
             Effect::Gravity
             | Effect::LinkDamping
-            | Effect::ThermalLag
             | Effect::AsymmetricFriction
             | Effect::ConstantLoad => settings.push((1.0, f64::NAN)),
         }
