@@ -38,12 +38,8 @@ pub const THERMAL_LAG_SHARES: [f64; 5] = [0.01, 0.03, 0.1, 0.3, 1.0];
 
 /// The thermal lags probed for `prob`'s runs, s (`THERMAL_LAG_SHARES` of their median span).
 pub fn thermal_lag_grid(prob: &Problem) -> [f64; 5] {
-    let mut spans: Vec<f64> = prob
-        .inputs
-        .iter()
-        .filter(|i| i.time.len() > 1)
-        .map(|i| i.time[i.time.len() - 1] - i.time[0])
-        .collect();
+    let mut spans: Vec<f64> =
+        prob.inputs.iter().filter(|i| i.time.len() > 1).map(|i| i.time[i.time.len() - 1] - i.time[0]).collect();
     spans.sort_by(f64::total_cmp);
     let span = spans.get(spans.len() / 2).copied().unwrap_or(1.0);
     THERMAL_LAG_SHARES.map(|share| share * span)
@@ -398,10 +394,9 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
                 if !fit.spec.effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::LinkDamping)) => {}
             // never beside the effect that took its place (`Effect::takes_place_of`)
             e if fit.spec.effects.iter().any(|x| x.takes_place_of() == Some(e)) => {}
-            Effect::Gravity
-            | Effect::LinkDamping
-            | Effect::AsymmetricFriction
-            | Effect::ConstantLoad => settings.push((1.0, f64::NAN)),
+            Effect::Gravity | Effect::LinkDamping | Effect::AsymmetricFriction | Effect::ConstantLoad => {
+                settings.push((1.0, f64::NAN))
+            }
         }
         let mut best: Option<(f64, Vec<f64>)> = None;
         for (size, lam) in settings {

@@ -1201,11 +1201,8 @@ impl DeviceRig<'_, '_> {
         let single = as_single && added.len() == 1;
         let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
         let takes_nothing_out = !drop.iter().any(|e| m.fit.spec.effects.contains(e));
-        let structures: Vec<Structure> = if single {
-            self.laws.on_bank((spec.law, spec.springs))
-        } else {
-            vec![(spec.law, spec.springs)]
-        };
+        let structures: Vec<Structure> =
+            if single { self.laws.on_bank((spec.law, spec.springs)) } else { vec![(spec.law, spec.springs)] };
         self.with_screen(m, |sprob, current, current_sig| {
             let t = std::time::Instant::now();
             let screened = structures
