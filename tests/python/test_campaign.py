@@ -139,9 +139,11 @@ def test_a_drive_is_judged_in_the_equivalent_form_it_declares():
 # truth's replay, 43: the moving starts after gaps fitted; 156, 2026-11-29: a stiffness that grows with the
 # angle, outside the library, flagged at 1.6× the floor the motor log's own error leaves, where the count's
 # q/√12 had excused it; 161, 2026-11-30: steps whose motor band is no longer capped at three times their rms
-# frequency, Coulomb friction and backlash without the constant load that stood in for the lost motion): a
-# regression guard, not the campaign's pass rate (which the benchmark reports).
-PASSING = [6, 10, 12, 18, 43, 156, 161]
+# frequency, Coulomb friction and backlash without the constant load that stood in for the lost motion; 55,
+# 2026-12-02: a thermal lag as long as its 16.9 s runs behind a 5 K heating, found once the lag is probed over
+# the run's span; 10 and 156 drift in temperature since drift was drawn): a regression guard, not the campaign's
+# pass rate (which the benchmark reports).
+PASSING = [6, 10, 12, 18, 43, 55, 156, 161]
 
 
 @pytest.mark.parametrize("seed", PASSING)
@@ -306,6 +308,16 @@ def test_the_reference_driven_rate_is_split_at_the_position_floor(capsys):
     lines = capsys.readouterr().out.splitlines()
     assert lines == ["  reference-driven, friction's offset Fc/kp under the position floor: 1/2 passed",
                      "  reference-driven, friction's offset Fc/kp over the position floor: 1/2 passed"]
+
+
+def test_the_pass_rate_is_printed_per_class_in_the_bins_order(capsys):
+    def result(rate, passed):
+        return {"class": "1 effect", "passed": passed, "rig": {"rate_hz": rate}}
+    campaign.print_classes([result(5000, False), result(200, True), result(1000, True), result(400, False)],
+                           "title", [("rate", lambda r: campaign.bins(r["rig"]["rate_hz"], (500, 2000), " Hz")),
+                                     ("missing", lambda r: r["rig"]["jitter"])])
+    lines = capsys.readouterr().out.splitlines()
+    assert lines == ["", "title", "  rate: ≤ 500 Hz 1/2, ≤ 2000 Hz 1/1, > 2000 Hz 0/1", "  missing: unknown 2/4"]
 
 
 def test_a_torque_multisine_reaches_the_rigs_peak_speed(tmp_path):

@@ -78,28 +78,34 @@ def log_uniform(rng, lo, hi):
 
 
 def lag_shift(lag, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude):
-    """How far a thermal lag moves the link, rad: the link's response θl = H θm, H = Z/(Z − Jω²) with
-    Z = K + iωC, changed by the largest δZ the lag makes over the run (the PCL's K and C behind the
-    thermocouple's), |δθl| = amplitude Jω² |δZ| / |Z − Jω²|², at the top frequency w, over the rig's
-    temperatures (quasi-static: the lag is slow beside the motion)."""
+    """How far a thermal lag moves the link, rad, beyond what each temperature's own K and C take in:
+    the link's response θl = H θm, H = Z/(Z − Jω²) with Z = K + iωC, changed by δZ(t), the PCL's K and C
+    behind the thermocouple's over the run, less its mean over the run (a lag that only offsets the
+    temperature is a change of K and C), |δθl| = amplitude Jω² |δZ| / |Z − Jω²|², at the top frequency w;
+    its rms over the run, at the rig's most telling temperature (quasi-static: the lag is slow beside
+    the motion)."""
     worst = 0.0
     shape = truth_model.transmission_shape
+    times = np.linspace(0.0, duration, 401)
     for temp, k, c in zip(temps, ks, cs):
         run = {"from_c": temp - drift / 2, "to_c": temp + drift / 2, "duration_s": duration,
                "time_constant_s": drift_tau}
         k0, c0 = shape(temp)
-        dz = 0.0
-        for t in np.linspace(0.0, duration, 201):
+        dz = []
+        for t in times:
             (kl, cl), (kh, ch) = shape(truth_model.pcl_temperature(run, t, lag)), shape(truth_model.housing_temperature(run, t))
-            dz = max(dz, abs(complex(k * (kl - kh) / k0, w * c * (cl - ch) / c0)))
-        worst = max(worst, amplitude * j * w * w * dz / abs(complex(k - j * w * w, w * c)) ** 2)
+            dz.append(complex(k * (kl - kh) / k0, w * c * (cl - ch) / c0))
+        dz = np.array(dz)
+        varying = math.sqrt(float(np.mean(np.abs(dz - dz.mean()) ** 2)))
+        worst = max(worst, amplitude * j * w * w * varying / abs(complex(k - j * w * w, w * c)) ** 2)
     return worst
 
 
 def lag_for(rng, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude, lo, hi):
-    """A thermal lag that moves the link by a size drawn as every effect's is (`lo`–`hi`, log-uniform),
-    found by bisection on its time constant up to the heating's own; 0 where even that moves it by less
-    than `lo` (a drift through the flat of the PCL's curve hides any lag)."""
+    """A thermal lag that moves the link (`lag_shift`: the rms of what K and C do not take in) by a size
+    drawn as every effect's is (`lo`–`hi`, log-uniform), found by bisection on its time constant up to
+    the heating's own or the run's; 0 where even that moves it by less than `lo` (a drift through the
+    flat of the PCL's curve hides any lag)."""
     target = log_uniform(rng, lo, hi)
     shift = lambda lag: lag_shift(lag, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude)  # noqa: E731
     top = min(drift_tau, duration)
@@ -568,6 +574,17 @@ DRIVE_CLASSES = [
 ]
 
 
+def bin_order(item):
+    """Sort key of a class label: the `bins` labels by their edge (every '≤ e' before the '> last'),
+    other labels as text."""
+    label = item[0]
+    try:
+        edge = float(label.split()[1])
+    except (IndexError, ValueError):
+        return (1, 0.0, label)
+    return (0, edge + (1e-9 * abs(edge) if label.startswith(">") else 0.0), label)
+
+
 def print_classes(results, title, classes):
     """Pass rates of `results` split every way `classes` splits them."""
     if not results:
@@ -582,7 +599,7 @@ def print_classes(results, title, classes):
                 key = "unknown"
             passed, total = counts.get(key, (0, 0))
             counts[key] = (passed + r["passed"], total + 1)
-        print(f"  {name}: " + ", ".join(f"{k} {p}/{n}" for k, (p, n) in sorted(counts.items())))
+        print(f"  {name}: " + ", ".join(f"{k} {p}/{n}" for k, (p, n) in sorted(counts.items(), key=bin_order)))
 
 
 def main(argv=None):

@@ -1538,6 +1538,22 @@ mod tests {
     use super::*;
 
     #[test]
+    fn a_candidate_is_refitted_under_every_law_on_the_current_bank_only() {
+        use DampingLaw::{Hysteretic, Viscous};
+        use SpringBank::{Nominal, Scaled};
+        let heating = LawChoice {
+            allowed: vec![(Viscous, Scaled), (Viscous, Nominal), (Hysteretic, Scaled), (Hysteretic, Nominal)],
+            reason: String::new(),
+            undecided: false,
+        };
+        assert_eq!(heating.on_bank((Hysteretic, Nominal)), vec![(Hysteretic, Nominal), (Viscous, Nominal)]);
+        assert_eq!(heating.on_bank((Viscous, Scaled)), vec![(Viscous, Scaled), (Hysteretic, Scaled)]);
+        // a steady thermocouple allows one bank: every structure, the current one first, as before
+        let steady = LawChoice { allowed: vec![(Viscous, Scaled), (Hysteretic, Scaled)], ..heating };
+        assert_eq!(steady.on_bank((Hysteretic, Scaled)), vec![(Hysteretic, Scaled), (Viscous, Scaled)]);
+    }
+
+    #[test]
     fn removing_a_stribeck_excess_zeroes_its_level_not_its_speed() {
         // one temperature group (ln K, ln C), Coulomb friction, a Stribeck excess (level, ln speed):
         // the excess is gone when its level is zero. Forcing ln v to 0 as well read a speed of 1 rad/s
