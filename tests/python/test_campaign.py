@@ -171,24 +171,32 @@ def test_drift_leaves_every_other_draw_as_it_was(monkeypatch):
         assert d["samples"] == o["samples"]
 
 
+# Two temperatures heating by 6 K through each 10 s run (47 → 53 and 57 → 63 °C): K and C change by up to 2.4×
+# and 5× within a run (Table 2's E'' falls tenfold from 50 to 60 °C)
+HEATING = ["--declare-inertia", "--seed", "3", "--temperatures", "50,60", "--frequencies", "1", "--stiffness", "20,12",
+           "--damping", "0.12,0.05", "--duration", "10", "--noise", "1e-4", "--drift", "6", "--drift-time-constant", "4"]
+HEATING_KC = [(20.0, 0.12), (12.0, 0.05)]
+
+
+def calibrated(runs, out):
+    """`thermovia calibrate` on a folder of runs: its report."""
+    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(runs), "--out", str(out), "--no-plots"],
+                         capture_output=True, text=True)
+    assert run.returncode == 0, run.stderr
+    return json.loads((out / "report.json").read_text())
+
+
 def test_a_drifting_thermocouple_is_followed_as_the_pcl_softens(tmp_path):
-    # two temperatures heating by 6 K through each run (47 → 53 and 57 → 63 °C): K and C change by up to
-    # 2.4× and 5× within a run (Table 2's E'' falls tenfold from 50 to 60 °C). The loop drives its FMU
-    # with the logged thermocouple and must read each temperature's K and C at its nominal one
-    args = ["--declare-inertia", "--replay", "--seed", "3", "--temperatures", "50,60", "--frequencies", "1",
-            "--stiffness", "20,12", "--damping", "0.12,0.05", "--duration", "10", "--noise", "1e-4",
-            "--drift", "6", "--drift-time-constant", "4"]
-    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *args])
+    # the loop drives its FMU with the logged thermocouple and must read each temperature's K and C at its
+    # nominal one
+    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *HEATING])
     header = [l for l in (tmp_path / "runs" / "run_50C_1Hz.csv").read_text().splitlines() if not l.startswith("#")]
     temps = [float(l.split(",")[3]) for l in header[1:]]
     assert header[0].endswith(",temperature_c") and temps[0] == 47.0 and temps[-1] == 53.0
     assert all(b >= a for a, b in zip(temps, temps[1:]))
-    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "runs"), "--out",
-                          str(tmp_path / "calibration"), "--no-plots"], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    report = json.loads((tmp_path / "calibration" / "report.json").read_text())
+    report = calibrated(tmp_path / "runs", tmp_path / "calibration")
     assert report["added_effects"] == [], report["added_effects"]
-    for g, (k, c) in zip(report["identified"], [(20.0, 0.12), (12.0, 0.05)]):
+    for g, (k, c) in zip(report["identified"], HEATING_KC):
         assert abs(g["stiffness"] / k - 1) < 0.02 and abs(g["damping"] / c - 1) < 0.02, g
     floor = math.sqrt(1e-4 ** 2 + campaign.truth_model.ENCODER_QUANTUM ** 2 / 12)
     assert report["final"]["rmse_rad"] < 1.1 * floor, report["final"]["rmse_rad"] / floor
@@ -198,28 +206,19 @@ def test_a_drifting_thermocouple_is_followed_as_the_pcl_softens(tmp_path):
         lines = f.read_text().splitlines()
         (tmp_path / "steady" / f.name).write_text(
             "\n".join(l if l.startswith("#") else l.rsplit(",", 1)[0] for l in lines) + "\n")
-    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "steady"), "--out",
-                          str(tmp_path / "steady-calibration"), "--no-plots"], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    steady = json.loads((tmp_path / "steady-calibration" / "report.json").read_text())
+    steady = calibrated(tmp_path / "steady", tmp_path / "steady-calibration")
     assert steady["baseline"]["rmse_rad"] > 3 * floor, steady["baseline"]["rmse_rad"] / floor
 
 
 def test_a_thermal_lag_behind_a_drifting_thermocouple_is_found(tmp_path):
     # the same heating, the PCL 1.5 s behind the thermocouple (the truth's closed-form first-order lag):
     # the loop must add the lag and read its time constant, with K and C still at their nominal temperatures
-    args = ["--declare-inertia", "--seed", "3", "--temperatures", "50,60", "--frequencies", "1",
-            "--stiffness", "20,12", "--damping", "0.12,0.05", "--duration", "10", "--noise", "1e-4",
-            "--drift", "6", "--drift-time-constant", "4", "--effect", "thermal_lag=1.5"]
-    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *args])
-    run = subprocess.run([str(campaign.THERMOVIA), "calibrate", str(tmp_path / "runs"), "--out",
-                          str(tmp_path / "calibration"), "--no-plots"], capture_output=True, text=True)
-    assert run.returncode == 0, run.stderr
-    report = json.loads((tmp_path / "calibration" / "report.json").read_text())
+    campaign.truth_model.main(["--out", str(tmp_path / "runs"), *HEATING, "--effect", "thermal_lag=1.5"])
+    report = calibrated(tmp_path / "runs", tmp_path / "calibration")
     assert [e["effect"] for e in report["added_effects"]] == ["thermal_lag"], report["added_effects"]
     lag = report["added_effects"][0]["parameters"]["time_constant_s"]
     assert abs(lag / 1.5 - 1) < 0.1, lag
-    for g, (k, c) in zip(report["identified"], [(20.0, 0.12), (12.0, 0.05)]):
+    for g, (k, c) in zip(report["identified"], HEATING_KC):
         assert abs(g["stiffness"] / k - 1) < 0.02 and abs(g["damping"] / c - 1) < 0.02, g
     assert report["final"]["rmse_rad"] < 0.6 * report["baseline"]["rmse_rad"]
 
