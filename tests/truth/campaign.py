@@ -88,8 +88,7 @@ def lag_shift(lag, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude):
     shape = truth_model.transmission_shape
     times = np.linspace(0.0, duration, 401)
     for temp, k, c in zip(temps, ks, cs):
-        run = {"from_c": temp - drift / 2, "to_c": temp + drift / 2, "duration_s": duration,
-               "time_constant_s": drift_tau}
+        run = truth_model.heating(temp, drift, duration, drift_tau)
         k0, c0 = shape(temp)
         dz = []
         for t in times:
@@ -109,9 +108,10 @@ def lag_for(rng, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude, lo,
     target = log_uniform(rng, lo, hi)
     shift = lambda lag: lag_shift(lag, drift, drift_tau, duration, temps, ks, cs, j, w, amplitude)  # noqa: E731
     top = min(drift_tau, duration)
-    if shift(top) < lo:
+    longest = shift(top)
+    if longest < lo:
         return 0.0
-    if shift(top) <= target:
+    if longest <= target:
         return top
     a, b = 1e-3 * top, top
     for _ in range(40):

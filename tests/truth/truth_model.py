@@ -144,6 +144,12 @@ def transmission_shape(temp_c):
     return SPRING_BANK + PCL_GEOMETRY * table_modulus(TABLE_E1_KPA, temp_c), table_modulus(TABLE_E2_KPA, temp_c)
 
 
+def heating(temp_c, kelvin, duration, time_constant):
+    """A run's drift (`housing_temperature`): temp_c − kelvin/2 at its start to temp_c + kelvin/2 at its end."""
+    return {"from_c": temp_c - kelvin / 2, "to_c": temp_c + kelvin / 2, "duration_s": duration,
+            "time_constant_s": time_constant}
+
+
 def housing_temperature(drift, t):
     """The thermocouple at t, °C, of a run whose `drift` is {"from_c", "to_c", "duration_s", "time_constant_s"}:
     a heater's first-order approach, from_c at 0 and to_c at the run's end."""
@@ -505,8 +511,7 @@ def main(argv=None):
                  "initial_link_angle": motor(0.0)[0], "initial_link_speed": a.initial_speed or 0.0}
             drift = None
             if a.drift > 0.0:
-                drift = {"from_c": temp - a.drift / 2, "to_c": temp + a.drift / 2, "duration_s": a.duration,
-                         "time_constant_s": a.drift_time_constant or a.duration}
+                drift = heating(temp, a.drift, a.duration, a.drift_time_constant or a.duration)
             schedule = transmission_schedule(k, c, temp, drift, effects.get("thermal_lag", 0.0))
             t, link, speed = simulate(p, a.duration, a.dt, motor, schedule)
             ts, ls, vs = t[::stride], link[::stride], speed[::stride]
