@@ -203,6 +203,16 @@ impl Effect {
         }
     }
 
+    /// An effect with no typical size to start a refit from, only the ranking's: a thermal lag. Its
+    /// size is the runs' (the PCL falls behind by the drift rate times the lag, and the lag's effect
+    /// changes shape with its size, `diagnose::THERMAL_LAG_SHARES`), and a short lag is a valley of
+    /// its own at no lag: the K and C fitted without it take in the offset a short lag makes. From
+    /// the difference step's 0.5 s, which is nearest the current model and so the cheapest start,
+    /// the refit of a 10 s lag on 20 s heating runs went to no lag (from 1 s or more it found 9.9 s).
+    pub fn started_from_ranking_only(self) -> bool {
+        self == Effect::ThermalLag
+    }
+
     /// Internal parameters: (name, typical size used for difference steps, lower bound).
     /// Gravity is (a, b) = m g d (cos, sin) of the offset; the Maxwell time is fitted as ln λ.
     pub fn params(self) -> &'static [(&'static str, f64, Option<f64>)] {

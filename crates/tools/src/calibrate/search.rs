@@ -613,7 +613,13 @@ fn candidate_starts(
     let n_t = 2 * prob.n_groups;
     let closed = prob.closed_form_start(law);
     let linearised: Vec<f64> = added.iter().flat_map(|c| c.start.iter().copied()).collect();
-    let typical: Vec<f64> = added.iter().flat_map(|c| c.effect.params().iter().map(|p| p.1)).collect();
+    let typical: Vec<f64> = added
+        .iter()
+        .flat_map(|c| match c.effect.started_from_ranking_only() {
+            true => c.start.clone(),
+            false => c.effect.params().iter().map(|p| p.1).collect(),
+        })
+        .collect();
     let table = prob.table_start();
     // a group whose transmission stopped at a bound, or drags the link through its damper, starts
     // from the table's: that is where the structure without the effect went (K → 0 dragging the
@@ -625,7 +631,8 @@ fn candidate_starts(
     }
     let mut starts = Vec::new();
     for transmission in [&here[..], &closed[..]] {
-        for effect in [&linearised, &typical] {
+        let distinct = if typical == linearised { 1 } else { 2 };
+        for effect in [&linearised, &typical].into_iter().take(distinct) {
             let mut q = transmission.to_vec();
             q.extend_from_slice(&current[n_t..]);
             q.extend_from_slice(effect);
