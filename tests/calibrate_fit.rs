@@ -20,6 +20,7 @@ fn sine_input(rate: f64, duration: f64, frequency: f64, amplitude: f64, inertia:
         com_distance: 0.14,
         initial_link_speed: 0.0,
         after_gap: false,
+        housing_before: Vec::new(),
     }
 }
 
@@ -70,6 +71,7 @@ fn the_gravitys_bounds_stay_inside_what_the_fmu_accepts() {
         com_distance: d,
         initial_link_speed: 0.0,
         after_gap: false,
+        housing_before: Vec::new(),
     };
     let n = input.time.len();
     let prob = Problem::new(&sim, vec![input], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
@@ -128,4 +130,55 @@ fn a_backlash_width_left_short_is_found_by_the_final_scan() {
     let right = Fit::evaluate(&prob, spec, truth.clone()).unwrap();
     let (kept, moved) = scan_backlash_width(&prob, right, &Budget::seconds(120.0));
     assert_eq!((kept.p, moved), (truth, None), "the truth's width moved");
+}
+
+/// A lagged PCL carries its lag across a gap: a segment started from the housing's history before
+/// it (`SimInput::housing_before`) continues the whole run, where one started level with its
+/// thermocouple does not (campaign rigs with a lag and a dropout: 0 of 3 passed).
+#[test]
+fn a_segment_after_a_gap_starts_its_pcl_where_its_lag_left_it() {
+    use thermovia_tools::calibrate::sim::{lagged_pcl, simulate, EffectValues, RunModel};
+    let fmu = common::fmu();
+    let mut inst = fmu.instantiate(None).unwrap();
+    let heating = |t: f64| 313.15 + 8.0 * (1.0 - (-t / 4.0).exp());
+    let time: Vec<f64> = (0..=12_000).map(|k| k as f64 * 1e-3).collect();
+    let mut whole = sine_input(1000.0, 12.0, 0.5, 0.3, 0.018);
+    whole.housing_k = time.iter().map(|&t| heating(t)).collect();
+    let tau = 3.0;
+    let model = RunModel { effects: EffectValues { thermal_lag: tau, ..Default::default() }, ..Default::default() };
+    let full = simulate(&mut inst, &whole, &model, None).unwrap();
+    // the segment after a 0.2 s dropout, from 6 s, started from the whole run's link state
+    let (gap, k) = (5_800, 6_000);
+    let segment = |before: Vec<(f64, f64)>| SimInput {
+        time: whole.time[k..].to_vec(),
+        motor: whole.motor[k..].to_vec(),
+        housing_k: whole.housing_k[k..].to_vec(),
+        link0: full[k],
+        initial_link_speed: (full[k + 1] - full[k - 1]) / 2e-3,
+        after_gap: true,
+        housing_before: before,
+        ..whole.clone()
+    };
+    let history: Vec<(f64, f64)> = (0..gap).map(|j| (whole.time[j], whole.housing_k[j])).collect();
+    // the lag in closed form against a fine integration of T' = (T_housing − T)/τ
+    let mut pcl = heating(0.0);
+    let h = 1e-4;
+    for j in 0..60_000 {
+        let t = j as f64 * h;
+        let slope = |t: f64, pcl: f64| (heating(t) - pcl) / tau;
+        let k1 = slope(t, pcl);
+        let k2 = slope(t + h / 2.0, pcl + h / 2.0 * k1);
+        let k3 = slope(t + h / 2.0, pcl + h / 2.0 * k2);
+        let k4 = slope(t + h, pcl + h * k3);
+        pcl += h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4);
+    }
+    let closed = lagged_pcl(&history, (6.0, heating(6.0)), tau);
+    assert!((closed - pcl).abs() < 2e-3, "closed form {closed} K, integrated {pcl} K");
+    assert!(heating(6.0) - closed > 0.5, "the PCL lags by {} K only", heating(6.0) - closed);
+    let rms =
+        |out: &[f64]| (out.iter().zip(&full[k..]).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / out.len() as f64).sqrt();
+    let carried = rms(&simulate(&mut inst, &segment(history), &model, None).unwrap());
+    let level = rms(&simulate(&mut inst, &segment(Vec::new()), &model, None).unwrap());
+    eprintln!("segment against the whole run: rms {carried:.3e} rad carried, {level:.3e} rad level");
+    assert!(carried < 0.1 * level, "carried {carried:.3e} rad, level {level:.3e} rad");
 }

@@ -55,6 +55,7 @@ fn run() -> Result<(), Error> {
             "coulomb_friction" => push(&mut effects, &mut p, fit::Effect::CoulombFriction, &[v("torque_nm")?]),
             "backlash" => push(&mut effects, &mut p, fit::Effect::Backlash, &[v("width_rad")?]),
             "link_damping" => push(&mut effects, &mut p, fit::Effect::LinkDamping, &[v("damping_nms")?]),
+            "thermal_lag" => push(&mut effects, &mut p, fit::Effect::ThermalLag, &[v("time_constant_s")?]),
             "constant_load" => push(&mut effects, &mut p, fit::Effect::ConstantLoad, &[v("torque_nm")?]),
             "gravity" => {
                 let (m, o) = (v("mgl_nm")?, v("offset_rad")?);

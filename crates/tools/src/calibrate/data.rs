@@ -96,6 +96,10 @@ pub struct Run {
     pub gaps: Vec<super::quality::Gap>,
     /// (this segment, of how many) when the file was split at its gaps; None for a whole file.
     pub segment: Option<(usize, usize)>,
+    /// (time s, °C) of the file's thermocouple before this segment's first sample: every earlier
+    /// sample, the dropped stretches' too. A PCL that lags its thermocouple carries its lag across a
+    /// gap; a whole file, or the first stretch, has none.
+    pub thermocouple_before: Vec<(f64, f64)>,
     /// What was done with an uneven time base, when it was uneven (for the report).
     pub time_base: Option<String>,
 }
@@ -437,6 +441,7 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         lines,
         repairs,
         segment: None,
+        thermocouple_before: Vec::new(),
         time_base: None,
     };
     let inertia_key = match axis {
@@ -795,6 +800,7 @@ pub fn split_at_gaps(run: Run) -> Vec<Run> {
             load: run.load.as_ref().map(|x| cut(x, a, b)),
             lines: run.lines[a..b].to_vec(),
             segment: Some((i + 1, n)),
+            thermocouple_before: (0..a).map(|k| (run.time[k], run.temperature_c[k])).collect(),
             ..run.clone()
         })
         .collect()

@@ -27,6 +27,10 @@ pub struct SimInput {
     /// The run is a segment after a gap in its file: the link is moving at its first sample, at a
     /// speed the calibration fits (`search::fit_initial_speeds`).
     pub after_gap: bool,
+    /// (time s, K) of the housing thermocouple before the first sample, for a segment after a gap
+    /// (`data::Run::thermocouple_before`): the PCL starts where its lag behind that history left it.
+    /// Empty: the PCL starts level with the thermocouple.
+    pub housing_before: Vec<(f64, f64)>,
 }
 
 /// Values of the effect library, in the FMU's own terms except gravity, which is held as
@@ -192,7 +196,10 @@ pub fn simulate(
         ("initial_motor_angle", input.motor[0]),
         ("initial_link_angle", input.link0),
         ("initial_housing_temperature", input.housing_k[0]),
-        ("initial_pcl_temperature", input.housing_k[0]),
+        (
+            "initial_pcl_temperature",
+            lagged_pcl(&input.housing_before, (input.time[0], input.housing_k[0]), e.thermal_lag),
+        ),
         ("excitation_frequency", m.excitation_frequency.unwrap_or(input.frequency_hz)),
         ("storage_modulus_scale", m.storage_scale),
         ("loss_modulus_scale", m.loss_scale),
@@ -255,6 +262,29 @@ pub fn simulate(
         out.push(y[0]);
     }
     Ok(out)
+}
+
+/// The PCL's temperature at `now` (time s, housing K) behind the housing temperatures `before` it,
+/// through a first-order lag of `tau` s that starts level with the first of them: the FMU's
+/// `thermal_lag_time_constant`, integrated exactly over each interval with the housing linear
+/// between samples (a gap's too: the thermocouple is not logged there). Without a lag or a history,
+/// the housing temperature at `now`.
+pub fn lagged_pcl(before: &[(f64, f64)], now: (f64, f64), tau: f64) -> f64 {
+    if before.is_empty() || tau <= 0.0 {
+        return now.1;
+    }
+    // e = T_pcl − T_housing follows e' = −e/τ − s on an interval where the housing rises at s
+    let mut e = 0.0;
+    for w in before.windows(2).map(|w| (w[0], w[1])).chain(before.last().map(|&l| (l, now))) {
+        let ((t0, h0), (t1, h1)) = w;
+        let dt = t1 - t0;
+        if dt <= 0.0 {
+            continue;
+        }
+        let s = (h1 - h0) / dt;
+        e = -s * tau + (e + s * tau) * (-dt / tau).exp();
+    }
+    now.1 + e
 }
 
 /// One simulated link-angle trace, or why the simulation failed.
