@@ -180,6 +180,22 @@ fn thermal_lag_is_found_blind() {
     check_single("lag", &["--thermal-lag", "2", "--heating-k", "8"], "thermal_lag", "time_constant_s", 2.0);
 }
 
+/// A lag half as long as the runs (the CLI's default runs: 4 temperatures × 0.5 and 1 Hz × 20 s,
+/// heating by 8 K): a short lag is a valley of its own at no lag, where the refit from the
+/// difference step's 0.5 s went (missed, 1.8× the floor), and from the current K and C the refit
+/// from the ranking's size needed more iterations than a screening refit has (an 8 s lag on 8 s
+/// runs). `Effect::started_from_ranking_only`.
+#[test]
+fn a_thermal_lag_half_as_long_as_the_runs_is_found_blind() {
+    let (c, synth) =
+        edited_blind("blind-long-lag", &["--thermal-lag", "10", "--heating-k", "8", "--seed", "7"], |_| true);
+    assert_eq!(added(&c), vec!["thermal_lag".to_string()], "{}", c.report["diagnosis"]);
+    let lag = param(&c, "thermal_lag", "time_constant_s");
+    assert!(within(lag, 10.0, 0.05), "thermal_lag.time_constant_s = {lag}, truth 10");
+    let fin = c.report["final"]["rmse_rad"].as_f64().unwrap();
+    assert!(fin <= 1.2 * synth.noise_floor(), "final RMSE {fin:.3e} > 1.2 × noise floor {:.3e}", synth.noise_floor());
+}
+
 #[test]
 fn frequency_dependent_modulus_is_found_blind() {
     check_single(

@@ -398,7 +398,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
                 settings.push((1.0, f64::NAN))
             }
         }
-        let mut best: Option<(f64, Vec<f64>)> = None;
+        let mut best: Option<(f64, Vec<f64>, Vec<f64>)> = None;
         for (size, lam) in settings {
             let mut p0 = fit.p.clone();
             p0.extend(std::iter::repeat_n(0.0, k));
@@ -446,10 +446,10 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
             }
             let gain = if physical { (sse_now - sse_aug).max(0.0) } else { 0.0 };
             if best.as_ref().is_none_or(|b| gain > b.0) {
-                best = Some((gain, start));
+                best = Some((gain, start, beta.rows(0, base).iter().copied().collect()));
             }
         }
-        let (gain, start) = best.unwrap_or((0.0, vec![0.0; k]));
+        let (gain, start, moved) = best.unwrap_or((0.0, vec![0.0; k], Vec::new()));
         let score = gain / sse_now.max(1e-300);
         let predicted_delta_bic = super::stepwise::predicted_delta_bic(fit.n, sse_now, gain, k);
         let evidence = if effect == Effect::FrequencyDependentModulus && unseen(effect) {
@@ -457,7 +457,7 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
         } else {
             evidence_text(prob, effect, sig, score, predicted_delta_bic, &start)
         };
-        out.push(Candidate { effect, score, predicted_delta_bic, start, evidence });
+        out.push(Candidate { effect, score, predicted_delta_bic, start, moved, evidence });
     }
     out.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(std::cmp::Ordering::Equal));
     out

@@ -1813,7 +1813,7 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
             // DRIVE_EFFECTS holds friction only
             (other, _) => format!("explains {:.1} % of the position residual ({})", 100.0 * score, other.name()),
         };
-        out.push(DriveCandidate { effect, score, predicted_delta_bic, start, evidence });
+        out.push(DriveCandidate { effect, score, predicted_delta_bic, start, moved: Vec::new(), evidence });
     }
     out.sort_by(|a, b| b.score.partial_cmp(&a.score).unwrap_or(std::cmp::Ordering::Equal));
     out

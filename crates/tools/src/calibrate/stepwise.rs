@@ -136,6 +136,9 @@ pub struct Ranked<E> {
     pub predicted_delta_bic: f64,
     /// Starting values of the effect's parameters for the refit.
     pub start: Vec<f64>,
+    /// The linearised step of the current model's parameters that goes with `start` (the projection
+    /// moves them with the effect); empty where not computed.
+    pub moved: Vec<f64>,
     pub evidence: String,
 }
 
@@ -1151,6 +1154,7 @@ mod tests {
                             score: 0.0,
                             predicted_delta_bic: 0.0,
                             start: vec![0.0],
+                            moved: Vec::new(),
                             evidence: String::new(),
                         };
                     }
@@ -1161,6 +1165,7 @@ mod tests {
                             score: 0.0,
                             predicted_delta_bic: BIC_MARGIN,
                             start: vec![0.0],
+                            moved: Vec::new(),
                             evidence: String::new(),
                         };
                     }
@@ -1170,6 +1175,7 @@ mod tests {
                             score: 10.0,
                             predicted_delta_bic: -1e6,
                             start: vec![beta[m.cols.len()]],
+                            moved: Vec::new(),
                             evidence: String::new(),
                         };
                     }
@@ -1179,6 +1185,7 @@ mod tests {
                         score: (now - aug) / now,
                         predicted_delta_bic: self.understated.filter(|u| u.0 == c).map_or(predicted, |u| u.1),
                         start: vec![beta[m.cols.len()]],
+                        moved: Vec::new(),
                         evidence: String::new(),
                     }
                 })
@@ -1704,6 +1711,7 @@ mod tests {
             score: 0.0,
             predicted_delta_bic,
             start: vec![],
+            moved: Vec::new(),
             evidence: String::new(),
         };
         // 0 gravity, 1 load, 2 Maxwell, 3 backlash, 4 Coulomb, 5 link damping, 6 a lag
