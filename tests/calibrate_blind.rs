@@ -333,7 +333,7 @@ fn a_simulation_looks_at_the_deadline_while_it_runs() {
         com_distance: 0.14,
         initial_link_speed: 0.0,
         after_gap: false,
-        housing_before: Vec::new(),
+        housing_before: Default::default(),
     };
     let model = RunModel::default();
     // `simulate` looks at the clock inside its loop of steps: a deadline already passed stops it at

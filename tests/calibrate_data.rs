@@ -336,6 +336,32 @@ fn a_gap_splits_the_run_and_is_listed() {
     assert!(runs[1].name().contains("segment 2 of 2"), "{}", runs[1].name());
 }
 
+/// Every segment after a gap carries the file's thermocouple before it (for a lagged PCL), in
+/// kelvin, and the segments share one copy of it: a log with many gaps does not hold its past once
+/// per segment.
+#[test]
+fn segments_share_one_copy_of_the_thermocouple_before_them() {
+    let d = tmp("calib-data-gaps-history");
+    // two gaps: samples 1000..1249 and 2000..2099 dropped
+    let text = sine_run(3000, 1000.0, even(1000.0));
+    let dropped = |i: usize| (1004..1254).contains(&i) || (2004..2104).contains(&i);
+    let kept: Vec<&str> = text.lines().enumerate().filter(|&(i, _)| !dropped(i)).map(|(_, l)| l).collect();
+    std::fs::write(d.join("gaps.csv"), kept.join("\n") + "\n").unwrap();
+    let runs = read_inputs(&[d.join("gaps.csv")]).unwrap();
+    assert_eq!(runs.len(), 3);
+    let lengths: Vec<usize> = runs.iter().map(|r| r.thermocouple_before.samples().len()).collect();
+    assert_eq!(lengths, vec![0, 1000, 1750], "every sample of the file before the segment");
+    let (second, third) = (runs[1].thermocouple_before.samples(), runs[2].thermocouple_before.samples());
+    assert_eq!(second.as_ptr(), third.as_ptr(), "one copy for the file");
+    assert_eq!(&third[..1000], second);
+    let file_time: Vec<f64> = runs[0].time.iter().chain(&runs[1].time).copied().collect();
+    let file_c: Vec<f64> = runs[0].temperature_c.iter().chain(&runs[1].temperature_c).copied().collect();
+    for (k, &(t, kelvin)) in third.iter().enumerate() {
+        assert_eq!(t, file_time[k]);
+        assert!((kelvin - (file_c[k] + 273.15)).abs() < 1e-9, "sample {k}: {kelvin} K against {} °C", file_c[k]);
+    }
+}
+
 /// A position that jumps faster than the FMU's speed range (a unit slip, a corrupt stretch) is
 /// refused at its line and column as the file is read, not by the FMU in the middle of a fit.
 #[test]

@@ -20,7 +20,7 @@ fn sine_input(rate: f64, duration: f64, frequency: f64, amplitude: f64, inertia:
         com_distance: 0.14,
         initial_link_speed: 0.0,
         after_gap: false,
-        housing_before: Vec::new(),
+        housing_before: Default::default(),
     }
 }
 
@@ -71,7 +71,7 @@ fn the_gravitys_bounds_stay_inside_what_the_fmu_accepts() {
         com_distance: d,
         initial_link_speed: 0.0,
         after_gap: false,
-        housing_before: Vec::new(),
+        housing_before: Default::default(),
     };
     let n = input.time.len();
     let prob = Problem::new(&sim, vec![input], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
@@ -156,7 +156,7 @@ fn a_segment_after_a_gap_starts_its_pcl_where_its_lag_left_it() {
         link0: full[k],
         initial_link_speed: (full[k + 1] - full[k - 1]) / 2e-3,
         after_gap: true,
-        housing_before: before,
+        housing_before: before.into(),
         ..whole.clone()
     };
     let history: Vec<(f64, f64)> = (0..gap).map(|j| (whole.time[j], whole.housing_k[j])).collect();

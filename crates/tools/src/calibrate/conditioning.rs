@@ -113,7 +113,7 @@ pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> (super::sim::SimInp
         com_distance: r.meta_f64("link_length_m").unwrap_or(0.14),
         initial_link_speed: initial_speed(&r.time, &r.link),
         after_gap: r.segment.is_some_and(|(k, _)| k > 1),
-        housing_before: r.thermocouple_before.iter().map(|&(t, c)| (t, c + crate::report::ZERO_CELSIUS)).collect(),
+        housing_before: r.thermocouple_before.clone(),
     };
     (input, conditioning)
 }

@@ -4,6 +4,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// How a run was driven (`# drive=`, docs/interfaces.md "Runs from other rigs and drives").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -96,12 +97,38 @@ pub struct Run {
     pub gaps: Vec<super::quality::Gap>,
     /// (this segment, of how many) when the file was split at its gaps; None for a whole file.
     pub segment: Option<(usize, usize)>,
-    /// (time s, °C) of the file's thermocouple before this segment's first sample: every earlier
-    /// sample, the dropped stretches' too. A PCL that lags its thermocouple carries its lag across a
-    /// gap; a whole file, or the first stretch, has none.
-    pub thermocouple_before: Vec<(f64, f64)>,
+    /// The file's thermocouple before this segment's first sample: every earlier sample, the dropped
+    /// stretches' too. A PCL that lags its thermocouple carries its lag across a gap; a whole file,
+    /// or the first stretch, has none.
+    pub thermocouple_before: HousingHistory,
     /// What was done with an uneven time base, when it was uneven (for the report).
     pub time_base: Option<String>,
+}
+
+/// (time s, housing K) logged before a segment's first sample: a prefix of its file's log, which
+/// every segment of the file shares. Empty for a whole file or its first stretch.
+#[derive(Clone, Debug, Default)]
+pub struct HousingHistory {
+    log: Option<Arc<[(f64, f64)]>>,
+    len: usize,
+}
+
+impl HousingHistory {
+    /// The first `len` samples of `log`.
+    pub fn prefix(log: &Arc<[(f64, f64)]>, len: usize) -> Self {
+        HousingHistory { log: Some(Arc::clone(log)), len: len.min(log.len()) }
+    }
+
+    pub fn samples(&self) -> &[(f64, f64)] {
+        self.log.as_ref().map_or(&[], |log| &log[..self.len])
+    }
+}
+
+impl From<Vec<(f64, f64)>> for HousingHistory {
+    fn from(samples: Vec<(f64, f64)>) -> Self {
+        let len = samples.len();
+        HousingHistory { log: Some(samples.into()), len }
+    }
 }
 
 /// How runs are read.
@@ -441,7 +468,7 @@ pub fn parse_run_with(path: &Path, text: &str, options: ReadOptions) -> Result<R
         lines,
         repairs,
         segment: None,
-        thermocouple_before: Vec::new(),
+        thermocouple_before: HousingHistory::default(),
         time_base: None,
     };
     let inertia_key = match axis {
@@ -778,7 +805,7 @@ fn gaps_of(lines: &[usize], t: &[f64]) -> Vec<super::quality::Gap> {
 /// One run per stretch between gaps, each started from its own first samples (the measured state
 /// after the gap), never bridged by interpolation across it. Stretches shorter than
 /// `quality::MIN_SEGMENT_SAMPLES` are dropped (the run's `gaps` still list every gap).
-pub fn split_at_gaps(run: Run) -> Vec<Run> {
+pub fn split_at_gaps(mut run: Run) -> Vec<Run> {
     if run.gaps.is_empty() {
         return vec![run];
     }
@@ -787,20 +814,32 @@ pub fn split_at_gaps(run: Run) -> Vec<Run> {
         .filter(|(a, b)| b - a >= super::quality::MIN_SEGMENT_SAMPLES)
         .collect();
     let n = kept.len();
-    let cut = |x: &Vec<f64>, a: usize, b: usize| x[a..b].to_vec();
+    // the samples move out, so that each segment copies its own stretch and the file's metadata,
+    // not the whole file; the thermocouple's history is one copy that every segment shares
+    let time = std::mem::take(&mut run.time);
+    let motor = std::mem::take(&mut run.motor);
+    let link = std::mem::take(&mut run.link);
+    let temperature_c = std::mem::take(&mut run.temperature_c);
+    let reference = run.reference.take();
+    let motor_torque = run.motor_torque.take();
+    let load = run.load.take();
+    let lines = std::mem::take(&mut run.lines);
+    let housing: Arc<[(f64, f64)]> =
+        time.iter().zip(&temperature_c).map(|(&t, &c)| (t, c + crate::report::ZERO_CELSIUS)).collect();
+    let cut = |x: &[f64], a: usize, b: usize| x[a..b].to_vec();
     kept.iter()
         .enumerate()
         .map(|(i, &(a, b))| Run {
-            time: cut(&run.time, a, b),
-            motor: cut(&run.motor, a, b),
-            link: cut(&run.link, a, b),
-            temperature_c: cut(&run.temperature_c, a, b),
-            reference: run.reference.as_ref().map(|x| cut(x, a, b)),
-            motor_torque: run.motor_torque.as_ref().map(|x| cut(x, a, b)),
-            load: run.load.as_ref().map(|x| cut(x, a, b)),
-            lines: run.lines[a..b].to_vec(),
+            time: cut(&time, a, b),
+            motor: cut(&motor, a, b),
+            link: cut(&link, a, b),
+            temperature_c: cut(&temperature_c, a, b),
+            reference: reference.as_ref().map(|x| cut(x, a, b)),
+            motor_torque: motor_torque.as_ref().map(|x| cut(x, a, b)),
+            load: load.as_ref().map(|x| cut(x, a, b)),
+            lines: lines[a..b].to_vec(),
             segment: Some((i + 1, n)),
-            thermocouple_before: (0..a).map(|k| (run.time[k], run.temperature_c[k])).collect(),
+            thermocouple_before: HousingHistory::prefix(&housing, a),
             ..run.clone()
         })
         .collect()

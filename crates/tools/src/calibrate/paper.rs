@@ -71,7 +71,7 @@ pub fn summarise(sim: &Simulator, effects: EffectValues, temps: &[f64], freqs: &
                 link0: 0.0,
                 com_distance: 0.14,
                 after_gap: false,
-                housing_before: Vec::new(),
+                housing_before: Default::default(),
             });
             keys.push((tc, f));
         }

@@ -27,10 +27,10 @@ pub struct SimInput {
     /// The run is a segment after a gap in its file: the link is moving at its first sample, at a
     /// speed the calibration fits (`search::fit_initial_speeds`).
     pub after_gap: bool,
-    /// (time s, K) of the housing thermocouple before the first sample, for a segment after a gap
+    /// The housing thermocouple before the first sample, for a segment after a gap
     /// (`data::Run::thermocouple_before`): the PCL starts where its lag behind that history left it.
     /// Empty: the PCL starts level with the thermocouple.
-    pub housing_before: Vec<(f64, f64)>,
+    pub housing_before: super::data::HousingHistory,
 }
 
 /// Values of the effect library, in the FMU's own terms except gravity, which is held as
@@ -198,7 +198,7 @@ pub fn simulate(
         ("initial_housing_temperature", input.housing_k[0]),
         (
             "initial_pcl_temperature",
-            lagged_pcl(&input.housing_before, (input.time[0], input.housing_k[0]), e.thermal_lag),
+            lagged_pcl(input.housing_before.samples(), (input.time[0], input.housing_k[0]), e.thermal_lag),
         ),
         ("excitation_frequency", m.excitation_frequency.unwrap_or(input.frequency_hz)),
         ("storage_modulus_scale", m.storage_scale),

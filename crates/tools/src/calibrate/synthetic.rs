@@ -216,7 +216,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
                 link0: 0.0,
                 com_distance: 0.14,
                 after_gap: false,
-                housing_before: Vec::new(),
+                housing_before: Default::default(),
             };
             let link = simulate(&mut inst, &input, &model, None)?;
             let mut text = String::new();
