@@ -1347,7 +1347,12 @@ impl Rig for DeviceRig<'_, '_> {
             None => winner.fit,
         };
         let done = levenberg_marquardt(self.prob, f.spec.clone(), f.p.clone(), MAX_ITERATIONS).ok()?;
-        debug(format_args!("winner {} iterations, SSE {:.6e} → {:.6e}", done.iterations, f.sse, done.sse));
+        // f's SSE is over the screening share when there is one; done's over every sample
+        let share = if screen.is_some() { " (screening share)" } else { "" };
+        debug(format_args!(
+            "winner {} iterations on every sample: SSE {:.6e}{share}, then {:.6e} (every sample)",
+            done.iterations, f.sse, done.sse
+        ));
         let s = signatures(self.prob, &done);
         earns_its_place(&m.fit, &m.sig, &done, &s).then_some(Judged { fit: done, sig: s })
     }

@@ -269,10 +269,16 @@ pub fn simulate(
 /// `thermal_lag_time_constant`, integrated exactly over each interval with the housing linear
 /// between samples (a gap's too: the thermocouple is not logged there). Without a lag or a history,
 /// the housing temperature at `now`.
+///
+/// Only the last `LAG_MEMORY` time constants of the history are walked: what the PCL lagged before
+/// them has decayed by e^−40 (below a double's resolution of the lag), so a late segment of a long
+/// log costs the same as an early one.
 pub fn lagged_pcl(before: &[(f64, f64)], now: (f64, f64), tau: f64) -> f64 {
     if before.is_empty() || tau <= 0.0 {
         return now.1;
     }
+    let first = before.partition_point(|&(t, _)| t < now.0 - LAG_MEMORY * tau).saturating_sub(1);
+    let before = &before[first..];
     // e = T_pcl − T_housing follows e' = −e/τ − s on an interval where the housing rises at s
     let mut e = 0.0;
     for w in before.windows(2).map(|w| (w[0], w[1])).chain(before.last().map(|&l| (l, now))) {
@@ -286,6 +292,9 @@ pub fn lagged_pcl(before: &[(f64, f64)], now: (f64, f64), tau: f64) -> f64 {
     }
     now.1 + e
 }
+
+/// Time constants of history that `lagged_pcl` walks.
+const LAG_MEMORY: f64 = 40.0;
 
 /// One simulated link-angle trace, or why the simulation failed.
 pub type JobResult = Result<Vec<f64>, String>;
@@ -417,5 +426,36 @@ impl Simulator {
     /// The reason the latest failed simulation gave, if any failed.
     pub fn last_failure(&self) -> Option<String> {
         self.last_failure.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The lag's recurrence over every sample of the history, from the first.
+    fn walked_from_the_first(before: &[(f64, f64)], now: (f64, f64), tau: f64) -> f64 {
+        let mut e = 0.0;
+        for w in before.windows(2).map(|w| (w[0], w[1])).chain(before.last().map(|&l| (l, now))) {
+            let ((t0, h0), (t1, h1)) = w;
+            let s = (h1 - h0) / (t1 - t0);
+            e = -s * tau + (e + s * tau) * (-(t1 - t0) / tau).exp();
+        }
+        now.1 + e
+    }
+
+    #[test]
+    fn a_long_history_is_walked_only_as_far_as_the_lag_remembers() {
+        // 200 s at 1 kHz of a heating with a slow swing, and a gap of 0.3 s before `now`
+        let housing = |t: f64| 313.15 + 8.0 * (1.0 - (-t / 30.0).exp()) + 0.5 * (0.1 * t).sin();
+        let before: Vec<(f64, f64)> = (0..200_000).map(|k| k as f64 * 1e-3).map(|t| (t, housing(t))).collect();
+        let now = (200.3, housing(200.3));
+        for tau in [0.05, 0.5, 3.0, 10.0] {
+            let (windowed, whole) = (lagged_pcl(&before, now, tau), walked_from_the_first(&before, now, tau));
+            assert!((windowed - whole).abs() < 1e-9, "τ {tau} s: {windowed} K against {whole} K");
+            assert!((now.1 - whole).abs() > 1e-3, "τ {tau} s: no lag to carry ({} K)", now.1 - whole);
+        }
+        // a history shorter than the lag's memory is walked whole: the same number
+        assert_eq!(lagged_pcl(&before, now, 10.0), walked_from_the_first(&before, now, 10.0));
     }
 }
