@@ -109,25 +109,25 @@ pub struct Run {
 /// every segment of the file shares. Empty for a whole file or its first stretch.
 #[derive(Clone, Debug, Default)]
 pub struct HousingHistory {
-    log: Option<Arc<[(f64, f64)]>>,
+    log: Arc<[(f64, f64)]>,
     len: usize,
 }
 
 impl HousingHistory {
     /// The first `len` samples of `log`.
     pub fn prefix(log: &Arc<[(f64, f64)]>, len: usize) -> Self {
-        HousingHistory { log: Some(Arc::clone(log)), len: len.min(log.len()) }
+        HousingHistory { log: Arc::clone(log), len: len.min(log.len()) }
     }
 
     pub fn samples(&self) -> &[(f64, f64)] {
-        self.log.as_ref().map_or(&[], |log| &log[..self.len])
+        &self.log[..self.len]
     }
 }
 
 impl From<Vec<(f64, f64)>> for HousingHistory {
     fn from(samples: Vec<(f64, f64)>) -> Self {
         let len = samples.len();
-        HousingHistory { log: Some(samples.into()), len }
+        HousingHistory { log: samples.into(), len }
     }
 }
 
