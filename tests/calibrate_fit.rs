@@ -182,3 +182,54 @@ fn a_segment_after_a_gap_starts_its_pcl_where_its_lag_left_it() {
     eprintln!("segment against the whole run: rms {carried:.3e} rad carried, {level:.3e} rad level");
     assert!(carried < 0.1 * level, "carried {carried:.3e} rad, level {level:.3e} rad");
 }
+
+/// A link held by its friction between the motor's steps (CI rig 3's shape without its coarse
+/// encoder: J = 0.0475 kg·m², K = 82 N·m/rad, a 1.65 N·m Coulomb friction and a 0.23 N·m·s/rad link
+/// damping, five smoothed steps in 7.4 s at 500 Hz, 0.3 mrad of noise): the equation error's rows
+/// at rest hold no friction level, so its subsets must not take a play for the friction that holds
+/// the deflection there (it chose link damping and a play, and the search stayed in that valley),
+/// and its start for Coulomb friction and link damping, from the rows where the link moves, is
+/// physical and near the truth's stiffness (from every row: K = 8.3 N·m/rad and a negative link
+/// damping, the stuck deflection read as a soft spring). The smoothing still flattens the link's
+/// ringing, so the start's friction is low: a start, not a fit.
+#[test]
+fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
+    use thermovia_tools::calibrate::search::equation_error_subsets;
+    use thermovia_tools::calibrate::synthetic::SplitMix;
+    let sim = Simulator::new(common::fmu(), 2).unwrap();
+    let rate = 500.0;
+    let time: Vec<f64> = (0..=(rate * 7.4) as usize).map(|k| k as f64 / rate).collect();
+    let steps = [(0.34, -0.135), (2.5, 0.177), (3.47, -0.076), (5.08, -0.14), (7.13, -0.024)];
+    let motor =
+        time.iter().map(|&t| steps.iter().map(|(at, by)| 0.5 * by * (1.0 + ((t - at) / 0.05).tanh())).sum()).collect();
+    let input = SimInput {
+        motor,
+        housing_k: vec![295.15; time.len()],
+        time,
+        frequency_hz: 0.2,
+        link_inertia: Some(0.0475),
+        link0: 0.0,
+        com_distance: 0.14,
+        initial_link_speed: 0.0,
+        after_gap: false,
+        housing_before: Default::default(),
+    };
+    let spec = ModelSpec {
+        effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
+        law: DampingLaw::Viscous,
+        springs: SpringBank::Scaled,
+        elasto_backlash: false,
+    };
+    let truth = vec![82.0f64.ln(), 0.67f64.ln(), 1.65, 0.23];
+    let n = input.time.len();
+    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
+    let mut measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let mut rng = SplitMix::new(3);
+    measured[0].iter_mut().for_each(|y| *y += 2.9e-4 * rng.normal());
+    let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
+    let subsets = equation_error_subsets(&prob, DampingLaw::Viscous, 3);
+    assert!(subsets.iter().all(|s| !s.contains(&Effect::Backlash)), "subsets {subsets:?}");
+    let e = prob.equation_error(DampingLaw::Viscous, &spec.effects).expect("the regression solves");
+    let k = e.p[0].exp();
+    assert!(e.p[2] > 0.0 && e.p[3] >= 0.0 && (k / 82.0).ln().abs() < 3f64.ln(), "start {:?}, K {k:.1}", e.p);
+}

@@ -321,8 +321,9 @@ impl SpringBank {
     }
 }
 
-/// A run's smoothed link and motor angles and the smoothing's half window (samples).
-type Smoothed = (Vec<f64>, Vec<f64>, usize);
+/// A run's smoothed link and motor angles, the smoothing's half window (samples), and the link
+/// speed below which the equation error reads the link as at rest (`speed_noise`, three of it).
+type Smoothed = (Vec<f64>, Vec<f64>, usize, f64);
 
 /// The data as the fit sees it.
 pub struct Problem<'a> {
@@ -696,8 +697,11 @@ impl<'a> Problem<'a> {
     /// differences of Savitzky–Golay-smoothed angles (a window of 2 % of the run, at least 5
     /// samples each side).
     pub fn equation_error(&self, law: DampingLaw, effects: &[Effect]) -> Option<EquationError> {
+        // with a friction among the effects no row at rest holds (`for_each_sample`); without one
+        // they do, and a link hanging at rest is where gravity and a play read best
+        let moving_only = effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::AsymmetricFriction));
         let solve = |width: f64| {
-            let normal = self.normal_equations(law, effects, width)?;
+            let normal = self.normal_equations(law, effects, width, moving_only)?;
             normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())
         };
         let width = if effects.contains(&Effect::Backlash) {
@@ -736,7 +740,7 @@ impl<'a> Problem<'a> {
         let reach = self
             .smoothed()
             .iter()
-            .flat_map(|(l, m, _)| l.iter().zip(m).map(|(a, b)| (b - a).abs()))
+            .flat_map(|(l, m, ..)| l.iter().zip(m).map(|(a, b)| (b - a).abs()))
             .fold(0.0, f64::max);
         let (lo, hi) = (0.04 * reach, 1.8 * reach);
         let n = BACKLASH_GRID_POINTS;
@@ -778,7 +782,18 @@ impl<'a> Problem<'a> {
     /// [`EQUATION_ERROR_EFFECTS`]; None for any other): columns [K, C per group] ++ the effects'.
     /// With a backlash `width` > 0, the transmission's columns are the FMU's clipped spring–damper
     /// without its clip: the spring on the relative angle beyond ±width/2, the damper in contact only.
-    pub fn normal_equations(&self, law: DampingLaw, effects: &[Effect], width: f64) -> Option<NormalEquations> {
+    /// `moving_only`: the rows where the link moves (`for_each_sample`), for choosing effects and
+    /// for a start with friction among them; a start without friction takes every row (a link
+    /// hanging at rest against its play, or under gravity, is where the regression reads them best:
+    /// CI rig 7's gravity and play started from moving rows alone ended at 18.5× white noise, from
+    /// every row at 7.1×).
+    pub fn normal_equations(
+        &self,
+        law: DampingLaw,
+        effects: &[Effect],
+        width: f64,
+        moving_only: bool,
+    ) -> Option<NormalEquations> {
         if effects.iter().any(|e| !EQUATION_ERROR_EFFECTS.contains(e)) {
             return None;
         }
@@ -789,7 +804,7 @@ impl<'a> Problem<'a> {
         let mut atb = DVector::<f64>::zeros(cols);
         let (mut btb, mut samples) = (0.0, 0usize);
         let mut row = DVector::<f64>::zeros(cols);
-        let independent = self.for_each_sample(law, |s| {
+        let independent = self.for_each_sample(law, moving_only, |s| {
             row.fill(0.0);
             let g = s.group;
             let beyond = s.phi - s.phi.clamp(-half_play, half_play);
@@ -830,7 +845,15 @@ impl<'a> Problem<'a> {
     /// Calls `f` with every usable sample of the equation error (runs of at least 40 samples,
     /// away from the smoothing's ends); returns about how many of them are independent (the
     /// smoothing correlates the residual over its window: about one independent sample per window).
-    fn for_each_sample(&self, law: DampingLaw, mut f: impl FnMut(&EquationSample)) -> f64 {
+    /// With `moving`, only samples whose link speed stands out of its noise (three times what the
+    /// smoothing and difference leave of it, `signal::smoothed_speed_gain`): at rest a friction's
+    /// torque is anything up to its level, not its level times the sign of a speed the noise sets,
+    /// so no row there holds for any friction level, and a play that leaves the transmission slack
+    /// fits the stuck link's deflection in its place (CI rig 3 without its coarse encoder: the
+    /// subsets chose link damping and a play for a 1.65 N·m friction holding the link between
+    /// steps, and the search never left that valley). Inverse-model identification leaves rest out
+    /// for the same reason (the drive's `at_rest`).
+    fn for_each_sample(&self, law: DampingLaw, moving: bool, mut f: impl FnMut(&EquationSample)) -> f64 {
         let mut independent = 0.0;
         for (r, inp) in self.inputs.iter().enumerate() {
             let n = inp.time.len();
@@ -843,14 +866,17 @@ impl<'a> Problem<'a> {
                 DampingLaw::Hysteretic if self.sinusoidal()[r] => self.tables[g].frequency_hz / inp.frequency_hz,
                 _ => 1.0,
             };
-            let (l, m, half) = &self.smoothed()[r];
+            let (l, m, half, rest_speed) = &self.smoothed()[r];
             let half = *half;
             let t = &inp.time;
             let d = |x: &[f64], k: usize| (x[k + 1] - x[k - 1]) / (t[k + 1] - t[k - 1]);
-            let range = half + 2..n - half - 2;
-            independent += range.len() as f64 / (2 * half + 1) as f64;
-            for k in range {
+            let mut used = 0usize;
+            for k in half + 2..n - half - 2 {
                 let v = d(l, k);
+                if moving && v.abs() <= *rest_speed {
+                    continue;
+                }
+                used += 1;
                 let acc = ((l[k + 1] - l[k]) / (t[k + 1] - t[k]) - (l[k] - l[k - 1]) / (t[k] - t[k - 1]))
                     / (0.5 * (t[k + 1] - t[k - 1]));
                 f(&EquationSample {
@@ -863,6 +889,7 @@ impl<'a> Problem<'a> {
                     inertial: j * acc,
                 });
             }
+            independent += used as f64 / (2 * half + 1) as f64;
         }
         independent
     }
@@ -874,10 +901,11 @@ impl<'a> Problem<'a> {
     pub fn torque_scale(&self) -> Option<TorqueScale> {
         *self.torque_scale.get_or_init(|| {
             let law = DampingLaw::Viscous;
-            let normal = self.normal_equations(law, &EQUATION_ERROR_EFFECTS, 0.0)?;
+            let normal = self.normal_equations(law, &EQUATION_ERROR_EFFECTS, 0.0, false)?;
             let (beta, _) = normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())?;
             let mut scale = TorqueScale { transmission_nm: 0.0, inertial_nm: 0.0, speed: 0.0, relative_angle: 0.0 };
-            self.for_each_sample(law, |s| {
+            // every sample: a stuck link's deflection is a torque the runs show
+            self.for_each_sample(law, false, |s| {
                 let tau = beta[2 * s.group].abs() * s.phi.abs() + beta[2 * s.group + 1].abs() * s.dphi.abs();
                 scale.transmission_nm = scale.transmission_nm.max(tau);
                 scale.inertial_nm = scale.inertial_nm.max(s.inertial.abs());
@@ -928,7 +956,10 @@ impl<'a> Problem<'a> {
                 .zip(&self.measured)
                 .map(|(inp, y)| {
                     let (half, link) = super::signal::smooth_to_noise(&inp.time, y, (y.len() / 100).max(5));
-                    (link, smooth(&inp.time, &inp.motor, half), half)
+                    let noise = super::signal::cubic_noise(&inp.time, y);
+                    let period = super::quality::median_period(&inp.time);
+                    let rest = 3.0 * noise * super::signal::smoothed_speed_gain(half) / period;
+                    (link, smooth(&inp.time, &inp.motor, half), half, rest)
                 })
                 .collect()
         })

@@ -282,13 +282,15 @@ pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String
 /// other, and no bound pins it): of every subset (asymmetric friction only with Coulomb
 /// friction), the lowest BIC on the regression's independent rows among those in which each
 /// effect's removal costs more than `BIC_MARGIN`: the best `count` of them, best first. The
-/// regression is formed once; every subset is solved from its normal equations.
+/// regression is formed once, on the rows where the link moves (at rest, friction holds any torque
+/// up to its level, and no row there tells friction from play); every subset is solved from its
+/// normal equations.
 pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> Vec<Vec<Effect>> {
     let all = EQUATION_ERROR_EFFECTS;
-    let Some(normal) = prob.normal_equations(law, &all, 0.0) else { return Vec::new() };
+    let Some(normal) = prob.normal_equations(law, &all, 0.0, true) else { return Vec::new() };
     // with backlash: the same regression at each width of the grid (the best width per subset)
     let with_play: Vec<NormalEquations> =
-        prob.backlash_width_grid().into_iter().filter_map(|w| prob.normal_equations(law, &all, w)).collect();
+        prob.backlash_width_grid().into_iter().filter_map(|w| prob.normal_equations(law, &all, w, true)).collect();
     let n_t = 2 * prob.n_groups;
     let mut offsets = Vec::with_capacity(all.len());
     let mut next = n_t;

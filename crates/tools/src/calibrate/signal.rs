@@ -36,6 +36,17 @@ pub fn savitzky_golay(x: &[f64], half: usize) -> Vec<f64> {
         .collect()
 }
 
+/// The rms speed, in units per sample period, that white noise of unit σ leaves after quintic
+/// Savitzky–Golay smoothing over 2·half+1 samples (`savitzky_golay`) and a central difference
+/// (x[k+1] − x[k−1])/2: √Σ d_i² over the difference of the smoother's impulse response.
+pub fn smoothed_speed_gain(half: usize) -> f64 {
+    let centre = 2 * half + 1;
+    let mut impulse = vec![0.0; 2 * centre + 1];
+    impulse[centre] = 1.0;
+    let h = savitzky_golay(&impulse, half);
+    h.windows(3).map(|w| (0.5 * (w[2] - w[0])).powi(2)).sum::<f64>().sqrt()
+}
+
 /// Whether `t` is an even grid: every interval within 1e-3 of the median (CSV rounding passes,
 /// a logger's jitter does not).
 pub fn is_even_grid(t: &[f64]) -> bool {
@@ -764,6 +775,23 @@ mod tests {
             assert!((scale / (a * w) - 1.0).abs() < 0.03, "{rate} Hz, {f} Hz: {scale} against {}", a * w);
         }
         assert_eq!(mean_square_speed(&[0.0, 1e-3], &[0.0, 1.0]), None);
+    }
+
+    /// The speed noise the equation error's rest test assumes is what smoothing and a central
+    /// difference leave of white noise, measured, at a narrow and a wide window.
+    #[test]
+    fn the_smoothed_speed_gain_is_what_white_noise_leaves() {
+        let mut rng = crate::calibrate::synthetic::SplitMix::new(3);
+        let noise: Vec<f64> = (0..200_000).map(|_| rng.normal()).collect();
+        for half in [5, 40] {
+            let s = savitzky_golay(&noise, half);
+            let d: Vec<f64> = s[half..s.len() - half].windows(3).map(|w| 0.5 * (w[2] - w[0])).collect();
+            let rms = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+            let gain = smoothed_speed_gain(half);
+            assert!((rms / gain - 1.0).abs() < 0.02, "half {half}: measured {rms:.4e}, gain {gain:.4e}");
+            // smoothing takes noise out: a raw central difference leaves 1/√2
+            assert!(gain < 0.5f64.sqrt() / 3.0, "half {half}: {gain}");
+        }
     }
 
     #[test]
