@@ -322,7 +322,7 @@ impl SpringBank {
 }
 
 /// A run's smoothed link and motor angles, the smoothing's half window (samples), and the link
-/// speed below which the equation error reads the link as at rest (`speed_noise`, three of it).
+/// speed at or below which the equation error reads the link as at rest (`for_each_sample`).
 type Smoothed = (Vec<f64>, Vec<f64>, usize, f64);
 
 /// The data as the fit sees it.
@@ -955,8 +955,7 @@ impl<'a> Problem<'a> {
                 .iter()
                 .zip(&self.measured)
                 .map(|(inp, y)| {
-                    let (half, link) = super::signal::smooth_to_noise(&inp.time, y, (y.len() / 100).max(5));
-                    let noise = super::signal::cubic_noise(&inp.time, y);
+                    let (half, link, noise) = super::signal::smooth_to_noise(&inp.time, y, (y.len() / 100).max(5));
                     let period = super::quality::median_period(&inp.time);
                     let rest = 3.0 * noise * super::signal::smoothed_speed_gain(half) / period;
                     (link, smooth(&inp.time, &inp.motor, half), half, rest)

@@ -345,8 +345,8 @@ pub fn fade_ends(t: &[f64], band: &[f64], ends: &[f64], edge_hz: f64) -> Vec<f64
 /// signal's noise (the discrepancy principle): half windows from 5 up by factors of 2 while the rms
 /// of x − smooth(x) stays within 1.25× its noise (`cubic_noise`); a window that takes
 /// more has started to flatten the signal (a link ringing at its natural frequency, a step's edge).
-/// Returns (half window, smoothed signal).
-pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>) {
+/// Returns (half window, smoothed signal, the noise measured).
+pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>, f64) {
     let noise = cubic_noise(t, x);
     let mut half = 5.min(cap);
     let mut best = smooth(t, x, half);
@@ -359,7 +359,7 @@ pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>) {
         }
         (half, best) = (next, s);
     }
-    (half, best)
+    (half, best, noise)
 }
 
 /// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
