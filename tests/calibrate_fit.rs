@@ -183,6 +183,70 @@ fn a_segment_after_a_gap_starts_its_pcl_where_its_lag_left_it() {
     assert!(carried < 0.1 * level, "carried {carried:.3e} rad, level {level:.3e} rad");
 }
 
+/// Campaign rig 3's shape (steps that hold a friction-stuck link still between them) read through a
+/// coarse encoder (1 700 counts a turn, q/√12 = 1.07e-3 rad, under 2.9e-4 rad of noise): while the
+/// link holds, its reading sits on one count, off by a constant up to q/2 for the whole hold. The
+/// truth's own residual must read as white (no structure to look for), and a model whose friction
+/// is 30 % short must not.
+#[test]
+fn a_coarse_count_held_still_is_not_structure() {
+    use thermovia_tools::calibrate::diagnose::{signatures, STRUCTURE_LIMIT};
+    use thermovia_tools::calibrate::fit::Fit;
+    use thermovia_tools::calibrate::synthetic::SplitMix;
+    let sim = Simulator::new(common::fmu(), 2).unwrap();
+    let input = held_steps_input();
+    let spec = ModelSpec {
+        effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
+        law: DampingLaw::Viscous,
+        springs: SpringBank::Scaled,
+        elasto_backlash: false,
+    };
+    let truth = vec![82.0f64.ln(), 0.67f64.ln(), 1.65, 0.23];
+    let n = input.time.len();
+    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
+    let mut measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let q = 2.0 * std::f64::consts::PI / 1700.0;
+    let mut rng = SplitMix::new(3);
+    measured[0].iter_mut().for_each(|y| *y = q * ((*y + 2.9e-4 * rng.normal()) / q).round());
+    let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
+    let right = Fit::evaluate(&prob, spec.clone(), truth.clone()).expect("the truth simulates");
+    let right = signatures(&prob, &right);
+    let mut short = truth.clone();
+    short[2] *= 0.7;
+    let short = Fit::evaluate(&prob, spec, short).expect("the short friction simulates");
+    let short = signatures(&prob, &short);
+    eprintln!("structure: the truth {:.2}, friction 30 % short {:.2}", right.structure_ratio, short.structure_ratio);
+    assert!(
+        right.structure_ratio < STRUCTURE_LIMIT && short.structure_ratio > STRUCTURE_LIMIT,
+        "structure: the truth {:.2}, friction 30 % short {:.2} (limit {STRUCTURE_LIMIT}); rms {:.3e} and {:.3e}",
+        right.structure_ratio,
+        short.structure_ratio,
+        right.rmse,
+        short.rmse
+    );
+}
+
+/// Rig 3's motor steps at 500 Hz for 7.4 s, on its 0.0475 kg·m² link at 22 °C.
+fn held_steps_input() -> SimInput {
+    let rate = 500.0;
+    let time: Vec<f64> = (0..=(rate * 7.4) as usize).map(|k| k as f64 / rate).collect();
+    let steps = [(0.34, -0.135), (2.5, 0.177), (3.47, -0.076), (5.08, -0.14), (7.13, -0.024)];
+    let motor =
+        time.iter().map(|&t| steps.iter().map(|(at, by)| 0.5 * by * (1.0 + ((t - at) / 0.05).tanh())).sum()).collect();
+    SimInput {
+        motor,
+        housing_k: vec![295.15; time.len()],
+        time,
+        frequency_hz: 0.2,
+        link_inertia: Some(0.0475),
+        link0: 0.0,
+        com_distance: 0.14,
+        initial_link_speed: 0.0,
+        after_gap: false,
+        housing_before: Default::default(),
+    }
+}
+
 /// A link held by its friction between the motor's steps (CI rig 3's shape without its coarse
 /// encoder: J = 0.0475 kg·m², K = 82 N·m/rad, a 1.65 N·m Coulomb friction and a 0.23 N·m·s/rad link
 /// damping, five smoothed steps in 7.4 s at 500 Hz, 0.3 mrad of noise): the equation error's rows
@@ -197,23 +261,7 @@ fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
     use thermovia_tools::calibrate::search::equation_error_subsets;
     use thermovia_tools::calibrate::synthetic::SplitMix;
     let sim = Simulator::new(common::fmu(), 2).unwrap();
-    let rate = 500.0;
-    let time: Vec<f64> = (0..=(rate * 7.4) as usize).map(|k| k as f64 / rate).collect();
-    let steps = [(0.34, -0.135), (2.5, 0.177), (3.47, -0.076), (5.08, -0.14), (7.13, -0.024)];
-    let motor =
-        time.iter().map(|&t| steps.iter().map(|(at, by)| 0.5 * by * (1.0 + ((t - at) / 0.05).tanh())).sum()).collect();
-    let input = SimInput {
-        motor,
-        housing_k: vec![295.15; time.len()],
-        time,
-        frequency_hz: 0.2,
-        link_inertia: Some(0.0475),
-        link0: 0.0,
-        com_distance: 0.14,
-        initial_link_speed: 0.0,
-        after_gap: false,
-        housing_before: Default::default(),
-    };
+    let input = held_steps_input();
     let spec = ModelSpec {
         effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
         law: DampingLaw::Viscous,

@@ -75,7 +75,9 @@ pub struct Signatures {
     /// yet the reading is off by up to q/2 (campaign rigs 7 and 18, steps with noise ≪ q: 0.78 and
     /// 0.52 of q/√12).
     pub noise_floor: f64,
-    /// RMS of the 25-sample moving average of e over σ̂/√25 (≈ 1 for white noise).
+    /// RMS of the 25-sample moving average of e over what a right model's residual leaves there
+    /// (≈ 1 for one): white noise's σ̂/√25, or through a count the noise does not dither, the
+    /// count's error on the model's angle (`LinkCount::right_model_error`) where that is more.
     pub structure_ratio: f64,
     pub autocorrelation: Vec<(usize, f64)>,
     pub corr_sign_link_speed: f64,
@@ -156,65 +158,118 @@ impl HarmonicWindow {
     }
 }
 
+/// A run's link encoder as a reading of the model's angle: its count `q` on its `grid` (a reading
+/// is grid + q·n) and the sensor's noise `sigma` under the count, chosen so that the model's angle
+/// with that noise added, read to the counts, has the measured column's cubic-residual noise (noise
+/// dithers the count and takes the period out of its error; none where the count alone reads as
+/// noisy as the column). Measured once per problem, against the first model judged
+/// (`Problem::link_counts`): the noise under a count hardly depends on the model's angle.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LinkCount {
+    pub q: f64,
+    pub grid: f64,
+    pub sigma: f64,
+}
+
+impl LinkCount {
+    /// None for a column that is not quantised.
+    pub fn of(time: &[f64], measured: &[f64], model: &[f64], seed: u64) -> Option<LinkCount> {
+        let q = super::signal::quantum(measured);
+        if q == 0.0 || measured.len() != model.len() || time.len() != model.len() || time.len() < 5 {
+            return None;
+        }
+        let grid = measured[0] - q * (measured[0] / q).round();
+        let draws = normal_draws(model.len(), seed);
+        let cubic_noise = |x: &[f64]| {
+            let (sum, n) = super::signal::cubic_residuals(time, x).fold((0.0, 0usize), |(s, n), r| (s + r * r, n + 1));
+            (sum / n.max(1) as f64).sqrt()
+        };
+        let target = cubic_noise(measured);
+        let at = |sigma: f64| LinkCount { q, grid, sigma };
+        // bisection on σ (the reading's cubic-residual noise grows with it)
+        let sigma = if cubic_noise(&at(0.0).reading(model, &draws)) >= target {
+            0.0
+        } else {
+            let (mut lo, mut hi) = (0.0, 2.0 * target.max(q));
+            for _ in 0..16 {
+                let mid = 0.5 * (lo + hi);
+                if cubic_noise(&at(mid).reading(model, &draws)) < target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            0.5 * (lo + hi)
+        };
+        Some(at(sigma))
+    }
+
+    /// `model` with the sensor's noise (`draws` of a standard normal) added, read to the counts.
+    fn reading(&self, model: &[f64], draws: &[f64]) -> Vec<f64> {
+        let read = |x: f64| self.grid + self.q * ((x - self.grid) / self.q).round();
+        model.iter().zip(draws).map(|(m, z)| read(m + self.sigma * z)).collect()
+    }
+
+    /// What the residual of a model that is right would hold: `model` read through this encoder
+    /// (its noise drawn from `seed`), less `model`.
+    pub fn right_model_error(&self, model: &[f64], seed: u64) -> Vec<f64> {
+        self.reading(model, &normal_draws(model.len(), seed)).iter().zip(model).map(|(a, m)| a - m).collect()
+    }
+
+    /// Whether the sensor's noise dithers the count (σ ≥ q/√12, as `signal`'s band limit reads it):
+    /// its error is then near white; below, a link held still dwells on one count, an error that
+    /// stays while the link does.
+    pub fn dithered(&self) -> bool {
+        self.sigma >= self.q / 12f64.sqrt()
+    }
+}
+
+fn normal_draws(n: usize, seed: u64) -> Vec<f64> {
+    let mut rng = super::synthetic::SplitMix::new(seed);
+    (0..n).map(|_| rng.normal()).collect()
+}
+
+/// The seed of run `r`'s simulated sensor noise (`LinkCount`), the same in every call.
+pub(crate) fn count_seed(r: usize) -> u64 {
+    0x9E37_79B9_7F4A_7C15 ^ (r as u64 + 1)
+}
+
 /// What a perfect model leaves at 2ω, 3ω or 5ω through each run's link encoder (the largest of
 /// the three, rad; 0 for a column that is not quantised). A count's error on a periodic angle is
 /// itself periodic and lands on the harmonics, where white noise would spread: rig 267 (the truth's
 /// effects within 1 %, 1.02× its floor) left 24× what white noise at its floor leaves there, and
-/// rig 297 41× (docs/calibration.md). The model's link angle with the sensor's noise under the
-/// count added (σ such that the reading's cubic-residual noise is the measured column's: noise
-/// dithers the count and takes the period out of its error), read to the column's counts on its
-/// grid, less the model's angle: what the residual of a model that is right would hold. Read on
-/// the sinusoidal runs only, as the harmonic test is (0 for the others).
+/// rig 297 41× (docs/calibration.md). Read through `LinkCount::right_model_error` on the sinusoidal
+/// runs only, as the harmonic test is (0 for the others).
 pub fn count_overtones(prob: &Problem, fit: &Fit) -> Vec<f64> {
     let sinusoidal = prob.sinusoidal();
+    let counts = prob.link_counts(&fit.outputs);
     (0..prob.inputs.len())
-        .map(|r| {
-            if !sinusoidal.get(r).copied().unwrap_or(false) {
-                return 0.0;
+        .map(|r| match (sinusoidal.get(r), counts.get(r), fit.outputs.get(r)) {
+            (Some(true), Some(Some(count)), Some(model)) => {
+                let inp = &prob.inputs[r];
+                let error = count.right_model_error(model, count_seed(r));
+                HarmonicWindow::of(&inp.time, inp.frequency_hz).largest_overtone(&inp.time, &error)
             }
-            let inp = &prob.inputs[r];
-            let seed = 0x9E37_79B9_7F4A_7C15 ^ (r as u64 + 1);
-            fit.outputs
-                .get(r)
-                .map_or(0.0, |model| count_overtone(&inp.time, &prob.measured[r], model, inp.frequency_hz, seed))
+            _ => 0.0,
         })
         .collect()
 }
 
-/// [`count_overtones`] for one run: `measured` the link column, `model` the model's link angle.
-fn count_overtone(time: &[f64], measured: &[f64], model: &[f64], frequency_hz: f64, seed: u64) -> f64 {
-    let q = super::signal::quantum(measured);
-    if q == 0.0 || measured.len() != model.len() || time.len() != model.len() || time.len() < 5 {
-        return 0.0;
-    }
-    let grid = measured[0] - q * (measured[0] / q).round();
-    let read = |x: f64| grid + q * ((x - grid) / q).round();
-    let mut rng = super::synthetic::SplitMix::new(seed);
-    let draws: Vec<f64> = (0..model.len()).map(|_| rng.normal()).collect();
-    let reading = |sigma: f64| -> Vec<f64> { model.iter().zip(&draws).map(|(m, z)| read(m + sigma * z)).collect() };
-    let cubic_noise = |x: &[f64]| {
-        let (sum, n) = super::signal::cubic_residuals(time, x).fold((0.0, 0usize), |(s, n), r| (s + r * r, n + 1));
-        (sum / n.max(1) as f64).sqrt()
-    };
-    let target = cubic_noise(measured);
-    // bisection on σ (the reading's cubic-residual noise grows with it); none where the count
-    // alone reads as noisy as the column
-    let sigma = if cubic_noise(&reading(0.0)) >= target {
-        0.0
-    } else {
-        let (mut lo, mut hi) = (0.0, 2.0 * target.max(q));
-        for _ in 0..16 {
-            let mid = 0.5 * (lo + hi);
-            if cubic_noise(&reading(mid)) < target {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
+/// The sum of squares of `e`'s `w`-sample moving average over every full window, and the windows'
+/// count.
+fn smoothed_squares(e: &[f64], w: usize) -> (f64, f64) {
+    let (mut acc, mut sum, mut count) = (0.0, 0.0, 0.0);
+    for k in 0..e.len() {
+        acc += e[k];
+        if k >= w {
+            acc -= e[k - w];
         }
-        0.5 * (lo + hi)
-    };
-    let error: Vec<f64> = reading(sigma).iter().zip(model).map(|(a, m)| a - m).collect();
-    HarmonicWindow::of(time, frequency_hz).largest_overtone(time, &error)
+        if k + 1 >= w {
+            sum += (acc / w as f64).powi(2);
+            count += 1.0;
+        }
+    }
+    (sum, count)
 }
 
 /// Pearson correlation of two equally long series (0 when either is constant).
@@ -258,6 +313,10 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     let mut smooth_sq = 0.0;
     let mut smooth_n = 0.0f64;
     let mut acf: Vec<(usize, f64, f64)> = [1usize, 2, 5, 10, 50].iter().map(|&l| (l, 0.0, 0.0)).collect();
+    let counts = prob.link_counts(&fit.outputs);
+    // per run: its windows and, through a count the noise does not dither, the smoothed squares a
+    // right model's residual would leave
+    let mut dwell: Vec<(f64, Option<f64>)> = Vec::new();
     for (r, inp) in prob.inputs.iter().enumerate() {
         let y = &prob.measured[r];
         let n = y.len();
@@ -278,18 +337,16 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
             dead.push(sign_of_slope(&inp.motor, k, 5));
             time.push((t[k] - t[0]) / span);
         }
-        let mut acc = 0.0;
-        let w = STRUCTURE_WINDOW;
-        for k in 0..n {
-            acc += e[k];
-            if k >= w {
-                acc -= e[k - w];
-            }
-            if k + 1 >= w {
-                smooth_sq += (acc / w as f64).powi(2);
-                smooth_n += 1.0;
-            }
-        }
+        let (sq, windows) = smoothed_squares(e, STRUCTURE_WINDOW);
+        smooth_sq += sq;
+        smooth_n += windows;
+        // what a right model's residual leaves through a count the noise does not dither (None:
+        // white noise's share, below)
+        let count = counts.get(r).copied().flatten().filter(|c| !c.dithered());
+        dwell.push((
+            windows,
+            count.map(|c| smoothed_squares(&c.right_model_error(model, count_seed(r)), STRUCTURE_WINDOW).0),
+        ));
         let var: f64 = e.iter().map(|x| x * x).sum::<f64>();
         for (lag, num, den) in acf.iter_mut() {
             if *lag < n {
@@ -341,10 +398,18 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
     let white_noise = (noise_num / noise_den.max(1.0)).sqrt();
     let noise_floor = white_noise.max(super::signal::pooled_quantisation_floor(prob.measured.iter().map(|y| &y[..])));
     let smooth_rms = (smooth_sq / smooth_n.max(1.0)).sqrt();
+    // A right model's smoothed residual: white noise's, or where a count dwells while the link
+    // holds still, what that count leaves (a constant error per hold, up to q/2, which the moving
+    // average keeps whole). CI rig 3 (steps, 1 700 counts a turn under 2.9e-4 rad of noise) read
+    // 4.1× white noise with the truth's friction and damping in, and took a Maxwell branch for it.
+    let white_sq = white_noise.powi(2) / STRUCTURE_WINDOW as f64;
+    let expected_sq =
+        dwell.iter().map(|&(windows, sq)| sq.map_or(windows * white_sq, |sq| sq.max(windows * white_sq))).sum::<f64>();
+    let expected_rms = (expected_sq / smooth_n.max(1.0)).sqrt();
     Signatures {
         rmse: fit.rmse(),
         noise_floor,
-        structure_ratio: smooth_rms / (white_noise / (STRUCTURE_WINDOW as f64).sqrt()),
+        structure_ratio: smooth_rms / expected_rms,
         autocorrelation: acf.into_iter().map(|(l, a, b)| (l, if b > 0.0 { a / b } else { 0.0 })).collect(),
         corr_sign_link_speed: corr(&all_e, &speed),
         corr_sin_link_angle: corr(&all_e, &sinl),
@@ -561,6 +626,13 @@ mod tests {
     use super::*;
     use crate::calibrate::synthetic::SplitMix;
     use std::f64::consts::PI;
+
+    /// `count_overtones` for one run: its link encoder found against `model` and its error on it.
+    fn count_overtone(time: &[f64], measured: &[f64], model: &[f64], frequency_hz: f64, seed: u64) -> f64 {
+        LinkCount::of(time, measured, model, seed).map_or(0.0, |c| {
+            HarmonicWindow::of(time, frequency_hz).largest_overtone(time, &c.right_model_error(model, seed))
+        })
+    }
 
     /// A 0.5 Hz sine read at 1 kHz by a 2 000-count encoder with 2e-5 rad of noise under the count:
     /// the count's error on the true angle lands on the harmonics, far above what white noise at

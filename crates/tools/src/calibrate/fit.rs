@@ -347,6 +347,8 @@ pub struct Problem<'a> {
     sinusoidal: std::sync::OnceLock<Vec<bool>>,
     /// Each sinusoidal run's (K, C) from its frequency response when physical, computed once.
     responses: std::sync::OnceLock<Vec<Option<(f64, f64)>>>,
+    /// Each run's link encoder (`diagnose::LinkCount`), measured once.
+    link_counts: std::sync::OnceLock<Vec<Option<super::diagnose::LinkCount>>>,
 }
 
 /// Parameter vector: [ln K_g, ln C_g for each temperature group] (the transmission's stiffness,
@@ -492,6 +494,7 @@ impl<'a> Problem<'a> {
             torque_scale: std::sync::OnceLock::new(),
             sinusoidal: sinusoidal.into(),
             responses: std::sync::OnceLock::new(),
+            link_counts: std::sync::OnceLock::new(),
         })
     }
 
@@ -509,6 +512,7 @@ impl<'a> Problem<'a> {
             torque_scale: std::sync::OnceLock::new(),
             sinusoidal: std::sync::OnceLock::new(),
             responses: std::sync::OnceLock::new(),
+            link_counts: std::sync::OnceLock::new(),
         }
     }
 
@@ -959,6 +963,24 @@ impl<'a> Problem<'a> {
                     let period = super::quality::median_period(&inp.time);
                     let rest = 3.0 * noise * super::signal::smoothed_speed_gain(half) / period;
                     (link, smooth(&inp.time, &inp.motor, half), half, rest)
+                })
+                .collect()
+        })
+    }
+
+    /// Each run's link encoder (`diagnose::LinkCount`; None where the column is not quantised),
+    /// measured against `outputs`, the model's link angles, on the first call only.
+    pub fn link_counts(&self, outputs: &[Vec<f64>]) -> &[Option<super::diagnose::LinkCount>] {
+        self.link_counts.get_or_init(|| {
+            (0..self.inputs.len())
+                .map(|r| {
+                    let model = outputs.get(r)?;
+                    super::diagnose::LinkCount::of(
+                        &self.inputs[r].time,
+                        &self.measured[r],
+                        model,
+                        super::diagnose::count_seed(r),
+                    )
                 })
                 .collect()
         })
