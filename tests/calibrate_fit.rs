@@ -194,17 +194,7 @@ fn a_coarse_count_held_still_is_not_structure() {
     use thermovia_tools::calibrate::fit::Fit;
     use thermovia_tools::calibrate::synthetic::SplitMix;
     let sim = Simulator::new(common::fmu(), 2).unwrap();
-    let input = held_steps_input();
-    let spec = ModelSpec {
-        effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
-    let truth = vec![82.0f64.ln(), 0.67f64.ln(), 1.65, 0.23];
-    let n = input.time.len();
-    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
-    let mut measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let (input, spec, truth, mut measured) = held_steps(&sim);
     let q = 2.0 * std::f64::consts::PI / 1700.0;
     let mut rng = SplitMix::new(3);
     measured[0].iter_mut().for_each(|y| *y = q * ((*y + 2.9e-4 * rng.normal()) / q).round());
@@ -224,6 +214,23 @@ fn a_coarse_count_held_still_is_not_structure() {
         right.rmse,
         short.rmse
     );
+}
+
+/// Rig 3's steps (`held_steps_input`) through its truth's Coulomb friction (1.65 N·m) and link
+/// damping (0.23 N·m·s/rad) at K = 82 N·m/rad, C = 0.67 N·m·s/rad: the input, the truth's structure
+/// and parameters, and its link angle without noise.
+fn held_steps(sim: &Simulator) -> (SimInput, ModelSpec, Vec<f64>, Vec<Vec<f64>>) {
+    let input = held_steps_input();
+    let spec = ModelSpec {
+        effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
+        law: DampingLaw::Viscous,
+        springs: SpringBank::Scaled,
+        elasto_backlash: false,
+    };
+    let truth = vec![82.0f64.ln(), 0.67f64.ln(), 1.65, 0.23];
+    let blank = Problem::new(sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
+    let measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    (input, spec, truth, measured)
 }
 
 /// Rig 3's motor steps at 500 Hz for 7.4 s, on its 0.0475 kg·m² link at 22 °C.
@@ -261,17 +268,7 @@ fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
     use thermovia_tools::calibrate::search::equation_error_subsets;
     use thermovia_tools::calibrate::synthetic::SplitMix;
     let sim = Simulator::new(common::fmu(), 2).unwrap();
-    let input = held_steps_input();
-    let spec = ModelSpec {
-        effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
-    let truth = vec![82.0f64.ln(), 0.67f64.ln(), 1.65, 0.23];
-    let n = input.time.len();
-    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
-    let mut measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let (input, spec, _, mut measured) = held_steps(&sim);
     let mut rng = SplitMix::new(3);
     measured[0].iter_mut().for_each(|y| *y += 2.9e-4 * rng.normal());
     let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
