@@ -180,10 +180,8 @@ impl LinkCount {
         }
         let grid = measured[0] - q * (measured[0] / q).round();
         let draws = normal_draws(model.len(), seed);
-        let cubic_noise = |x: &[f64]| {
-            let (sum, n) = super::signal::cubic_residuals(time, x).fold((0.0, 0usize), |(s, n), r| (s + r * r, n + 1));
-            (sum / n.max(1) as f64).sqrt()
-        };
+        // at least 5 samples: the cubic residuals are never empty, so this is their rms
+        let cubic_noise = |x: &[f64]| super::signal::cubic_noise(time, x);
         let target = cubic_noise(measured);
         let at = |sigma: f64| LinkCount { q, grid, sigma };
         // bisection on σ (the reading's cubic-residual noise grows with it)
