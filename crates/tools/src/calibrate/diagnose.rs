@@ -164,11 +164,15 @@ impl HarmonicWindow {
 /// dithers the count and takes the period out of its error; none where the count alone reads as
 /// noisy as the column). Measured once per problem, against the first model judged
 /// (`Problem::link_counts`): the noise under a count hardly depends on the model's angle.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct LinkCount {
     pub q: f64,
     pub grid: f64,
     pub sigma: f64,
+    /// The standard normal draws of the sensor's noise, one per sample, from `seed`: drawn once,
+    /// read by every whiteness test of the problem (a draw costs a log, a root and a cosine).
+    draws: Vec<f64>,
+    seed: u64,
 }
 
 impl LinkCount {
@@ -183,7 +187,7 @@ impl LinkCount {
         // at least 5 samples: the cubic residuals are never empty, so this is their rms
         let cubic_noise = |x: &[f64]| super::signal::cubic_noise(time, x);
         let target = cubic_noise(measured);
-        let at = |sigma: f64| LinkCount { q, grid, sigma };
+        let at = |sigma: f64| LinkCount { q, grid, sigma, draws: Vec::new(), seed };
         // bisection on σ (the reading's cubic-residual noise grows with it)
         let sigma = if cubic_noise(&at(0.0).reading(model, &draws)) >= target {
             0.0
@@ -199,7 +203,7 @@ impl LinkCount {
             }
             0.5 * (lo + hi)
         };
-        Some(at(sigma))
+        Some(LinkCount { draws, ..at(sigma) })
     }
 
     /// `model` with the sensor's noise (`draws` of a standard normal) added, read to the counts.
@@ -209,9 +213,17 @@ impl LinkCount {
     }
 
     /// What the residual of a model that is right would hold: `model` read through this encoder
-    /// (its noise drawn from `seed`), less `model`.
-    pub fn right_model_error(&self, model: &[f64], seed: u64) -> Vec<f64> {
-        self.reading(model, &normal_draws(model.len(), seed)).iter().zip(model).map(|(a, m)| a - m).collect()
+    /// (its noise the draws it was measured with, or as many from the same seed for a model of
+    /// another length), less `model`.
+    pub fn right_model_error(&self, model: &[f64]) -> Vec<f64> {
+        let redrawn;
+        let draws = if model.len() == self.draws.len() {
+            &self.draws
+        } else {
+            redrawn = normal_draws(model.len(), self.seed);
+            &redrawn
+        };
+        self.reading(model, draws).iter().zip(model).map(|(a, m)| a - m).collect()
     }
 
     /// Whether the sensor's noise dithers the count (σ ≥ q/√12, as `signal`'s band limit reads it):
@@ -245,7 +257,7 @@ pub fn count_overtones(prob: &Problem, fit: &Fit) -> Vec<f64> {
         .map(|r| match (sinusoidal.get(r), counts.get(r), fit.outputs.get(r)) {
             (Some(true), Some(Some(count)), Some(model)) => {
                 let inp = &prob.inputs[r];
-                let error = count.right_model_error(model, count_seed(r));
+                let error = count.right_model_error(model);
                 HarmonicWindow::of(&inp.time, inp.frequency_hz).largest_overtone(&inp.time, &error)
             }
             _ => 0.0,
@@ -340,11 +352,8 @@ pub fn signatures(prob: &Problem, fit: &Fit) -> Signatures {
         smooth_n += windows;
         // what a right model's residual leaves through a count the noise does not dither (None:
         // white noise's share, below)
-        let count = counts.get(r).copied().flatten().filter(|c| !c.dithered());
-        dwell.push((
-            windows,
-            count.map(|c| smoothed_squares(&c.right_model_error(model, count_seed(r)), STRUCTURE_WINDOW).0),
-        ));
+        let count = counts.get(r).and_then(Option::as_ref).filter(|c| !c.dithered());
+        dwell.push((windows, count.map(|c| smoothed_squares(&c.right_model_error(model), STRUCTURE_WINDOW).0)));
         let var: f64 = e.iter().map(|x| x * x).sum::<f64>();
         for (lag, num, den) in acf.iter_mut() {
             if *lag < n {
@@ -627,9 +636,8 @@ mod tests {
 
     /// `count_overtones` for one run: its link encoder found against `model` and its error on it.
     fn count_overtone(time: &[f64], measured: &[f64], model: &[f64], frequency_hz: f64, seed: u64) -> f64 {
-        LinkCount::of(time, measured, model, seed).map_or(0.0, |c| {
-            HarmonicWindow::of(time, frequency_hz).largest_overtone(time, &c.right_model_error(model, seed))
-        })
+        LinkCount::of(time, measured, model, seed)
+            .map_or(0.0, |c| HarmonicWindow::of(time, frequency_hz).largest_overtone(time, &c.right_model_error(model)))
     }
 
     /// A 0.5 Hz sine read at 1 kHz by a 2 000-count encoder with 2e-5 rad of noise under the count:
