@@ -1194,8 +1194,26 @@ impl Fit {
         let n = self.n as f64;
         n * (self.sse / n).ln() + self.p.len() as f64 * n.ln()
     }
+    /// The standard error of parameter j; NaN (null in the report) for a fit without a covariance:
+    /// one only evaluated, where the budget ran out before a refit (fresh campaign rig 501 panicked
+    /// writing its report).
     pub fn std_err(&self, j: usize) -> f64 {
-        self.covariance[(j, j)].max(0.0).sqrt()
+        standard_deviation(self.covariance_at(j, j))
+    }
+
+    /// The covariance of parameters i and j; NaN where the fit has none.
+    pub fn covariance_at(&self, i: usize, j: usize) -> f64 {
+        self.covariance.get((i, j)).copied().unwrap_or(f64::NAN)
+    }
+}
+
+/// √variance, a rounding's negative variance read as 0; NaN (unknown) stays NaN, where `f64::max`
+/// would turn it into 0.
+pub fn standard_deviation(variance: f64) -> f64 {
+    if variance.is_nan() {
+        variance
+    } else {
+        variance.max(0.0).sqrt()
     }
 }
 

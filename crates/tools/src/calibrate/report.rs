@@ -6,7 +6,7 @@ use serde_json::{json, Map, Value};
 
 use super::data::Run;
 use super::diagnose::Signatures;
-use super::fit::{Effect, Fit, Problem};
+use super::fit::{standard_deviation, Effect, Fit, Problem};
 use super::quality::short;
 use super::search::Outcome;
 use crate::report::plot::{
@@ -52,7 +52,7 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
         .find(|(_, e)| *e == effect)
         .expect("effect in the fit");
     let v = &fit.p[o..];
-    let c = |i: usize, j: usize| fit.covariance[(o + i, o + j)];
+    let c = |i: usize, j: usize| fit.covariance_at(o + i, o + j);
     match effect {
         Effect::CoulombFriction => vec![("torque_nm", v[0], c(0, 0).sqrt())],
         Effect::Backlash => vec![("width_rad", v[0], c(0, 0).sqrt())],
@@ -65,7 +65,7 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
             let gm = [a / m, b / m];
             let go = [-b / (m * m), a / (m * m)];
             let var = |g: [f64; 2]| g[0] * g[0] * c(0, 0) + 2.0 * g[0] * g[1] * c(0, 1) + g[1] * g[1] * c(1, 1);
-            vec![("mgl_nm", m, var(gm).max(0.0).sqrt()), ("offset_rad", b.atan2(a), var(go).max(0.0).sqrt())]
+            vec![("mgl_nm", m, standard_deviation(var(gm))), ("offset_rad", b.atan2(a), standard_deviation(var(go)))]
         }
         Effect::FrequencyDependentModulus => {
             let lam = v[1].exp();
@@ -88,9 +88,9 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
             };
             let combo = |sym: Option<usize>, asym: usize, sign: f64| {
                 let value = sym.map_or(0.0, |i| fit.p[i]) + sign * fit.p[asym];
-                let var = fit.covariance[(asym, asym)]
-                    + sym.map_or(0.0, |i| fit.covariance[(i, i)] + 2.0 * sign * fit.covariance[(i, asym)]);
-                (value, var.max(0.0).sqrt())
+                let var = fit.covariance_at(asym, asym)
+                    + sym.map_or(0.0, |i| fit.covariance_at(i, i) + 2.0 * sign * fit.covariance_at(i, asym));
+                (value, standard_deviation(var))
             };
             let (cp, cn) =
                 (combo(level(Effect::CoulombFriction), o, 1.0), combo(level(Effect::CoulombFriction), o, -1.0));
@@ -1062,6 +1062,46 @@ fn truth_markdown(t: &Value) -> String {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_fit_only_evaluated_reports_unknown_errors_not_a_panic() {
+        // fresh campaign rig 501: the budget ran out before the final model's refit, so it had no
+        // covariance, and reading one panicked while the report was written
+        use super::super::fit::{DampingLaw, Effect, Fit, ModelSpec, SpringBank};
+        use nalgebra::DMatrix;
+        let effects = vec![Effect::CoulombFriction, Effect::Gravity, Effect::AsymmetricFriction];
+        let fit = |covariance: DMatrix<f64>| Fit {
+            spec: ModelSpec {
+                effects: effects.clone(),
+                law: DampingLaw::Viscous,
+                springs: SpringBank::Scaled,
+                elasto_backlash: false,
+            },
+            p: vec![3.5, -1.0, 0.4, 0.2, -0.1, 0.05, 0.01],
+            outputs: vec![],
+            residual: vec![],
+            sse: 1e-4,
+            n: 100,
+            jacobian: DMatrix::zeros(0, 0),
+            covariance,
+            iterations: 0,
+        };
+        let evaluated = fit(DMatrix::zeros(0, 0));
+        assert!(evaluated.std_err(0).is_nan());
+        for e in &effects {
+            for (name, value, error) in super::effect_parameters(&evaluated, *e) {
+                assert!(value.is_finite() && error.is_nan(), "{e:?} {name}: {value} ± {error}");
+            }
+        }
+        // with a covariance the errors are read from it
+        let fitted = fit(DMatrix::from_diagonal_element(7, 7, 4e-6));
+        assert_eq!(fitted.std_err(2), 2e-3);
+        for e in &effects {
+            for (name, _, error) in super::effect_parameters(&fitted, *e) {
+                assert!(error.is_finite() && error > 0.0, "{e:?} {name}: ± {error}");
+            }
+        }
+    }
+
     #[test]
     fn a_scanned_backlash_width_is_named_in_the_report() {
         let law = |scan: Value| json!({"backlash_law": {"chosen": "clipped", "compared": [], "rule": "", "width_scan": scan}});
