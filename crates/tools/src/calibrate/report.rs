@@ -388,7 +388,11 @@ fn plausible(prob: &Problem, fit: &Fit, e: Effect) -> Vec<(&'static str, f64, f6
 }
 
 fn fmt_params(fit: &Fit, e: Effect) -> String {
-    effect_parameters(fit, e).iter().map(|(n, v, s)| format!("{n} = {v:.4} ± {s:.2e}")).collect::<Vec<_>>().join(", ")
+    effect_parameters(fit, e)
+        .iter()
+        .map(|(n, v, s)| format!("{n} = {v:.4} {}", plus_minus(*s)))
+        .collect::<Vec<_>>()
+        .join(", ")
 }
 
 pub fn report_markdown(j: &Value, o: &Outcome) -> String {
@@ -428,16 +432,8 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
             v["final"]["relerr_percent"].as_f64().unwrap_or(f64::NAN)
         );
     }
-    if let Some(h) = j["held_out"].as_object() {
-        s += &format!(
-            "\n**Held-out error** ({}): baseline {:.3e} rad → final {:.3e} rad. An effect stays only if it lowers it.\n",
-            h["method"].as_str().unwrap_or(""),
-            h["baseline_rmse_rad"].as_f64().unwrap_or(f64::NAN),
-            h["final_rmse_rad"].as_f64().unwrap_or(f64::NAN)
-        );
-        for n in h["notes"].as_array().into_iter().flatten() {
-            s += &format!("- {}\n", n.as_str().unwrap_or_default());
-        }
+    if j["held_out"].is_object() {
+        s += &held_out_markdown(&j["held_out"]);
     }
     s += "\n## Chain of evidence\n\n";
     s += &super::stepwise::record_markdown(
@@ -503,6 +499,32 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
     s
 }
 
+/// The held-out fold's errors, "not measured" where the budget left the fold out (null).
+fn held_out_markdown(h: &Value) -> String {
+    let rad =
+        |v: &Value| v.as_f64().filter(|x| x.is_finite()).map_or("not measured".into(), |x| format!("{x:.3e} rad"));
+    let mut s = format!(
+        "\n**Held-out error** ({}): baseline {} → final {}. An effect stays only if it lowers it.\n",
+        h["method"].as_str().unwrap_or(""),
+        rad(&h["baseline_rmse_rad"]),
+        rad(&h["final_rmse_rad"])
+    );
+    for n in h["notes"].as_array().into_iter().flatten() {
+        s += &format!("- {}\n", n.as_str().unwrap_or_default());
+    }
+    s
+}
+
+/// "± σ" for a standard error, "± unknown" where the fit has none (a model the budget left without
+/// its covariance: `Fit::covariance_at`).
+fn plus_minus(std: f64) -> String {
+    if std.is_finite() {
+        format!("± {std:.2e}")
+    } else {
+        "± unknown".into()
+    }
+}
+
 /// The `identified` table (the paper's quantities) and the damping law's evidence.
 fn identified_markdown(j: &Value) -> String {
     let mut s = String::from(
@@ -512,12 +534,12 @@ fn identified_markdown(j: &Value) -> String {
     let f = |g: &Value, k: &str| g[k].as_f64().unwrap_or(f64::NAN);
     for g in j["identified"].as_array().into_iter().flatten() {
         s += &format!(
-            "| {} | {:.4} ± {:.2e} | {:.4e} ± {:.2e} | {:.4e}{} | {:.3} | {:.4} | {:.3e} |\n",
+            "| {} | {:.4} {} | {:.4e} {} | {:.4e}{} | {:.3} | {:.4} | {:.3e} |\n",
             g["temperature_c"],
             f(g, "stiffness"),
-            f(g, "stiffness_std"),
+            plus_minus(f(g, "stiffness_std")),
             f(g, "damping"),
-            f(g, "damping_std"),
+            plus_minus(f(g, "damping_std")),
             f(g, "inertia"),
             if g["inertia_declared"].as_bool() == Some(true) { "" } else { " (default, not declared)" },
             f(g, "natural_frequency_hz"),
@@ -1091,6 +1113,9 @@ mod tests {
             for (name, value, error) in super::effect_parameters(&evaluated, *e) {
                 assert!(value.is_finite() && error.is_nan(), "{e:?} {name}: {value} ± {error}");
             }
+            // report.md says so in words, not "± NaN"
+            let text = super::fmt_params(&evaluated, *e);
+            assert!(text.contains("± unknown") && !text.contains("NaN"), "{text}");
         }
         // with a covariance the errors are read from it
         let fitted = fit(DMatrix::from_diagonal_element(7, 7, 4e-6));
@@ -1100,6 +1125,16 @@ mod tests {
                 assert!(error.is_finite() && error > 0.0, "{e:?} {name}: ± {error}");
             }
         }
+    }
+
+    #[test]
+    fn a_fold_the_budget_left_out_reads_not_measured() {
+        let md = super::held_out_markdown(&json!({"method": "a blocked fold", "baseline_rmse_rad": null,
+            "final_rmse_rad": null, "notes": ["the held-out fold was left out"]}));
+        assert!(md.contains("baseline not measured → final not measured") && !md.contains("NaN"), "{md}");
+        let md = super::held_out_markdown(&json!({"method": "a blocked fold", "baseline_rmse_rad": 2e-3,
+            "final_rmse_rad": 1e-3}));
+        assert!(md.contains("baseline 2.000e-3 rad → final 1.000e-3 rad"), "{md}");
     }
 
     #[test]
