@@ -10,7 +10,8 @@ use super::fit::{standard_deviation, Effect, Fit, Problem};
 use super::quality::short;
 use super::search::Outcome;
 use crate::report::plot::{
-    chart_svg, draw, figure, log_axis, log_range, panel, thin, Axes, Dash, Marker, Series, Style, BLUE_, GREY_, RED_,
+    chart_svg, draw, figure, log_axis, log_range, panel, thin, Axes, Dash, Marker, Series, Style, BLACK_, BLUE_, GREY_,
+    RED_,
 };
 
 /// Error metrics of a fit over every sample used.
@@ -587,51 +588,90 @@ fn identified_markdown(j: &Value) -> String {
 }
 
 /// The paper's quantities against temperature (report.json `identified` and `identified_baseline`):
-/// stiffness and damping on log axes, the final fit with ±2σ bars, the baseline beside it.
+/// stiffness and damping on log axes, the final fit with ±2σ bars, the baseline beside it. A value
+/// at its fit bound (`stiffness_range`, `damping_range`) is a limit, not an estimate: it is drawn
+/// as a cross, and kept out of the axis's range (at the axis's edge where it would be off it), so
+/// that a limp baseline at 1e-2 N·m/rad does not squash the estimates into a corner.
 pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> {
-    let points = |key: &str, what: &str| -> Vec<(f64, f64, f64)> {
+    struct Point {
+        t: f64,
+        v: f64,
+        std: f64,
+        at_bound: bool,
+    }
+    let points = |key: &str, what: &str| -> Vec<Point> {
         j[key]
             .as_array()
             .into_iter()
             .flatten()
             .map(|g| {
                 let f = |k: &str| g[k].as_f64().unwrap_or(f64::NAN);
-                (f("temperature_c"), f(what), f(&format!("{what}_std")))
+                let v = f(what);
+                let range = &g[format!("{what}_range")];
+                let at_bound = [&range[0], &range[1]]
+                    .iter()
+                    .filter_map(|b| b.as_f64())
+                    .any(|b| b > 0.0 && (v / b).ln().abs() <= 1e-6);
+                Point { t: f("temperature_c"), v, std: f(&format!("{what}_std")), at_bound }
             })
-            .filter(|p| p.0.is_finite() && p.1 > 0.0)
+            .filter(|p| p.t.is_finite() && p.v > 0.0)
             .collect()
     };
     // the bar's lower end on a log axis: 2σ below, but never at or below zero
-    let low = |p: &(f64, f64, f64)| (p.1 - 2.0 * p.2).max(p.1 / 10.0);
-    let high = |p: &(f64, f64, f64)| p.1 + 2.0 * p.2.max(0.0);
+    let low = |p: &Point| (p.v - 2.0 * p.std).max(p.v / 10.0);
+    let high = |p: &Point| p.v + 2.0 * p.std.max(0.0);
     let baseline_style = Style::points(RED_, Marker::Square).hollow();
     let final_style = Style::points(BLUE_, Marker::Circle);
+    let bound_style = |color| Style::points(color, Marker::Cross);
+    let any_bound = ["identified", "identified_baseline"]
+        .iter()
+        .any(|key| ["stiffness", "damping"].iter().any(|what| points(key, what).iter().any(|p| p.at_bound)));
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1100, 480)).into_drawing_area();
-        let legend = [
+        let mut legend = vec![
             ("final fit (± 2σ bars where wider than the marker)".to_string(), final_style),
             ("baseline".to_string(), baseline_style),
         ];
+        if any_bound {
+            legend.push((
+                "at a fit bound: a limit, not an estimate (at the axis's edge if off it)".into(),
+                bound_style(BLACK_),
+            ));
+        }
         let body = figure(&root, "Identified transmission per temperature", &legend)?;
         let panels = body.split_evenly((1, 2));
         for (panel_area, (what, unit)) in
             panels.iter().zip([("stiffness", "K (N·m/rad)"), ("damping", "C (N·m·s/rad)")])
         {
             let (fin, base) = (points("identified", what), points("identified_baseline", what));
-            let all: Vec<&(f64, f64, f64)> = fin.iter().chain(&base).collect();
+            let all: Vec<&Point> = fin.iter().chain(&base).collect();
             if all.is_empty() {
                 continue;
             }
-            let (t0, t1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.0), b.max(p.0)));
-            let (v0, v1) = log_range(all.iter().flat_map(|p| [low(p), high(p)]));
+            let (t0, t1) = all.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), p| (a.min(p.t), b.max(p.t)));
+            // the estimates set the range; bounds only where nothing else is left
+            let estimates: Vec<&&Point> = all.iter().filter(|p| !p.at_bound).collect();
+            let (v0, v1) = if estimates.is_empty() {
+                log_range(all.iter().map(|p| p.v))
+            } else {
+                log_range(estimates.iter().flat_map(|p| [low(p), high(p)]))
+            };
+            let on_scale = |v: f64| v.clamp(v0 * 1.1, v1 / 1.1);
             let mut ch = panel(panel_area, what, "temperature (°C)", unit, (t0 - 5.0)..(t1 + 5.0), log_axis(v0, v1))?;
             // the baseline a little to the right, so a baseline on the final value stays visible
-            draw(&mut ch, &base.iter().map(|p| (p.0 + 0.8, p.1)).collect::<Vec<_>>(), baseline_style)?;
+            let shifted = |ps: &[Point], bound: bool, dx: f64| -> Vec<(f64, f64)> {
+                ps.iter().filter(|p| p.at_bound == bound).map(|p| (p.t + dx, on_scale(p.v))).collect()
+            };
+            draw(&mut ch, &shifted(&base, false, 0.8), baseline_style)?;
+            draw(&mut ch, &shifted(&base, true, 0.8), bound_style(RED_))?;
             ch.draw_series(
-                fin.iter().map(|p| ErrorBar::new_vertical(p.0, low(p), p.1, high(p), BLUE_.stroke_width(2), 10)),
+                fin.iter()
+                    .filter(|p| !p.at_bound)
+                    .map(|p| ErrorBar::new_vertical(p.t, low(p), p.v, high(p), BLUE_.stroke_width(2), 10)),
             )?;
-            draw(&mut ch, &fin.iter().map(|p| (p.0, p.1)).collect::<Vec<_>>(), final_style)?;
+            draw(&mut ch, &shifted(&fin, false, 0.0), final_style)?;
+            draw(&mut ch, &shifted(&fin, true, 0.0), bound_style(BLUE_))?;
         }
         root.present()?;
     }
@@ -1125,6 +1165,34 @@ mod tests {
                 assert!(error.is_finite() && error > 0.0, "{e:?} {name}: ± {error}");
             }
         }
+    }
+
+    #[test]
+    fn a_value_at_its_fit_bound_is_marked_and_does_not_set_the_axis() {
+        let entry = |t: f64, k: f64| {
+            json!({"temperature_c": t, "stiffness": k, "stiffness_std": 1.0, "damping": 5.0, "damping_std": 0.1,
+                "stiffness_range": [1e-2, 1e5], "damping_range": [1e-7, 1e3]})
+        };
+        let labels = |svg: &str| -> Vec<String> {
+            svg.split("<text")
+                .skip(1)
+                .filter_map(|t| Some(t.split_once('>')?.1.split('<').next()?.trim().to_string()))
+                .collect()
+        };
+        let numbers = |svg: &str| labels(svg).iter().filter_map(|l| l.parse::<f64>().ok()).collect::<Vec<_>>();
+        let legend = "at a fit bound";
+        // a limp baseline at the stiffness's lower bound (CI rig 13's at 40 and 50 °C)
+        let j = json!({"identified": [entry(22.0, 120.0), entry(40.0, 75.0), entry(60.0, 20.0)],
+            "identified_baseline": [entry(22.0, 85.0), entry(40.0, 1e-2), entry(60.0, 15.0)]});
+        let svg = super::identified_plot(&j).unwrap();
+        assert!(labels(&svg).iter().any(|l| l.starts_with(legend)), "{:?}", labels(&svg));
+        // the estimates (15–120 N·m/rad, C 5) set the axes: no tick down at the bound's decade
+        assert!(numbers(&svg).iter().all(|&v| v >= 1.0), "{:?}", numbers(&svg));
+        // the same baseline off its bound is an estimate: it sets the axis, and nothing is marked
+        let j = json!({"identified": [entry(22.0, 120.0)], "identified_baseline": [entry(22.0, 2e-2)]});
+        let svg = super::identified_plot(&j).unwrap();
+        assert!(!labels(&svg).iter().any(|l| l.starts_with(legend)));
+        assert!(numbers(&svg).iter().any(|&v| v < 0.1), "{:?}", numbers(&svg));
     }
 
     #[test]
