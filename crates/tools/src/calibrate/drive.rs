@@ -450,7 +450,11 @@ impl DriveFit {
     }
     pub fn value(&self, param: Param) -> Option<(f64, f64)> {
         let i = self.spec.iter().position(|&q| q == param)?;
-        Some((self.p[i], self.covariance[(i, i)].max(0.0).sqrt()))
+        Some((self.p[i], super::fit::standard_deviation(self.covariance_at(i, i))))
+    }
+    /// An element of the covariance, NaN (unknown) where the fit has none, as `Fit::covariance_at`.
+    pub fn covariance_at(&self, i: usize, j: usize) -> f64 {
+        self.covariance.get((i, j)).copied().unwrap_or(f64::NAN)
     }
 }
 
@@ -750,7 +754,7 @@ impl<'a> DriveProblem<'a> {
         // covariance: inside its confidence region the positions cannot tell the two apart
         let k = force.len();
         let delta = DVector::from_iterator(k, force.iter().map(|&i| taken.p[i] - fit.p[i]));
-        let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(force[a], force[b])]);
+        let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance_at(force[a], force[b]));
         let wald = (delta.transpose() * spd_inverse(&cov) * &delta)[(0, 0)];
         let rms_ratio = (taken.sse / fit.sse).sqrt();
         Some(ForceLevels {
@@ -1612,7 +1616,7 @@ pub fn wald(fit: &DriveFit, effect: DriveEffect) -> f64 {
     let idx: Vec<usize> = drive_levels(effect).filter_map(|q| fit.spec.iter().position(|&x| x == q)).collect();
     let k = idx.len();
     let theta = DVector::from_iterator(k, idx.iter().map(|&i| fit.p[i]));
-    let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance[(idx[a], idx[b])]);
+    let cov = DMatrix::from_fn(k, k, |a, b| fit.covariance_at(idx[a], idx[b]));
     (theta.transpose() * spd_inverse(&cov) * &theta)[(0, 0)]
 }
 
@@ -2327,7 +2331,7 @@ pub fn parameter_table(prob: &DriveProblem, fit: &DriveFit, axis: Axis) -> Vec<(
     let (_, _, tu, iu, vu) = axis.units();
     let mut out = Vec::new();
     for (i, &q) in fit.spec.iter().enumerate() {
-        let (x, s) = (fit.p[i], fit.covariance[(i, i)].max(0.0).sqrt());
+        let (x, s) = (fit.p[i], super::fit::standard_deviation(fit.covariance_at(i, i)));
         let row = match q {
             Param::LnInertia => ("inertia".to_string(), x.exp(), x.exp() * s, iu.to_string()),
             Param::Viscous => ("viscous_friction".into(), x, s, vu.into()),
@@ -2970,6 +2974,33 @@ mod tests {
             let w = wald(&fit_at(speed), DriveEffect::StribeckFriction);
             assert!((w - 9.0).abs() < 1e-9, "Wald {w} at a speed of {speed}");
         }
+    }
+
+    #[test]
+    fn a_drive_fit_without_a_covariance_reads_unknown_errors_not_a_panic() {
+        // the twin of the device's fresh rig 501: a fit the budget left without its covariance
+        let fit = |covariance: DMatrix<f64>| DriveFit {
+            spec: vec![Param::Coulomb, Param::AsymCoulomb, Param::AsymViscous],
+            effects: vec![DriveEffect::CoulombFriction, DriveEffect::AsymmetricFriction],
+            p: vec![0.3, 0.1, 0.01],
+            sims: vec![],
+            residual: vec![],
+            sse: 0.0,
+            jacobian: DMatrix::zeros(0, 3),
+            covariance,
+            iterations: 0,
+            equation_error: None,
+        };
+        let (v, s) = fit(DMatrix::zeros(0, 0)).value(Param::AsymCoulomb).unwrap();
+        assert!(v == 0.1 && s.is_nan(), "{v} ± {s}");
+        // no information is no evidence: the Wald statistic is 0, not a panic
+        assert_eq!(wald(&fit(DMatrix::zeros(0, 0)), DriveEffect::AsymmetricFriction), 0.0);
+        // with one, both are read from it: (0.1/0.2)² + (0.01/0.01)²
+        let known = fit(DMatrix::from_diagonal(&nalgebra::DVector::from_vec(vec![0.01, 0.04, 1e-4])));
+        let (_, s) = known.value(Param::AsymCoulomb).unwrap();
+        assert!((s - 0.2).abs() < 1e-12, "{s}");
+        let w = wald(&known, DriveEffect::AsymmetricFriction);
+        assert!((w - 1.25).abs() < 1e-9, "{w}");
     }
 
     /// One sample period `h` of x'' = a(x') with the torque held: RK4 in 20 sub-steps.
