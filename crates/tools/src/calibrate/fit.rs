@@ -31,7 +31,7 @@ pub enum Effect {
 pub const NEAR_BOUND: f64 = 4.0;
 
 /// Whether the log-parameter `x` sits on the bound `lo` or `hi` (not logs).
-fn on_bound(x: f64, lo: f64, hi: f64) -> bool {
+pub(crate) fn on_bound(x: f64, lo: f64, hi: f64) -> bool {
     x <= lo.ln() + 1e-9 || x >= hi.ln() - 1e-9
 }
 

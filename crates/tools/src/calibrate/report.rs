@@ -607,11 +607,12 @@ pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> 
             .map(|g| {
                 let f = |k: &str| g[k].as_f64().unwrap_or(f64::NAN);
                 let v = f(what);
+                // the fit's own rule (report.json's `at_bound`, for K or C alone)
                 let range = &g[format!("{what}_range")];
-                let at_bound = [&range[0], &range[1]]
-                    .iter()
-                    .filter_map(|b| b.as_f64())
-                    .any(|b| b > 0.0 && (v / b).ln().abs() <= 1e-6);
+                let at_bound = match (range[0].as_f64(), range[1].as_f64()) {
+                    (Some(lo), Some(hi)) => super::fit::on_bound(v.ln(), lo, hi),
+                    _ => false,
+                };
                 Point { t: f("temperature_c"), v, std: f(&format!("{what}_std")), at_bound }
             })
             .filter(|p| p.t.is_finite() && p.v > 0.0)
@@ -623,9 +624,11 @@ pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> 
     let baseline_style = Style::points(RED_, Marker::Square).hollow();
     let final_style = Style::points(BLUE_, Marker::Circle);
     let bound_style = |color| Style::points(color, Marker::Cross);
-    let any_bound = ["identified", "identified_baseline"]
-        .iter()
-        .any(|key| ["stiffness", "damping"].iter().any(|what| points(key, what).iter().any(|p| p.at_bound)));
+    // (final, baseline) per panel, read once
+    let quantities = [("stiffness", "K (N·m/rad)"), ("damping", "C (N·m·s/rad)")];
+    let series: Vec<(Vec<Point>, Vec<Point>)> =
+        quantities.iter().map(|(what, _)| (points("identified", what), points("identified_baseline", what))).collect();
+    let any_bound = series.iter().any(|(fin, base)| fin.iter().chain(base).any(|p| p.at_bound));
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (1100, 480)).into_drawing_area();
@@ -641,11 +644,8 @@ pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> 
         }
         let body = figure(&root, "Identified transmission per temperature", &legend)?;
         let panels = body.split_evenly((1, 2));
-        for (panel_area, (what, unit)) in
-            panels.iter().zip([("stiffness", "K (N·m/rad)"), ("damping", "C (N·m·s/rad)")])
-        {
-            let (fin, base) = (points("identified", what), points("identified_baseline", what));
-            let all: Vec<&Point> = fin.iter().chain(&base).collect();
+        for ((panel_area, (what, unit)), (fin, base)) in panels.iter().zip(quantities).zip(&series) {
+            let all: Vec<&Point> = fin.iter().chain(base).collect();
             if all.is_empty() {
                 continue;
             }
@@ -663,15 +663,15 @@ pub fn identified_plot(j: &Value) -> Result<String, Box<dyn std::error::Error>> 
             let shifted = |ps: &[Point], bound: bool, dx: f64| -> Vec<(f64, f64)> {
                 ps.iter().filter(|p| p.at_bound == bound).map(|p| (p.t + dx, on_scale(p.v))).collect()
             };
-            draw(&mut ch, &shifted(&base, false, 0.8), baseline_style)?;
-            draw(&mut ch, &shifted(&base, true, 0.8), bound_style(RED_))?;
+            draw(&mut ch, &shifted(base, false, 0.8), baseline_style)?;
+            draw(&mut ch, &shifted(base, true, 0.8), bound_style(RED_))?;
             ch.draw_series(
                 fin.iter()
                     .filter(|p| !p.at_bound)
                     .map(|p| ErrorBar::new_vertical(p.t, low(p), p.v, high(p), BLUE_.stroke_width(2), 10)),
             )?;
-            draw(&mut ch, &shifted(&fin, false, 0.0), final_style)?;
-            draw(&mut ch, &shifted(&fin, true, 0.0), bound_style(BLUE_))?;
+            draw(&mut ch, &shifted(fin, false, 0.0), final_style)?;
+            draw(&mut ch, &shifted(fin, true, 0.0), bound_style(BLUE_))?;
         }
         root.present()?;
     }
