@@ -41,6 +41,9 @@ const FRICTION: (&str, f64) = ("coulomb_friction", 0.05);
 /// near rest the friction's slope goes into the exponential steps' linear part.
 const HEAVY_FRICTION: (&str, f64) = ("coulomb_friction", 1.7);
 const LIGHT_LINK: (&str, f64) = ("link_inertia", 0.023);
+/// A Stribeck excess as the campaign's rigs draw it (fresh rig 508: 0.033 N·m at 0.16 rad/s).
+const STRIBECK: (&str, f64) = ("stribeck_friction", 0.05);
+const STRIBECK_SPEED: (&str, f64) = ("stribeck_velocity", 0.16);
 const BACKLASH: (&str, f64) = ("backlash_width", 0.01);
 /// The crystallinity on the melting curve both ways (the model before issue 20), for the cost of
 /// the kinetics in the same run.
@@ -158,6 +161,24 @@ const REGIMES: &[Regime] = &[
         time_grid: false,
         jitter: 0.0,
         params: &[HEAVY_FRICTION, LIGHT_LINK],
+    },
+    Regime {
+        label: "Coulomb friction 0.05 N·m with a Stribeck excess 0.05 N·m at 0.16 rad/s",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 0.0,
+        time_grid: false,
+        jitter: 0.0,
+        params: &[FRICTION, STRIBECK, STRIBECK_SPEED],
+    },
+    Regime {
+        label: "Coulomb friction 1.7 N·m with a Stribeck excess 0.05 N·m at 0.16 rad/s, sticking",
+        start_c: 22.0,
+        ambient_c: 22.0,
+        heater_w: 0.0,
+        time_grid: false,
+        jitter: 0.0,
+        params: &[HEAVY_FRICTION, STRIBECK, STRIBECK_SPEED, LIGHT_LINK],
     },
     Regime {
         label: "backlash 0.01 rad",
