@@ -306,9 +306,7 @@ fn calibrate_device(
     // runs are only scored.
     // The fold is two refits and more: left out where it would end past the budget (or is cut off
     // by it), and the search's model stands.
-    // (`affords` counts the search's refits: one cut short at its start has timed none, and
-    // splitting the runs in halves alone took 4 s of fresh rig 492's, past its budget)
-    let fold = (budget.affords(2.0) && !budget.past_end()).then(|| {
+    let fold = budget.affords(2.0).then(|| {
         let base = budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.baseline));
         (base, budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.final_fit)))
     });

@@ -120,9 +120,12 @@ impl Budget {
             .is_none_or(|end| std::time::Instant::now() + std::time::Duration::from_secs_f64(seconds.max(0.0)) <= end)
     }
     /// Whether `refits` steps as long as the longest refit so far still end within the whole budget
-    /// (what follows the search checks this before each of its steps, counting its fits).
+    /// (what follows the search checks this before each of its steps, counting its fits). Never
+    /// once the fits' end has passed: a search cut off at its start has timed no refit, and each
+    /// step after it (splitting the runs for the fold alone took 4 s of fresh rig 492's) would
+    /// start past the end.
     pub fn affords(&self, refits: f64) -> bool {
-        self.start.elapsed().as_secs_f64() + refits * self.longest.get() <= self.seconds
+        !self.past_end() && self.start.elapsed().as_secs_f64() + refits * self.longest.get() <= self.seconds
     }
 }
 
@@ -1683,6 +1686,18 @@ mod tests {
         assert!(!budget.spent(), "what follows the search still has its share");
         budget.longest.set(100.0 + 1.0);
         assert!(budget.spent(), "a step as long as the whole budget would overrun it");
+    }
+
+    #[test]
+    fn past_the_fits_end_no_step_is_afforded_even_with_no_refit_timed() {
+        // 99 s into a 100 s budget: past the fits' end (98 s), yet within the budget
+        let start = std::time::Instant::now().checked_sub(std::time::Duration::from_secs(99)).expect("up 99 s");
+        let budget = Budget::since(start, 100.0);
+        assert!(budget.past_end());
+        assert!(!budget.affords(0.0) && budget.spent());
+        // a budget too large to name an end has no end to pass
+        let open = Budget::seconds(f64::INFINITY);
+        assert!(!open.past_end() && open.affords(2.0));
     }
 
     #[test]
