@@ -303,6 +303,11 @@ fn every_regime_matches_fine_reference_over_20_s() {
     // a quarter newton-metre holding the link through the rests between a prescribed motor's
     // steps: there the linearised step takes over from 16 explicit steps a sub-step
     let held_friction = Params { coulomb_friction: 0.25, ..prescribed_motor.clone() };
+    // a Stribeck excess as the campaign draws it, whose falling level a few v_s out makes the
+    // friction's slope negative there (the step linearises it at nothing)
+    let stribeck = |p: &Params| Params { stribeck_friction: 0.05, stribeck_velocity: 0.16, ..p.clone() };
+    let heavy_stribeck = stribeck(&heavy_friction);
+    let held_stribeck = stribeck(&held_friction);
     let all = Params { gravity_link_mass: 0.91, coulomb_friction: 0.05, backlash_width: 0.01, ..prescribed_motor };
     // The Prony law's branch remembers its deflection through the play, which moves the play
     // (mechanics::play_centre): torque-driven, the motor crosses it hundreds of times. Fitted once
@@ -355,6 +360,16 @@ fn every_regime_matches_fine_reference_over_20_s() {
         (
             "Coulomb friction 0.25 N·m, held between steps",
             sc(held_friction, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(prescribed(motor_steps))),
+            0.0,
+        ),
+        (
+            "Coulomb 1.7 N·m and a Stribeck excess, light link",
+            sc(heavy_stribeck, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())),
+            0.0,
+        ),
+        (
+            "Coulomb 0.25 N·m and a Stribeck excess, held between steps",
+            sc(held_stribeck, 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(prescribed(motor_steps))),
             0.0,
         ),
         ("backlash 0.01 rad", sc(backlash.clone(), 22.0, 22.0, 0.0, exact_steps(20.0), Box::new(motion())), 0.0),
