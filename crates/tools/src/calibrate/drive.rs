@@ -452,9 +452,9 @@ impl DriveFit {
         let i = self.spec.iter().position(|&q| q == param)?;
         Some((self.p[i], super::fit::standard_deviation(self.covariance_at(i, i))))
     }
-    /// An element of the covariance, NaN (unknown) where the fit has none, as `Fit::covariance_at`.
+    /// An element of the covariance, NaN (unknown) where the fit has none.
     pub fn covariance_at(&self, i: usize, j: usize) -> f64 {
-        self.covariance.get((i, j)).copied().unwrap_or(f64::NAN)
+        super::fit::covariance_entry(&self.covariance, i, j)
     }
 }
 

@@ -1203,8 +1203,14 @@ impl Fit {
 
     /// The covariance of parameters i and j; NaN where the fit has none.
     pub fn covariance_at(&self, i: usize, j: usize) -> f64 {
-        self.covariance.get((i, j)).copied().unwrap_or(f64::NAN)
+        covariance_entry(&self.covariance, i, j)
     }
+}
+
+/// Element (i, j) of a fit's covariance; NaN (unknown) where it has none, as a fit only evaluated
+/// (an empty matrix) has none.
+pub fn covariance_entry(covariance: &DMatrix<f64>, i: usize, j: usize) -> f64 {
+    covariance.get((i, j)).copied().unwrap_or(f64::NAN)
 }
 
 /// √variance, a rounding's negative variance read as 0; NaN (unknown) stays NaN, where `f64::max`

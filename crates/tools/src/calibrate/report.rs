@@ -46,19 +46,18 @@ pub fn effect_entry(name: &str, params: &[(&'static str, f64, f64)]) -> Value {
 
 /// (name, value, standard error) of an effect's parameters in the SI units of interfaces.md.
 pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f64)> {
-    let (o, _) = fit
-        .spec
-        .offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2)
-        .into_iter()
-        .find(|(_, e)| *e == effect)
-        .expect("effect in the fit");
+    let offsets =
+        fit.spec.offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2);
+    let offset_of = |e: Effect| offsets.iter().find(|(_, x)| *x == e).map(|&(i, _)| i);
+    let o = offset_of(effect).expect("effect in the fit");
     let v = &fit.p[o..];
     let c = |i: usize, j: usize| fit.covariance_at(o + i, o + j);
+    let sd = |i: usize| standard_deviation(c(i, i));
     match effect {
-        Effect::CoulombFriction => vec![("torque_nm", v[0], c(0, 0).sqrt())],
-        Effect::Backlash => vec![("width_rad", v[0], c(0, 0).sqrt())],
-        Effect::LinkDamping => vec![("damping_nms", v[0], c(0, 0).sqrt())],
-        Effect::ThermalLag => vec![("time_constant_s", v[0], c(0, 0).sqrt())],
+        Effect::CoulombFriction => vec![("torque_nm", v[0], sd(0))],
+        Effect::Backlash => vec![("width_rad", v[0], sd(0))],
+        Effect::LinkDamping => vec![("damping_nms", v[0], sd(0))],
+        Effect::ThermalLag => vec![("time_constant_s", v[0], sd(0))],
         Effect::Gravity => {
             let (a, b) = (v[0], v[1]);
             let m = a.hypot(b).max(1e-300);
@@ -70,23 +69,16 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
         }
         Effect::FrequencyDependentModulus => {
             let lam = v[1].exp();
-            vec![("stiffness_nm_per_rad", v[0], c(0, 0).sqrt()), ("relaxation_time_s", lam, lam * c(1, 1).sqrt())]
+            vec![("stiffness_nm_per_rad", v[0], sd(0)), ("relaxation_time_s", lam, lam * sd(1))]
         }
         Effect::StribeckFriction => {
             let vs = v[1].exp();
-            vec![("torque_nm", v[0], c(0, 0).sqrt()), ("velocity", vs, vs * c(1, 1).sqrt())]
+            vec![("torque_nm", v[0], sd(0)), ("velocity", vs, vs * sd(1))]
         }
-        Effect::ConstantLoad => vec![("torque_nm", v[0], c(0, 0).sqrt())],
+        Effect::ConstantLoad => vec![("torque_nm", v[0], sd(0))],
         Effect::AsymmetricFriction => {
             // the four levels of interfaces.md: the symmetric parts (Coulomb, link damping, when in
             // the model) ± the half-differences; errors through the covariance of each sum
-            let level = |e: Effect| -> Option<usize> {
-                fit.spec
-                    .offsets((fit.p.len() - fit.spec.effects.iter().map(|e| e.params().len()).sum::<usize>()) / 2)
-                    .into_iter()
-                    .find(|(_, x)| *x == e)
-                    .map(|(i, _)| i)
-            };
             let combo = |sym: Option<usize>, asym: usize, sign: f64| {
                 let value = sym.map_or(0.0, |i| fit.p[i]) + sign * fit.p[asym];
                 let var = fit.covariance_at(asym, asym)
@@ -94,9 +86,9 @@ pub fn effect_parameters(fit: &Fit, effect: Effect) -> Vec<(&'static str, f64, f
                 (value, standard_deviation(var))
             };
             let (cp, cn) =
-                (combo(level(Effect::CoulombFriction), o, 1.0), combo(level(Effect::CoulombFriction), o, -1.0));
+                (combo(offset_of(Effect::CoulombFriction), o, 1.0), combo(offset_of(Effect::CoulombFriction), o, -1.0));
             let (bp, bn) =
-                (combo(level(Effect::LinkDamping), o + 1, 1.0), combo(level(Effect::LinkDamping), o + 1, -1.0));
+                (combo(offset_of(Effect::LinkDamping), o + 1, 1.0), combo(offset_of(Effect::LinkDamping), o + 1, -1.0));
             vec![
                 ("coulomb_positive", cp.0, cp.1),
                 ("coulomb_negative", cn.0, cn.1),
