@@ -613,7 +613,8 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
     let mut white_round_run = false;
     loop {
         while rig.effect_count(&current) < MAX_EFFECTS
-            && (rounds.is_empty() || rig.structure_left(&current) || !white_round_run)
+            // (no round yet implies no white round yet: the first round always runs)
+            && (rig.structure_left(&current) || !white_round_run)
             && budget.allows("a round of one-at-a-time refits")
         {
             let effects_before = rig.effects(&current);
