@@ -368,13 +368,13 @@ pub struct Record<E, S, D> {
     pub rounds: Vec<Round<E, S, D>>,
     /// Effect sets refitted at once: the rig's combinations and pairs of candidates.
     pub combinations: Vec<Attempt<E, D>>,
-    /// Effects removed again by the backward check.
+    /// Effects removed again by the backward check, or after the search by a rule of the rig's own.
     pub pruned: Vec<Pruned<E>>,
     /// Set when the budget ran out: (seconds allowed, what was skipped).
     pub budget_exhausted: Option<(f64, &'static str)>,
 }
 
-/// An effect the backward check removed.
+/// An effect the backward check removed (or, with `because`, a rule of the rig's own).
 #[derive(Clone, Debug, PartialEq)]
 pub struct Pruned<E> {
     pub effect: E,
@@ -386,6 +386,8 @@ pub struct Pruned<E> {
     /// Removed because no sample could show it (`Rig::visible`), or, with `replaced_by`, what it
     /// did beyond its lighter form (`Rig::lighter_hidden`), whatever the BIC said.
     pub below_noise: bool,
+    /// Removed by a rule of the rig's own after the search, whatever the BIC said: why, in words.
+    pub because: Option<String>,
 }
 
 /// One step of the backward check on `current`: the first effect that goes (or gives way to its
@@ -441,6 +443,7 @@ fn backward_step<R: Rig>(
                 bic_with: rig.bic(current),
                 bic_without: rig.bic(&refit),
                 below_noise: (below_noise && lighter.is_none()) || hidden,
+                because: None,
             };
             return Some((p, refit));
         }
@@ -946,6 +949,9 @@ pub fn record_json<E: Copy, S, D>(
             if let Some(l) = p.replaced_by {
                 j["replaced_by"] = json!(name(l));
             }
+            if let Some(why) = &p.because {
+                j["because"] = json!(why);
+            }
             j
         }).collect::<Vec<_>>(),
         "search_budget": s.budget_exhausted.map(|(seconds, what)| json!({"seconds": seconds, "exhausted": true,
@@ -1005,6 +1011,15 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
         s += "\n";
     }
     for p in record["pruned_effects"].as_array().into_iter().flatten() {
+        if let Some(why) = p["because"].as_str() {
+            s += &format!(
+                "After the search: **{}** removed (BIC {} with it, {} without): {why}.\n\n",
+                p["effect"].as_str().unwrap_or(""),
+                f(&p["bic_with"]),
+                f(&p["bic_without"])
+            );
+            continue;
+        }
         s += &match p["replaced_by"].as_str() {
             None if p["below_noise"] == true => format!(
                 "Backward check: **{}** removed again (BIC {} with it, {} without): it moves the link by less than \
@@ -1675,6 +1690,37 @@ mod tests {
         let j = record_json(&s.record, Linear::name, |_| json!({}), |_| json!({}));
         let md = record_markdown(&j, |_| String::new(), |_| String::new());
         assert!(md.contains("no sample shows the difference"), "{md}");
+    }
+
+    #[test]
+    fn a_removal_by_the_rigs_own_rule_says_why_in_the_record_and_its_markdown() {
+        let mut record: Record<usize, (), ()> =
+            Record { rounds: Vec::new(), combinations: Vec::new(), pruned: Vec::new(), budget_exhausted: None };
+        record.pruned.push(Pruned {
+            effect: 2,
+            replaced_by: None,
+            bic_with: -900.0,
+            bic_without: -850.0,
+            below_noise: false,
+            because: Some("it sat at its bound".into()),
+        });
+        record.pruned.push(Pruned {
+            effect: 1,
+            replaced_by: None,
+            bic_with: -800.0,
+            bic_without: -795.0,
+            below_noise: false,
+            because: None,
+        });
+        let j = record_json(&record, Linear::name, |_| json!({}), |_| json!({}));
+        assert_eq!(j["pruned_effects"][0]["because"], "it sat at its bound");
+        assert!(j["pruned_effects"][1].get("because").is_none(), "{j}");
+        let md = record_markdown(&j, |_| String::new(), |_| String::new());
+        assert!(
+            md.contains("After the search: **x2** removed (BIC -900 with it, -850 without): it sat at its bound."),
+            "{md}"
+        );
+        assert!(md.contains("Backward check: **x1** removed again"), "{md}");
     }
 
     #[test]
