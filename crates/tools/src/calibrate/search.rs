@@ -804,8 +804,9 @@ fn best_law(
 /// motion the fit lets it show: in the runs' band its torque K_m τ φ' is the transmission's damping,
 /// the same form with two parameters more. Fresh rig 617 (a multisine, no Maxwell branch in its
 /// truth) kept one at K_m 19.2 N·m/rad and τ = 1 ms beside C 0.175 N·m·s/rad, where the truth's C
-/// is 0.195 = 0.175 + K_m τ. The branch goes, K_m τ joins each group's damping and the rest is
-/// refitted from there; None where the model has no branch at that bound or the refit fails.
+/// is 0.195 = 0.175 + K_m τ. The branch goes, K_m τ joins each group's damping (exact under the
+/// viscous law; under the hysteretic law, whose C is read at a reference frequency, only a start) and
+/// the rest is refitted from there; None where the model has no branch at that bound or the refit fails.
 fn maxwell_as_damping(prob: &Problem, fit: &Fit) -> Option<(Fit, super::stepwise::Pruned<Effect>)> {
     let maxwell = Effect::FrequencyDependentModulus;
     let o = fit.spec.offset_of(maxwell, prob.n_groups)?;
@@ -1590,24 +1591,24 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     // the current spring bank alone: the law is what a friction found late stood in for (fresh rig 647:
     // Coulomb friction found, the hysteretic law kept from before it, C +84 % at every temperature, with
     // 41 s of its 120 s left and four structures to fit).
-    let structures = final_structures(laws, (current.spec.law, current.spec.springs), |fits| budget.affords(fits));
     let mut law_reason = laws.reason.clone();
     if !current.spec.effects.is_empty() && laws.allowed.len() > 1 {
-        match &structures {
+        let before = (current.spec.law, current.spec.springs);
+        match final_structures(laws, before, |fits| budget.affords(fits)) {
             None => law_reason
                 .push_str("; not chosen again with the final effects: the time budget (--search-budget) held no more"),
-            Some(s) if s.len() < laws.allowed.len() => law_reason.push_str(
-                "; with the final effects only the damping laws under the chosen spring bank were refitted: the \
-                 time budget (--search-budget) held no more",
-            ),
-            Some(_) => {}
-        }
-    }
-    if let Some(structures) = structures.filter(|_| !current.spec.effects.is_empty()) {
-        let before = (current.spec.law, current.spec.springs);
-        current = budget.timed(|| best_law(prob, None, current, &structures, "final effects", &mut rows));
-        if (current.spec.law, current.spec.springs) != before {
-            sig = signatures(prob, &current);
+            Some(structures) => {
+                if structures.len() < laws.allowed.len() {
+                    law_reason.push_str(
+                        "; with the final effects only the damping laws under the chosen spring bank were refitted: \
+                         the time budget (--search-budget) held no more",
+                    );
+                }
+                current = budget.timed(|| best_law(prob, None, current, &structures, "final effects", &mut rows));
+                if (current.spec.law, current.spec.springs) != before {
+                    sig = signatures(prob, &current);
+                }
+            }
         }
     }
     let mut width_scan = None;
