@@ -2,6 +2,9 @@
 //! that missed a better model (the truth's BIC lower than the report's) from runs that cannot tell
 //! the two apart. `cargo run --release -p thermovia-tools --example truth_fit -- RIG_FOLDER`
 //! (a campaign rig: RIG_FOLDER/runs with truth.json, RIG_FOLDER/calibration/report.json).
+//! Arguments after the folder, `INDEX=VALUE`, replace entries of the start (the printed `fitted p`'s
+//! order): how far from the truth a refit still finds it; `speeds=V1,V2,...` sets every run's (or
+//! segment's) initial link speed, rad/s, before the fit (the search's debug output prints its own).
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
@@ -80,8 +83,25 @@ fn run() -> Result<(), Error> {
         springs: fit::SpringBank::Scaled,
         elasto_backlash: false,
     };
-    let at_truth = fit::Fit::evaluate(&prob, spec.clone(), p.clone()).ok_or("could not simulate the truth")?;
-    let fitted = fit::levenberg_marquardt(&prob, spec, p, search::MAX_ITERATIONS)?;
+    let mut start = p.clone();
+    for arg in std::env::args().skip(2) {
+        let (i, v) = arg.split_once('=').ok_or_else(|| format!("{arg}: expected INDEX=VALUE"))?;
+        if i == "speeds" {
+            let speeds: Result<Vec<f64>, _> = v.split(',').map(str::parse).collect();
+            let speeds = speeds.map_err(|_| format!("{arg}: expected speeds=V1,V2,... (rad/s)"))?;
+            if speeds.len() != prob.inputs.len() {
+                return Err(format!("{arg}: {} runs, {} speeds", prob.inputs.len(), speeds.len()).into());
+            }
+            prob.set_initial_speeds(&speeds);
+            continue;
+        }
+        let i: usize = i.parse().map_err(|_| format!("{arg}: INDEX is not a number"))?;
+        let v: f64 = v.parse().map_err(|_| format!("{arg}: VALUE is not a number"))?;
+        let n = start.len();
+        *start.get_mut(i).ok_or_else(|| format!("{arg}: the start has {n} entries"))? = v;
+    }
+    let at_truth = fit::Fit::evaluate(&prob, spec.clone(), p).ok_or("could not simulate the truth")?;
+    let fitted = fit::levenberg_marquardt(&prob, spec, start, search::MAX_ITERATIONS)?;
     let fitted = search::resolve_initial_speeds(&mut prob, fitted);
     let fitted = search::fit_initial_speeds(&mut prob, fitted);
     let final_bic = report["final"]["bic"].as_f64().unwrap_or(f64::NAN);

@@ -372,6 +372,35 @@ pub struct Record<E, S, D> {
     pub pruned: Vec<Pruned<E>>,
     /// Set when the budget ran out: (seconds allowed, what was skipped).
     pub budget_exhausted: Option<(f64, &'static str)>,
+    /// Where the rig searched a second time from the first search's model (`Record::append_again`).
+    pub again: Option<Again>,
+}
+
+/// A second search from the first one's model: how much of the record came before it, and why.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Again {
+    pub rounds_before: usize,
+    pub combinations_before: usize,
+    pub why: String,
+}
+
+impl<E, S, D> Record<E, S, D> {
+    /// `second`, a search run from this one's model, appended to this record: its rounds and
+    /// combinations after this one's (its combination at the start is staged as the search again),
+    /// its removals, and the budget's end if either met it.
+    pub fn append_again(&mut self, second: Record<E, S, D>, why: String) {
+        self.again =
+            Some(Again { rounds_before: self.rounds.len(), combinations_before: self.combinations.len(), why });
+        self.rounds.extend(second.rounds);
+        self.combinations.extend(second.combinations.into_iter().map(|mut a| {
+            if a.stage == "baseline" {
+                a.stage = "the search again, at its start";
+            }
+            a
+        }));
+        self.pruned.extend(second.pruned);
+        self.budget_exhausted = self.budget_exhausted.or(second.budget_exhausted);
+    }
 }
 
 /// An effect the backward check removed (or, with `because`, a rule of the rig's own).
@@ -896,6 +925,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             combinations,
             pruned,
             budget_exhausted: budget.exhausted.get().map(|what| (budget.seconds, what)),
+            again: None,
         },
     }
 }
@@ -954,6 +984,7 @@ pub fn record_json<E: Copy, S, D>(
             }
             j
         }).collect::<Vec<_>>(),
+        "searched_again": s.again.as_ref().map(|a| json!({"from_round": a.rounds_before + 1, "why": a.why})),
         "search_budget": s.budget_exhausted.map(|(seconds, what)| json!({"seconds": seconds, "exhausted": true,
             "skipped": what, "note": "the search stopped when its time budget ran out (--search-budget) and kept the best model found so far"})),
     })
@@ -986,7 +1017,15 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
         s += &format!("Refitted at once ({}): {}.\n\n", c["stage"].as_str().unwrap_or(""), line(c));
     }
     let rounds = record["rounds"].as_array().map_or(&[][..], |v| v.as_slice());
+    let again_from = record["searched_again"]["from_round"].as_u64().map(|n| n as usize);
     for (i, r) in rounds.iter().enumerate() {
+        if again_from == Some(i + 1) {
+            s += &format!(
+                "### The search again, from round {}\n\n{}.\n\n",
+                i + 1,
+                record["searched_again"]["why"].as_str().unwrap_or("")
+            );
+        }
         s += &format!(
             "### Round {}{}\n\n| effect | score | predicted ΔBIC | evidence |\n|---|---|---|---|\n",
             i + 1,
@@ -1009,6 +1048,12 @@ pub fn record_markdown(record: &Value, state: impl Fn(&Value) -> String, detail:
             s += "\nNo candidate predicted a BIC gain worth a refit (or the residual is white at the noise floor).\n";
         }
         s += "\n";
+    }
+    if again_from.is_some_and(|n| n > rounds.len()) {
+        s += &format!(
+            "### The search again\n\n{}; it added no round.\n\n",
+            record["searched_again"]["why"].as_str().unwrap_or("")
+        );
     }
     for p in record["pruned_effects"].as_array().into_iter().flatten() {
         if let Some(why) = p["because"].as_str() {
@@ -1693,9 +1738,38 @@ mod tests {
     }
 
     #[test]
+    fn a_search_run_again_is_marked_where_its_rounds_begin() {
+        let (x0, x1) = (normals(71, N), normals(72, N));
+        let (r, start) = rig(vec![x0.clone(), x1.clone()], |i| x0[i] + 0.5 * x1[i]);
+        let first = search(&r, start, &Budget::seconds(60.0));
+        let mut second = search(&r, r.fit(vec![1]), &Budget::seconds(60.0));
+        let (n, m) = (first.record.rounds.len(), second.record.rounds.len());
+        assert!(n > 0 && m > 0, "both searches ran rounds: {n}, {m}");
+        let verdict = Verdict { keep: false, bic_before: -10.0, bic_after: -5.0, detail: () };
+        second.record.combinations.push(Attempt { stage: "baseline", effects: vec![0], removed: vec![], verdict });
+        let mut record = first.record.clone();
+        let combinations = record.combinations.len();
+        record.append_again(second.record, "its starts moved".into());
+        assert_eq!(record.rounds.len(), n + m);
+        assert_eq!(record.combinations[combinations].stage, "the search again, at its start");
+        let j = record_json(&record, Linear::name, |_| json!({}), |_| json!({}));
+        assert_eq!(j["searched_again"]["from_round"], json!(n + 1));
+        let md = record_markdown(&j, |_| String::new(), |_| String::new());
+        let at = |what: &str| md.find(what).unwrap_or_else(|| panic!("{what} not in {md}"));
+        let again = at(&format!("### The search again, from round {}\n\nits starts moved.", n + 1));
+        assert!(at(&format!("### Round {n}")) < again && again < at(&format!("### Round {}", n + 1)), "{md}");
+        assert!(md.contains("(the search again, at its start)"), "{md}");
+    }
+
+    #[test]
     fn a_removal_by_the_rigs_own_rule_says_why_in_the_record_and_its_markdown() {
-        let mut record: Record<usize, (), ()> =
-            Record { rounds: Vec::new(), combinations: Vec::new(), pruned: Vec::new(), budget_exhausted: None };
+        let mut record: Record<usize, (), ()> = Record {
+            rounds: Vec::new(),
+            combinations: Vec::new(),
+            pruned: Vec::new(),
+            budget_exhausted: None,
+            again: None,
+        };
         record.pruned.push(Pruned {
             effect: 2,
             replaced_by: None,
