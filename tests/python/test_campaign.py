@@ -259,6 +259,18 @@ def test_friction_is_refitted_from_a_transmission_a_link_damper_emptied(tmp_path
     assert result["ratio"] < 1.5, result["why"]
 
 
+def test_a_sticking_link_after_a_gap_is_searched_again_from_its_final_starts(tmp_path):
+    # fresh campaign rig 655: Coulomb friction 0.46 N·m and a Stribeck excess 0.20 N·m over 0.058 rad/s on a
+    # soft, light link at 0.21 Hz, each run split by a 0.26 s dropout; the link sticks and slips. The baseline,
+    # without friction, started the segment after one gap at -0.50 rad/s where the link sticks: from there even
+    # the truth's parameters fit at 81x the floor, and the search ended with Coulomb friction alone at 33x
+    # (the loop before 2026-12-04). With the starts the final effects fit, the search runs again and finds both.
+    result = campaign.run_rig(campaign.draw(655), tmp_path, 120.0)
+    assert result["passed"], result["why"]
+    report = json.loads((tmp_path / "rig_655" / "calibration" / "report.json").read_text())
+    assert report["searched_again"]["from_round"] >= 2, report["searched_again"]
+
+
 DRIVE_DRAWS = [campaign.draw_drive(s) for s in range(1, 201)]
 
 

@@ -260,6 +260,7 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         })),
         "identified_baseline": identified(prob, &o.baseline, temps),
         "rounds": record["rounds"],
+        "searched_again": record["searched_again"],
         "search_budget": record["search_budget"],
         "combinations": record["combinations"],
         "signatures": {"baseline": signature_json(&o.baseline_signatures), "final": signature_json(&o.final_signatures)},
