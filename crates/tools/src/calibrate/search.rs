@@ -261,13 +261,13 @@ pub fn baseline_starts(prob: &Problem, law: DampingLaw) -> Vec<(&'static str, Ve
 
 /// Levenberg–Marquardt from the cheapest of several starts (each simulated once).
 fn fit_from_best(prob: &Problem, spec: ModelSpec, starts: Vec<Vec<f64>>, max_iter: usize) -> Result<Fit, String> {
-    let p0 = starts
-        .into_iter()
-        .map(|p| (prob.cost(&spec, &p), p))
-        .min_by(|a, b| a.0.total_cmp(&b.0))
-        .map(|(_, p)| p)
-        .ok_or("no start")?;
+    let p0 = best_start(prob, &spec, starts).ok_or("no start")?;
     levenberg_marquardt(prob, spec, p0, max_iter)
+}
+
+/// The start of lowest cost (each simulated once); None without a start.
+fn best_start(prob: &Problem, spec: &ModelSpec, starts: Vec<Vec<f64>>) -> Option<Vec<f64>> {
+    starts.into_iter().map(|p| (prob.cost(spec, &p), p)).min_by(|a, b| a.0.total_cmp(&b.0)).map(|(_, p)| p)
 }
 
 /// Levenberg–Marquardt from every start, the lowest BIC kept: where the starts' costs say nothing
@@ -691,7 +691,7 @@ fn stribeck_velocity_starts(
     starts: Vec<Vec<f64>>,
 ) -> Option<Vec<Vec<f64>>> {
     let o = spec.offset_of(Effect::StribeckFriction, prob.n_groups)?;
-    let best = starts.into_iter().map(|p| (sprob.cost(spec, &p), p)).min_by(|a, b| a.0.total_cmp(&b.0))?.1;
+    let best = best_start(sprob, spec, starts)?;
     let mut each = vec![best.clone()];
     for v in super::diagnose::stribeck_velocity_grid(prob) {
         let mut q = best.clone();
@@ -1327,10 +1327,12 @@ impl DeviceRig<'_, '_> {
                     let spec = ModelSpec { law, springs, ..spec.clone() };
                     let fit = |replace| {
                         let starts = candidate_starts(self.prob, &p, added, law, replace);
-                        let grid = self.velocity_grid && far_above_floor(current_sig);
-                        match stribeck_velocity_starts(self.prob, sprob, &spec, starts.clone()).filter(|_| grid) {
-                            Some(each) => fit_from_each(sprob, &spec, each, SCREEN_ITERATIONS).ok(),
-                            None => fit_from_best(sprob, spec.clone(), starts, SCREEN_ITERATIONS).ok(),
+                        let with_excess = spec.effects.contains(&Effect::StribeckFriction);
+                        if self.velocity_grid && with_excess && far_above_floor(current_sig) {
+                            let each = stribeck_velocity_starts(self.prob, sprob, &spec, starts)?;
+                            fit_from_each(sprob, &spec, each, SCREEN_ITERATIONS).ok()
+                        } else {
+                            fit_from_best(sprob, spec.clone(), starts, SCREEN_ITERATIONS).ok()
                         }
                     };
                     let table = fit(true);
@@ -1620,15 +1622,15 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
             refitted: std::cell::RefCell::new(Vec::new()),
             velocity_grid: true,
         };
-        let again = super::stepwise::search(&rig, Judged { fit: current, sig }, budget);
-        rows = rig.rows.into_inner();
-        debug(format_args!("searched again from the final starts: {:?}, {} simulations", t.elapsed(), sims(prob)));
         let why = format!(
             "the first search judged every candidate from the segments' starts the baseline chose; fitted again \
              with its effects, they lowered the BIC from {before_restarts:.0} to {:.0} with structure left, so the \
              search ran once more from there",
-            again.path[0].fit.bic()
+            current.bic()
         );
+        let again = super::stepwise::search(&rig, Judged { fit: current, sig }, budget);
+        rows = rig.rows.into_inner();
+        debug(format_args!("searched again from the final starts: {:?}, {} simulations", t.elapsed(), sims(prob)));
         record.append_again(again.record, why);
         path.extend(again.path.into_iter().skip(1));
         (current, sig) = (again.model.fit, again.model.sig);

@@ -376,11 +376,10 @@ pub struct Record<E, S, D> {
     pub again: Option<Again>,
 }
 
-/// A second search from the first one's model: how much of the record came before it, and why.
+/// A second search from the first one's model: how many rounds came before it, and why.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Again {
     pub rounds_before: usize,
-    pub combinations_before: usize,
     pub why: String,
 }
 
@@ -389,8 +388,7 @@ impl<E, S, D> Record<E, S, D> {
     /// combinations after this one's (its combination at the start is staged as the search again),
     /// its removals, and the budget's end if either met it.
     pub fn append_again(&mut self, second: Record<E, S, D>, why: String) {
-        self.again =
-            Some(Again { rounds_before: self.rounds.len(), combinations_before: self.combinations.len(), why });
+        self.again = Some(Again { rounds_before: self.rounds.len(), why });
         self.rounds.extend(second.rounds);
         self.combinations.extend(second.combinations.into_iter().map(|mut a| {
             if a.stage == "baseline" {
