@@ -9,7 +9,7 @@ use super::fit::{
 
 use super::stepwise::{debug, Attempt, Ranked, Record, Rig, Verdict};
 pub use super::stepwise::{
-    Budget, BIC_MARGIN, COMBINATION_PASSES, MAX_EFFECTS, PAIR_POOL, PRUNE_SKIP, SHORTLIST_SHARE, TRIES_PER_ROUND,
+    Budget, BIC_MARGIN, COMBINATION_PASSES, MAX_EFFECTS, PAIR_POOL, SHORTLIST_SHARE, TRIES_PER_ROUND,
 };
 use nalgebra::{DMatrix, DVector};
 
