@@ -271,6 +271,19 @@ def test_a_sticking_link_after_a_gap_is_searched_again_from_its_final_starts(tmp
     assert report["searched_again"]["from_round"] >= 2, report["searched_again"]
 
 
+def test_a_backlash_standing_in_for_friction_is_refitted_without(tmp_path):
+    # fresh campaign rig 659: asymmetric friction 4.75 / 5.20 N·m on a 117 N·m/rad link. The search kept a
+    # 33 mrad backlash beside the friction, whose levels it held 36-40 % low; the backward check never refitted
+    # without it, its linearised removal reading as plainly needed (the loop before 2026-12-04, night). Refitted
+    # without it, the friction reaches the truth's levels and the BIC falls.
+    result = campaign.run_rig(campaign.draw(659), tmp_path, 120.0)
+    assert result["passed"], result["why"]
+    report = json.loads((tmp_path / "rig_659" / "calibration" / "report.json").read_text())
+    backlash = [p for p in report["pruned_effects"] if p["effect"] == "backlash"]
+    assert backlash and not backlash[0]["below_noise"], report["pruned_effects"]
+    assert backlash[0]["bic_without"] < backlash[0]["bic_with"], backlash
+
+
 DRIVE_DRAWS = [campaign.draw_drive(s) for s in range(1, 201)]
 
 
