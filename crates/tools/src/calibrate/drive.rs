@@ -1795,12 +1795,12 @@ fn rank(prob: &DriveProblem, fit: &DriveFit, inverse: &Option<InverseModel>) -> 
                 start[0]
             ),
             (DriveEffect::AsymmetricFriction, iv) => format!(
-                "explains {:.1} % of the remaining position residual; linearised half-differences: Coulomb {:+.4}, viscous {:+.4}{}",
+                "explains {:.1} % of the remaining position residual; linearised half-differences: Coulomb {:+.3e}, viscous {:+.3e}{}",
                 100.0 * score,
                 start[0],
                 start[1],
                 iv.as_ref().and_then(|iv| iv.asymmetric).map_or(String::new(), |(cp, cn, vp, vn)| format!(
-                    "; inverse model by direction: Coulomb {cp:.3} forward / {cn:.3} back, viscous {vp:.3} / {vn:.3}"
+                    "; inverse model by direction: Coulomb {cp:.3e} forward / {cn:.3e} back, viscous {vp:.3e} / {vn:.3e}"
                 ))
             ),
             (DriveEffect::StribeckFriction, _) => format!(
