@@ -1554,7 +1554,7 @@ fn drop_unseen(
     model: Judged,
     budget: &Budget,
     path: &mut Vec<Judged>,
-    record: &mut super::stepwise::Record<Effect, Signatures, Evidence>,
+    record: &mut Record<Effect, Signatures, Evidence>,
 ) -> (Fit, Signatures) {
     if model.fit.spec.effects.is_empty() || budget.spent() {
         return (model.fit, model.sig);
