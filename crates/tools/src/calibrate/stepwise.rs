@@ -1600,16 +1600,23 @@ mod tests {
         assert_eq!((pair.stage, pair.effects.clone()), ("pair after a round", vec![0, 1]));
     }
 
+    /// y = x0 with x1 noise and x2 = x0 + z/2 a stand-in whose refits hold every added effect in its
+    /// valley (`Linear::valley`); x0, z and x1 drawn from seeds `seed`, `seed` + 1 and `seed` + 2.
+    fn stand_in_rig(seed: u64) -> Linear {
+        let (x0, z, x1) = (normals(seed, N), normals(seed + 1, N), normals(seed + 2, N));
+        let x2: Vec<f64> = (0..N).map(|i| x0[i] + 0.5 * z[i]).collect();
+        let (mut r, _) = rig(vec![x0.clone(), x1, x2], |i| x0[i]);
+        r.valley = Some((2, 0));
+        r
+    }
+
     /// A search started from a stand-in (x2 = x0 + z/2 for y = x0, as the device's combination can
     /// start from a backlash for a Stribeck excess) whose refits hold every added effect in its
     /// valley: x0 beside x2 lowers the BIC but removes a fifth of the excess, not a third. Swapped
     /// for x2, x0 explains everything (fresh rigs 121 and 143).
     #[test]
     fn a_candidate_held_in_a_stand_ins_valley_is_swapped_in_for_it() {
-        let (x0, z, x1) = (normals(61, N), normals(62, N), normals(63, N));
-        let x2: Vec<f64> = (0..N).map(|i| x0[i] + 0.5 * z[i]).collect();
-        let (mut r, _) = rig(vec![x0.clone(), x1, x2], |i| x0[i]);
-        r.valley = Some((2, 0));
+        let mut r = stand_in_rig(61);
         let s = search(&r, r.fit(vec![2]), &Budget::seconds(60.0));
         let round = &s.record.rounds[0].attempts[0];
         assert!(!round.verdict.keep && round.verdict.bic_after < round.verdict.bic_before - BIC_MARGIN);
@@ -1635,10 +1642,7 @@ mod tests {
     /// fell by 205).
     #[test]
     fn a_stand_in_whose_linearised_removal_reads_costly_is_refitted_without_all_the_same() {
-        let (x0, z, x1) = (normals(71, N), normals(72, N), normals(73, N));
-        let x2: Vec<f64> = (0..N).map(|i| x0[i] + 0.5 * z[i]).collect();
-        let (mut r, _) = rig(vec![x0.clone(), x1, x2], |i| x0[i]);
-        r.valley = Some((2, 0));
+        let mut r = stand_in_rig(71);
         r.removal_overstated = Some(2);
         let truth = Ranked {
             effect: 0,
