@@ -422,13 +422,26 @@ fn calibrate_device(
     // q_m/√12 in its place misjudged it both ways: held-out rig 93 (the right effects, ζ 0.06) sat at
     // 1.52× the floor it made, outside-library rig 156 at 1.56× (docs/calibration.md)
     let count_floor = signal::pooled_quantisation_floor(runs.iter().map(|r| &r.motor[..]));
-    // three simulations of the final model on motor angles conditioned again: taken where the budget
-    // affords them (a rig at its budget keeps the rule before them, the count's share and its factor,
-    // and its report says so with a null)
-    let simulated = budget
-        .affords(1.0)
+    // three simulations of the final model on motor angles conditioned again, stopped as the fits
+    // are, at the end of the budget's fits (a rig whose draws do not end by then keeps the rule
+    // before them, the count's share and its factor, and its report says so with a null). They were
+    // taken only where a whole refit still fitted, which a rig at its budget never has: fresh rig
+    // 736 (the truth's set, every level within 2 %) was flagged by the rule before them.
+    let simulated = (!budget.past_end())
         .then(|| {
-            input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing, &budget, conditioning_seconds)
+            if let Some(end) = budget.end() {
+                prob.sim.set_deadline(end);
+            }
+            let floor = input_error_floor(
+                &runs,
+                &prob,
+                &outcome.final_fit,
+                args.input_smoothing,
+                &budget,
+                conditioning_seconds,
+            );
+            prob.sim.clear_deadline();
+            floor
         })
         .flatten();
     let input_floor = simulated.unwrap_or(count_floor);
@@ -511,8 +524,8 @@ fn calibrate_device(
 /// rounding, one uniform offset in ±q/2 for each stretch the reading holds (a dwelling encoder's
 /// error holds as long as it dwells), and the noise in front of it. A run of steps dwells a few
 /// times only, so the mean square is taken over [`INPUT_ERROR_DRAWS`] draws, from a fixed seed: the
-/// same runs give the same floor. None when a simulation fails, or when a draw would end past the
-/// budget's fits ([`stepwise::Budget::end`]): each draw conditions every run's motor angle again, and
+/// same runs give the same floor. None when a simulation fails (one past the simulator's deadline
+/// does), or when a draw would end past the budget's fits ([`stepwise::Budget::end`]): each draw conditions every run's motor angle again, and
 /// on a million samples that alone takes seconds the simulations' deadline does not see (fresh rig
 /// 178: three draws, 15 s, took the calibration 9.5 s past its budget). A draw is expected to take
 /// as long as the last one, the first as long as the runs' first conditioning, `conditioning_seconds`.
