@@ -429,19 +429,9 @@ fn calibrate_device(
     // rigs 606, 756 and 757 had none; three simulations fitted in each).
     let simulated = (!budget.past_end())
         .then(|| {
-            if let Some(end) = budget.end() {
-                prob.sim.set_deadline(end);
-            }
-            let floor = input_error_floor(
-                &runs,
-                &prob,
-                &outcome.final_fit,
-                args.input_smoothing,
-                &budget,
-                conditioning_seconds,
-            );
-            prob.sim.clear_deadline();
-            floor
+            prob.sim.within(budget.end(), || {
+                input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing, &budget, conditioning_seconds)
+            })
         })
         .flatten();
     let input_floor = simulated.unwrap_or(count_floor);
@@ -525,9 +515,10 @@ fn calibrate_device(
 /// error holds as long as it dwells), and the noise in front of it. A run of steps dwells a few
 /// times only, so the mean square is taken over [`INPUT_ERROR_DRAWS`] draws, from a fixed seed: the
 /// same runs give the same floor. None when a simulation fails (one past the simulator's deadline
-/// does), or when a draw would end past the budget's fits ([`stepwise::Budget::end`]): each draw conditions every run's motor angle again, and
-/// on a million samples that alone takes seconds the simulations' deadline does not see (fresh rig
-/// 178: three draws, 15 s, took the calibration 9.5 s past its budget). A draw is expected to take
+/// does), or when a draw would end past the budget's fits ([`stepwise::Budget::end`]): each draw
+/// conditions every run's motor angle again, and on a million samples that alone takes seconds the
+/// simulations' deadline does not see (fresh rig 178: three draws, 15 s, took the calibration 9.5 s
+/// past its budget). A draw is expected to take
 /// as long as the last one, the first as long as the runs' first conditioning, `conditioning_seconds`.
 fn input_error_floor(
     runs: &[data::Run],

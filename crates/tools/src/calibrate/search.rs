@@ -1497,26 +1497,21 @@ impl Rig for DeviceRig<'_, '_> {
     fn combination(&self, m: &Judged, stage: &'static str) -> Option<(CombinationAttempt, Option<Judged>)> {
         let screen = self.screen.borrow();
         // the combination's fits stop at their share of the time left, and the search goes on
-        let end = self.prob.sim.deadline();
-        if let Some(end) = end {
+        let share = self.prob.sim.deadline().map(|end| {
             let now = std::time::Instant::now();
-            if end > now {
-                self.prob.sim.tighten_deadline(now + (end - now).mul_f64(COMBINATION_SHARE));
-            }
-        }
-        let tried = try_combination(
-            self.prob,
-            &screen,
-            &m.fit,
-            &m.sig,
-            stage,
-            &self.laws.on_bank((m.fit.spec.law, m.fit.spec.springs)),
-            &mut self.refitted.borrow_mut(),
-        );
-        if let Some(end) = end {
-            self.prob.sim.set_deadline(end);
-        }
-        let (attempt, accepted) = tried?;
+            now + end.saturating_duration_since(now).mul_f64(COMBINATION_SHARE)
+        });
+        let (attempt, accepted) = self.prob.sim.within(share, || {
+            try_combination(
+                self.prob,
+                &screen,
+                &m.fit,
+                &m.sig,
+                stage,
+                &self.laws.on_bank((m.fit.spec.law, m.fit.spec.springs)),
+                &mut self.refitted.borrow_mut(),
+            )
+        })?;
         Some((attempt, accepted.map(|(fit, sig)| Judged { fit, sig })))
     }
     fn removal_delta_bic(&self, m: &Judged, e: Effect) -> f64 {

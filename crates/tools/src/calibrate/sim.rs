@@ -340,6 +340,19 @@ impl Simulator {
         *d = Some(d.map_or(at, |d| d.min(at)));
     }
 
+    /// Runs `f` with the deadline moved to `at` where that is earlier (as [`Simulator::tighten_deadline`];
+    /// None leaves it), then puts it back as it was: a stage of the calibration held to a share of
+    /// its time, or one after the deadline was lifted bounded again.
+    pub fn within<T>(&self, at: Option<std::time::Instant>, f: impl FnOnce() -> T) -> T {
+        let before = self.deadline();
+        if let Some(at) = at {
+            self.tighten_deadline(at);
+        }
+        let out = f();
+        *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = before;
+        out
+    }
+
     /// Lifts the deadline: the simulations that write the report of a model already chosen.
     pub fn clear_deadline(&self) {
         *self.deadline.lock().unwrap_or_else(|p| p.into_inner()) = None;
