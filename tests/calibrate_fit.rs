@@ -24,6 +24,18 @@ fn sine_input(rate: f64, duration: f64, frequency: f64, amplitude: f64, inertia:
     }
 }
 
+/// The structure these tests fit: `effects` beside the scaled spring bank, with viscous
+/// transmission damping.
+fn viscous_spec(effects: Vec<Effect>) -> ModelSpec {
+    ModelSpec { effects, law: DampingLaw::Viscous, springs: SpringBank::Scaled, elasto_backlash: false }
+}
+
+/// The link angle the FMU gives `input` under `spec` at `truth`, without noise: a truth's runs.
+fn simulated(sim: &Simulator, input: &SimInput, spec: &ModelSpec, truth: &[f64]) -> Vec<Vec<f64>> {
+    let blank = Problem::new(sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
+    blank.outputs(spec, truth).expect("the truth simulates")
+}
+
 /// A link driven at 1/40 of its natural frequency (fresh rig 144's shape: J = 4.8e-3 kg·m², K = 19 N·m/rad,
 /// 0.24 Hz, 500 Hz for 7.5 s) with gravity and Coulomb friction, fitted from the truth with every torque
 /// 27× too large (where the campaign's fit of that rig ended): the link barely feels its inertia, so
@@ -33,16 +45,10 @@ fn sine_input(rate: f64, duration: f64, frequency: f64, amplitude: f64, inertia:
 fn a_fit_started_with_every_torque_scaled_finds_the_truths_scale() {
     let sim = Simulator::new(common::fmu(), 2).unwrap();
     let input = sine_input(500.0, 7.5, 0.2424, 0.17, 4.84e-3);
-    let spec = ModelSpec {
-        effects: vec![Effect::Gravity, Effect::CoulombFriction],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
+    let spec = viscous_spec(vec![Effect::Gravity, Effect::CoulombFriction]);
     // [ln K, ln C] ++ gravity (a, b) ++ Coulomb level, N·m
     let truth = vec![19.26f64.ln(), 0.0587f64.ln(), 0.168, 0.0, 0.0054];
-    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
-    let measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let measured = simulated(&sim, &input, &spec, &truth);
     let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
     let s: f64 = 27.0;
     let start = vec![truth[0] + s.ln(), truth[1] + s.ln(), 0.168 * s, 0.0, 0.0054 * s];
@@ -75,12 +81,7 @@ fn the_gravitys_bounds_stay_inside_what_the_fmu_accepts() {
     };
     let n = input.time.len();
     let prob = Problem::new(&sim, vec![input], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
-    let spec = ModelSpec {
-        effects: vec![Effect::Gravity],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
+    let spec = viscous_spec(vec![Effect::Gravity]);
     let (lower, upper) = prob.bounds(&spec);
     let most = 1e4 * 9.80665 * d;
     let bound = |b: &[Option<f64>], j: usize| b[j].unwrap_or_else(|| panic!("gravity component {j} unbounded"));
@@ -102,18 +103,12 @@ fn a_backlash_width_left_short_is_found_by_the_final_scan() {
     use thermovia_tools::calibrate::stepwise::Budget;
     let sim = Simulator::new(common::fmu(), 2).unwrap();
     let input = sine_input(2000.0, 4.0, 1.5, 0.05, 0.02);
-    let spec = ModelSpec {
-        effects: vec![Effect::Backlash],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
+    let spec = viscous_spec(vec![Effect::Backlash]);
     let width = 0.9e-3;
     let truth = vec![92.0f64.ln(), 0.55f64.ln(), width];
-    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
     // a logger's noise of 1e-5 rad (uniform, deterministic), so the truth's own width is no exact zero
     let noise = |k: usize| 1e-5 * ((k * 7919 % 1000) as f64 / 500.0 - 1.0);
-    let mut measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let mut measured = simulated(&sim, &input, &spec, &truth);
     measured[0].iter_mut().enumerate().for_each(|(k, y)| *y += noise(k));
     let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
     let short = Fit::evaluate(&prob, spec.clone(), vec![truth[0], truth[1], 0.85 * width]).unwrap();
@@ -142,16 +137,10 @@ fn a_fit_on_every_sample_stands_when_the_budget_ends_before_its_refit() {
     use thermovia_tools::calibrate::search::refit_or_stand;
     let sim = Simulator::new(common::fmu(), 2).unwrap();
     let input = sine_input(500.0, 4.0, 1.0, 0.1, 0.02);
-    let spec = ModelSpec {
-        effects: vec![Effect::CoulombFriction],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
+    let spec = viscous_spec(vec![Effect::CoulombFriction]);
     // [ln K, ln C] ++ Coulomb level, N·m
     let truth = vec![92.0f64.ln(), 0.55f64.ln(), 0.02];
-    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
-    let measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let measured = simulated(&sim, &input, &spec, &truth);
     let prob = Problem::new(&sim, vec![input], measured, vec![0], &[22.0]).unwrap();
     let off = vec![truth[0] + 0.3, truth[1] - 0.3, 0.01];
     let fit = Fit::evaluate(&prob, spec.clone(), off.clone()).unwrap();
@@ -253,15 +242,9 @@ fn a_coarse_count_held_still_is_not_structure() {
 /// and parameters, and its link angle without noise.
 fn held_steps(sim: &Simulator) -> (SimInput, ModelSpec, Vec<f64>, Vec<Vec<f64>>) {
     let input = held_steps_input();
-    let spec = ModelSpec {
-        effects: vec![Effect::CoulombFriction, Effect::LinkDamping],
-        law: DampingLaw::Viscous,
-        springs: SpringBank::Scaled,
-        elasto_backlash: false,
-    };
+    let spec = viscous_spec(vec![Effect::CoulombFriction, Effect::LinkDamping]);
     let truth = vec![82.0f64.ln(), 0.67f64.ln(), 1.65, 0.23];
-    let blank = Problem::new(sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
-    let measured = blank.outputs(&spec, &truth).expect("the truth simulates");
+    let measured = simulated(sim, &input, &spec, &truth);
     (input, spec, truth, measured)
 }
 

@@ -1466,12 +1466,13 @@ impl Rig for DeviceRig<'_, '_> {
         };
         // (fresh rig 802, unscreened: a Coulomb refit 134 000 below the baseline in BIC was lost
         // when the budget ended before its run-on's first step, and the report had no effect)
-        let done = refit_or_stand(self.prob, f.spec.clone(), f.p.clone(), screen.is_none().then(|| f.clone()))?;
-        // f's SSE is over the screening share when there is one; done's over every sample
+        let (spec, p, screened_sse) = (f.spec.clone(), f.p.clone(), f.sse);
+        let done = refit_or_stand(self.prob, spec, p, screen.is_none().then_some(f))?;
+        // the winner's SSE is over the screening share when there is one; done's over every sample
         let share = if screen.is_some() { " (screening share)" } else { "" };
         debug(format_args!(
-            "winner {} iterations on every sample: SSE {:.6e}{share}, then {:.6e} (every sample)",
-            done.iterations, f.sse, done.sse
+            "winner {} iterations on every sample: SSE {screened_sse:.6e}{share}, then {:.6e} (every sample)",
+            done.iterations, done.sse
         ));
         let s = signatures(self.prob, &done);
         earns_its_place(&m.fit, &m.sig, &done, &s).then_some(Judged { fit: done, sig: s })
