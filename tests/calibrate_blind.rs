@@ -334,6 +334,7 @@ fn a_simulation_looks_at_the_deadline_while_it_runs() {
         initial_link_speed: 0.0,
         after_gap: false,
         housing_before: Default::default(),
+        substeps: 1,
     };
     let model = RunModel::default();
     // `simulate` looks at the clock inside its loop of steps: a deadline already passed stops it at

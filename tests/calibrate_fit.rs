@@ -21,6 +21,7 @@ fn sine_input(rate: f64, duration: f64, frequency: f64, amplitude: f64, inertia:
         initial_link_speed: 0.0,
         after_gap: false,
         housing_before: Default::default(),
+        substeps: 1,
     }
 }
 
@@ -78,6 +79,7 @@ fn the_gravitys_bounds_stay_inside_what_the_fmu_accepts() {
         initial_link_speed: 0.0,
         after_gap: false,
         housing_before: Default::default(),
+        substeps: 1,
     };
     let n = input.time.len();
     let prob = Problem::new(&sim, vec![input], vec![vec![0.0; n]], vec![0], &[22.0]).unwrap();
@@ -178,6 +180,7 @@ fn a_segment_after_a_gap_starts_its_pcl_where_its_lag_left_it() {
         initial_link_speed: (full[k + 1] - full[k - 1]) / 2e-3,
         after_gap: true,
         housing_before: before.into(),
+        substeps: 1,
         ..whole.clone()
     };
     let history: Vec<(f64, f64)> = (0..gap).map(|j| (whole.time[j], whole.housing_k[j])).collect();
@@ -266,6 +269,7 @@ fn held_steps_input() -> SimInput {
         initial_link_speed: 0.0,
         after_gap: false,
         housing_before: Default::default(),
+        substeps: 1,
     }
 }
 
@@ -292,4 +296,37 @@ fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
     let e = prob.equation_error(DampingLaw::Viscous, &spec.effects).expect("the regression solves");
     let k = e.p[0].exp();
     assert!(e.p[2] > 0.0 && e.p[3] >= 0.0 && (k / 82.0).ln().abs() < 3f64.ln(), "start {:?}, K {k:.1}", e.p);
+}
+
+/// A 5 Hz sine logged at 200 Hz (fresh rig 852's shape: 40 samples a period, a link at 10.5 Hz):
+/// driven by straight lines between its samples, the link errs by 0.2 % of the swing against the
+/// same motion driven at 4 kHz; the cubic's substeps (`motor_substeps` takes them where the chords'
+/// error exceeds a quarter of the noise) take that error down at least tenfold. A slow sine logged
+/// fast keeps its straight lines.
+#[test]
+fn a_motor_logged_coarsely_drives_the_link_through_the_cubic_between_its_samples() {
+    use thermovia_tools::calibrate::sim::motor_substeps;
+    let sim = Simulator::new(common::fmu(), 2).unwrap();
+    let spec = viscous_spec(vec![]);
+    // K, C: f_n = 10.5 Hz on 0.055 kg·m², ζ ≈ 0.2
+    let truth = vec![240f64.ln(), 1.5f64.ln()];
+    let fine = sine_input(4000.0, 2.0, 5.0, 0.38, 0.055);
+    let mut coarse = sine_input(200.0, 2.0, 5.0, 0.38, 0.055);
+    let noise = 1e-4;
+    let m = motor_substeps(&coarse.time, &coarse.motor, noise);
+    assert!(m > 1, "a chord error of ~8e-4 rad over 1e-4 of noise keeps straight lines");
+    assert_eq!(motor_substeps(&fine.time, &fine.motor, noise), 1, "40 samples a period at 4 kHz need no substeps");
+    let slow = sine_input(1000.0, 4.0, 0.5, 0.38, 0.055);
+    assert_eq!(motor_substeps(&slow.time, &slow.motor, noise), 1, "0.5 Hz at 1 kHz: chords within 1e-6 rad");
+    let reference: Vec<f64> = simulated(&sim, &fine, &spec, &truth)[0].iter().step_by(20).copied().collect();
+    let error = |input: &SimInput| {
+        let y = &simulated(&sim, input, &spec, &truth)[0];
+        assert_eq!(y.len(), reference.len());
+        (y.iter().zip(&reference).map(|(a, b)| (a - b).powi(2)).sum::<f64>() / y.len() as f64).sqrt()
+    };
+    let straight = error(&coarse);
+    coarse.substeps = m;
+    let cubic = error(&coarse);
+    assert!(straight > 2e-4, "straight lines err by {straight:.2e} rad");
+    assert!(cubic < straight / 10.0, "{m} substeps on the cubic: {cubic:.2e} rad, straight lines {straight:.2e}");
 }

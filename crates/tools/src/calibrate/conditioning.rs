@@ -103,6 +103,7 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>, sinusoid: bool) -> us
 /// rectifies into bias. Returns how the motor angle was conditioned too, for the report.
 pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> (super::sim::SimInput, MotorConditioning) {
     let (motor, conditioning) = model_motor(r, smoothing_seconds);
+    let substeps = super::sim::motor_substeps(&r.time, &motor, super::signal::robust_noise(&r.time, &r.link));
     let input = super::sim::SimInput {
         time: r.time.clone(),
         motor,
@@ -114,6 +115,7 @@ pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> (super::sim::SimInp
         initial_link_speed: initial_speed(&r.time, &r.link),
         after_gap: r.segment.is_some_and(|(k, _)| k > 1),
         housing_before: r.thermocouple_before.clone(),
+        substeps,
     };
     (input, conditioning)
 }

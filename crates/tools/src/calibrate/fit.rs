@@ -1738,6 +1738,7 @@ mod tests {
                 initial_link_speed: 0.0,
                 after_gap: false,
                 housing_before: Default::default(),
+                substeps: 1,
             };
             let raw = frequency_response(&input, &link, j).expect("a response");
             assert!((raw.0 / k - 1.0).abs() < 0.05, "seed {seed}: K {} for {k}", raw.0);

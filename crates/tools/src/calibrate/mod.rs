@@ -397,6 +397,7 @@ fn calibrate_device(
             MotorConditioning::BandLimited { edge_hz } => j["input_band_hz"] = serde_json::json!(edge_hz),
             MotorConditioning::Smoothed { half_width_s } => j["input_smoothing_s"] = serde_json::json!(half_width_s),
         }
+        j["input_substeps"] = serde_json::json!(prob.inputs[i].substeps);
         j["inertia_declared"] = serde_json::json!(r.link_inertia.is_some());
     }
     // "unexplained" against a flexible reference, not only white noise (issue 10, item 6)

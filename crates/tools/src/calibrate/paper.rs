@@ -72,6 +72,7 @@ pub fn summarise(sim: &Simulator, effects: EffectValues, temps: &[f64], freqs: &
                 com_distance: 0.14,
                 after_gap: false,
                 housing_before: Default::default(),
+                substeps: 1,
             });
             keys.push((tc, f));
         }

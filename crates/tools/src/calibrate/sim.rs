@@ -31,6 +31,69 @@ pub struct SimInput {
     /// (`data::Run::thermocouple_before`): the PCL starts where its lag behind that history left it.
     /// Empty: the PCL starts level with the thermocouple.
     pub housing_before: super::data::HousingHistory,
+    /// FMU steps per sample interval (`motor_substeps`): the motor angle follows the cubic through
+    /// the samples, in straight pieces between the substeps, where one straight line per interval
+    /// would err by more than the noise allows. 1: the straight line between the samples.
+    pub substeps: usize,
+}
+
+/// The most FMU steps `motor_substeps` puts in one sample interval: 8 take a chord's error down
+/// 64-fold at 8× the simulation's cost.
+pub const MAX_SUBSTEPS: usize = 8;
+
+/// FMU steps per sample interval for a motor angle `motor` sampled at `time` whose link reads with
+/// noise `noise` (rad): the fewest m ≤ `MAX_SUBSTEPS` whose chords, m to an interval, err by at most a
+/// quarter of the noise in rms (adding at most 3 % to the rms the noise sets). A chord through a
+/// motion of curvature θ'' errs by up to θ''h²/8 over its interval h, so m = ⌈√(4 E₁/σ)⌉ with E₁
+/// the rms of |θ''|h²/8 over the run (θ'' the second divided difference of the conditioned angle).
+/// The campaign's device rig 852 (a 5 Hz sine logged at 200 Hz, 9.5e-5 rad of noise) read 8.0e-4
+/// rad between its truth's own replay on straight lines and the measured link: the fit then bent
+/// its friction by 15 % to take up that error.
+pub fn motor_substeps(time: &[f64], motor: &[f64], noise: f64) -> usize {
+    let n = time.len().min(motor.len());
+    if n < 3 || !(noise > 0.0) {
+        return 1;
+    }
+    let (mut sum, mut count) = (0.0, 0usize);
+    for k in 1..n - 1 {
+        let (h0, h1) = (time[k] - time[k - 1], time[k + 1] - time[k]);
+        if !(h0 > 0.0 && h1 > 0.0) {
+            continue;
+        }
+        let curvature = ((motor[k + 1] - motor[k]) / h1 - (motor[k] - motor[k - 1]) / h0) / (0.5 * (h0 + h1));
+        let chord = curvature * h1 * h1 / 8.0;
+        if chord.is_finite() {
+            sum += chord * chord;
+            count += 1;
+        }
+    }
+    if count == 0 {
+        return 1;
+    }
+    let chord_rms = (sum / count as f64).sqrt();
+    ((4.0 * chord_rms / noise).sqrt().ceil() as usize).clamp(1, MAX_SUBSTEPS)
+}
+
+/// The motor angle's slope at each sample: the derivative of the parabola through it and its two
+/// neighbours, in their own times (one-sided at the ends); with the samples, it sets the cubic
+/// Hermite pieces `simulate` takes substeps on.
+fn motor_slopes(time: &[f64], motor: &[f64]) -> Vec<f64> {
+    let n = time.len();
+    let chord = |k: usize| (motor[k + 1] - motor[k]) / (time[k + 1] - time[k]);
+    (0..n)
+        .map(|k| {
+            if n < 2 {
+                0.0
+            } else if k == 0 {
+                chord(0)
+            } else if k == n - 1 {
+                chord(n - 2)
+            } else {
+                let (h0, h1) = (time[k] - time[k - 1], time[k + 1] - time[k]);
+                (chord(k - 1) * h1 + chord(k) * h0) / (h0 + h1)
+            }
+        })
+        .collect()
 }
 
 /// Values of the effect library, in the FMU's own terms except gravity, which is held as
@@ -248,16 +311,40 @@ pub fn simulate(
     let nominal = (input.time[n - 1] - input.time[0]) / (n - 1) as f64;
     let vrs = [h.motor_cmd, h.speed_cmd, h.housing_cmd];
     let mut y = [0.0];
+    let substeps = input.substeps.clamp(1, MAX_SUBSTEPS);
+    let slopes = if substeps > 1 { motor_slopes(&input.time, &input.motor) } else { Vec::new() };
     for k in 0..n - 1 {
         check_deadline(k, until)?;
         let mut dt = input.time[k + 1] - input.time[k];
         if (dt - nominal).abs() <= STEP_SNAP * nominal {
             dt = nominal;
         }
-        let slope = (input.motor[k + 1] - input.motor[k]) / dt;
         let housing = 0.5 * (input.housing_k[k] + input.housing_k[k + 1]);
-        inst.set_reals(&vrs, &[input.motor[k], slope, housing])?;
-        inst.step(dt)?;
+        let (m0, m1) = (input.motor[k], input.motor[k + 1]);
+        if substeps == 1 {
+            inst.set_reals(&vrs, &[m0, (m1 - m0) / dt, housing])?;
+            inst.step(dt)?;
+        } else {
+            // the cubic Hermite piece through (m0, slope) and (m1, slope) on the logged interval,
+            // taken in equal substeps of the (snapped) step
+            let span = input.time[k + 1] - input.time[k];
+            let (d0, d1) = (slopes[k] * span, slopes[k + 1] * span);
+            let hermite = |s: f64| {
+                let (s2, s3) = (s * s, s * s * s);
+                (2.0 * s3 - 3.0 * s2 + 1.0) * m0
+                    + (s3 - 2.0 * s2 + s) * d0
+                    + (-2.0 * s3 + 3.0 * s2) * m1
+                    + (s3 - s2) * d1
+            };
+            let h_sub = dt / substeps as f64;
+            let mut at = m0;
+            for j in 1..=substeps {
+                let next = if j == substeps { m1 } else { hermite(j as f64 / substeps as f64) };
+                inst.set_reals(&vrs, &[at, (next - at) / h_sub, housing])?;
+                inst.step(h_sub)?;
+                at = next;
+            }
+        }
         inst.get_reals(&[h.link], &mut y)?;
         out.push(y[0]);
     }

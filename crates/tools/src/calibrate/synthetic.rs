@@ -217,6 +217,7 @@ pub fn generate(args: &SynthArgs, fmu: Fmu) -> Result<Vec<(String, String)>, Box
                 com_distance: 0.14,
                 after_gap: false,
                 housing_before: Default::default(),
+                substeps: 1,
             };
             let link = simulate(&mut inst, &input, &model, None)?;
             let mut text = String::new();
