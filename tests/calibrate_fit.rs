@@ -301,8 +301,8 @@ fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
 /// A 5 Hz sine logged at 200 Hz (fresh rig 852's shape: 40 samples a period, a link at 10.5 Hz):
 /// driven by straight lines between its samples, the link errs by 0.2 % of the swing against the
 /// same motion driven at 4 kHz; the cubic's substeps (`motor_substeps` takes them where the chords'
-/// error exceeds a quarter of the noise) take that error down at least tenfold. A slow sine logged
-/// fast keeps its straight lines.
+/// error exceeds a quarter of the noise) take that error down at least tenfold. Jittered stamps ask
+/// for as many substeps; a slow sine logged fast keeps its straight lines.
 #[test]
 fn a_motor_logged_coarsely_drives_the_link_through_the_cubic_between_its_samples() {
     use thermovia_tools::calibrate::sim::motor_substeps;
@@ -316,6 +316,15 @@ fn a_motor_logged_coarsely_drives_the_link_through_the_cubic_between_its_samples
     let m = motor_substeps(&coarse.time, &coarse.motor, noise);
     assert!(m > 1, "a chord error of ~8e-4 rad over 1e-4 of noise keeps straight lines");
     assert_eq!(motor_substeps(&fine.time, &fine.motor, noise), 1, "40 samples a period at 4 kHz need no substeps");
+    // a logger's stamps jittered by up to ±20 % of the period (the motor read at each stamp): the
+    // curvature is read in the samples' own times, so the count stays within one of the even grid's
+    let mut jittered = coarse.clone();
+    for (k, t) in jittered.time.iter_mut().enumerate().skip(1) {
+        *t += 0.2 * 0.005 * ((k as f64 * 0.7548776662).fract() * 2.0 - 1.0);
+    }
+    jittered.motor = jittered.time.iter().map(|t| 0.38 * (std::f64::consts::TAU * 5.0 * t).sin()).collect();
+    let m_jittered = motor_substeps(&jittered.time, &jittered.motor, noise);
+    assert!(m_jittered.abs_diff(m) <= 1, "jittered stamps: {m_jittered} substeps, {m} on the even grid");
     let slow = sine_input(1000.0, 4.0, 0.5, 0.38, 0.055);
     assert_eq!(motor_substeps(&slow.time, &slow.motor, noise), 1, "0.5 Hz at 1 kHz: chords within 1e-6 rad");
     let reference: Vec<f64> = simulated(&sim, &fine, &spec, &truth)[0].iter().step_by(20).copied().collect();
