@@ -2433,6 +2433,9 @@ pub fn report_json(
             .map(|(b, _)| json!({"effect": "link_damping", "parameters": {"damping_nms": b}})),
     );
     let mut equivalent_forms = super::report::equivalent_forms(&as_device);
+    if let (Some(form), Value::Array(list)) = (super::report::equal_levels_form(&as_device), &mut equivalent_forms) {
+        list.push(form);
+    }
     if axis == Axis::Linear {
         for form in equivalent_forms.as_array_mut().into_iter().flatten() {
             let note = form["note"].as_str().unwrap_or_default().replace("N.m.s/rad", "N.s/m").replace("N.m", "N");

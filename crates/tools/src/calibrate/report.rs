@@ -228,6 +228,9 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         list.push(form);
         list.extend(chained);
     }
+    if let (Some(form), Value::Array(list)) = (equal_levels_form(&added), &mut forms) {
+        list.push(form);
+    }
     json!({
         "runs": runs_json,
         "baseline": metrics(prob, &o.baseline),
@@ -974,6 +977,46 @@ pub fn equivalent_forms(added: &[Value]) -> Value {
     Value::Array(forms)
 }
 
+/// The load form's limit at no load (interfaces.md `equivalent_forms`): symmetric friction Fc with
+/// link damping b (0 without) and no load is asymmetric friction with Fc both ways and b both ways,
+/// the same torque at every speed. Without it a load of 0.002 N·m beside the pair gave the
+/// asymmetric form (campaign rig 287, through `through_the_load`) and no load gave none (fresh rig
+/// 910, whose truth's Coulomb levels differ by 0.5 %). Listed after every other form: where a found
+/// set has several readings, the more specific come first.
+pub fn equal_levels_form(added: &[Value]) -> Option<Value> {
+    let find = |name: &str, key: &str| added_parameter(added, name, key);
+    let asymmetric = added.iter().any(|e| e["effect"] == "asymmetric_friction");
+    let load = find("constant_load", "torque_nm").filter(|l| *l != 0.0);
+    if let (false, None, Some(fc)) = (asymmetric, load, find("coulomb_friction", "torque_nm")) {
+        let damping = find("link_damping", "damping_nms");
+        let b = damping.unwrap_or(0.0);
+        let mut found = json!({"coulomb_friction": {"torque_nm": fc}});
+        if let Some(b) = damping {
+            found["link_damping"] = json!({"damping_nms": b});
+        }
+        let pair = match damping {
+            Some(b) => {
+                format!("symmetric Coulomb friction of {} N.m with link damping of {} N.m.s/rad", short(fc), short(b))
+            }
+            None => format!("symmetric Coulomb friction of {} N.m", short(fc)),
+        };
+        let note = format!(
+            "Equivalent form: {pair} is asymmetric friction with equal levels, {} N.m forward and back and viscous \
+             levels of {} N.m.s/rad both ways. The search found no direction dependence worth the asymmetry's \
+             parameters, so it kept the symmetric form.",
+            short(fc),
+            short(b),
+        );
+        return Some(json!({
+            "found": found,
+            "equivalent": {"asymmetric_friction": {"coulomb_positive": fc, "coulomb_negative": fc,
+                "viscous_positive": b, "viscous_negative": b}},
+            "note": note,
+        }));
+    }
+    None
+}
+
 /// `truth_comparison` of report.json: the truth's effects and transmission against what the device
 /// loop identified (`report` holds `added_effects` and `identified`). Two truths are read:
 /// `thermovia synth`'s (effects at the top level, the moduli as factors on the FMU's table) and
@@ -1310,6 +1353,30 @@ mod tests {
         assert_eq!(with(0.01, None)[0]["equivalent"]["asymmetric_friction"]["viscous_negative"], 0.0);
         // a load larger than the friction has no friction form: it would push
         assert_eq!(with(0.05, None).as_array().unwrap().len(), 0);
+    }
+
+    #[test]
+    fn symmetric_friction_without_a_load_is_reported_as_asymmetric_friction_with_equal_levels() {
+        let coulomb = json!({"effect": "coulomb_friction", "parameters": {"torque_nm": 0.0425}});
+        let damping = json!({"effect": "link_damping", "parameters": {"damping_nms": 0.006}});
+        let forms = Value::Array(equal_levels_form(&[coulomb.clone(), damping]).into_iter().collect());
+        assert_eq!(forms.as_array().unwrap().len(), 1, "{forms}");
+        let a = &forms[0]["equivalent"]["asymmetric_friction"];
+        assert_eq!((a["coulomb_positive"].as_f64(), a["coulomb_negative"].as_f64()), (Some(0.0425), Some(0.0425)));
+        assert_eq!((a["viscous_positive"].as_f64(), a["viscous_negative"].as_f64()), (Some(0.006), Some(0.006)));
+        assert_eq!(forms[0]["found"]["link_damping"]["damping_nms"], 0.006);
+        assert!(forms[0]["note"].as_str().unwrap().contains("equal levels"), "{}", forms[0]["note"]);
+        // Coulomb friction alone: no viscous levels; the load's limit at 0, so the same form as with one
+        let alone = equal_levels_form(std::slice::from_ref(&coulomb)).unwrap();
+        assert_eq!(alone["equivalent"]["asymmetric_friction"]["viscous_negative"], 0.0);
+        assert_eq!(alone["found"].as_object().unwrap().len(), 1);
+        // with a load the load's form speaks instead, and asymmetric friction found needs no second reading
+        let loaded = [coulomb, json!({"effect": "constant_load", "parameters": {"torque_nm": 0.002}})];
+        assert!(equal_levels_form(&loaded).is_none());
+        assert!(equivalent_forms(&loaded)[0]["found"]["constant_load"].is_object());
+        let asymmetric = json!({"effect": "asymmetric_friction", "parameters": {"coulomb_positive": 0.05,
+            "coulomb_negative": 0.03, "viscous_positive": 0.0, "viscous_negative": 0.0}});
+        assert!(equal_levels_form(&[asymmetric]).is_none());
     }
 
     use super::*;
