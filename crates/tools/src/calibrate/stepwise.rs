@@ -64,6 +64,9 @@ pub struct Budget {
     pub exhausted: std::cell::Cell<Option<&'static str>>,
     /// The longest refit so far, s (the next one's likely length).
     longest: std::cell::Cell<f64>,
+    /// Seconds the report is expected to take after the last fit, where more than [`REPORT_SHARE`]
+    /// of the budget ([`Budget::reserve_for_report`]).
+    report: std::cell::Cell<f64>,
 }
 
 /// The share of the budget the search leaves to what follows it (the final model's starts and law,
@@ -78,14 +81,29 @@ impl Budget {
     }
     /// A budget counted from `start` (the command's start: reading the runs and the baseline count).
     pub fn since(start: std::time::Instant, seconds: f64) -> Budget {
-        Budget { start, seconds, exhausted: std::cell::Cell::new(None), longest: std::cell::Cell::new(0.0) }
+        Budget {
+            start,
+            seconds,
+            exhausted: std::cell::Cell::new(None),
+            longest: std::cell::Cell::new(0.0),
+            report: std::cell::Cell::new(0.0),
+        }
+    }
+    /// Leaves `seconds` after the last fit for the report where that is more than [`REPORT_SHARE`]
+    /// of the budget: on long records the report's passes over every sample outlast that share.
+    pub fn reserve_for_report(&self, seconds: f64) {
+        if seconds.is_finite() {
+            self.report.set(seconds.max(0.0));
+        }
     }
     /// The instant the fits must end (None for a budget too large to name one): the budget less
-    /// [`REPORT_SHARE`] of it, which the report and its plots take after the last fit.
+    /// what the report and its plots take after the last fit, [`REPORT_SHARE`] of it or the
+    /// reserve ([`Budget::reserve_for_report`]), the larger.
     pub fn end(&self) -> Option<std::time::Instant> {
-        let seconds = (1.0 - REPORT_SHARE) * self.seconds;
-        (seconds.is_finite() && seconds >= 0.0)
-            .then(|| self.start.checked_add(std::time::Duration::from_secs_f64(seconds.min(1e9))))
+        // (an infinite or NaN budget leaves NaN here: no end)
+        let seconds = self.seconds - (REPORT_SHARE * self.seconds).max(self.report.get());
+        (seconds.is_finite() && self.seconds >= 0.0)
+            .then(|| self.start.checked_add(std::time::Duration::from_secs_f64(seconds.clamp(0.0, 1e9))))
             .flatten()
     }
     /// Whether the search may go on to `next`: the longest refit so far must still end within the
@@ -1960,6 +1978,17 @@ mod tests {
         assert!(!budget.fits_end_after((1.0 - REPORT_SHARE) * 100.0 + 1.0));
         assert!(!Budget::since(t0, 0.0).fits_end_after(0.5));
         assert!(Budget::since(t0, f64::INFINITY).fits_end_after(1e6));
+        // a report that takes longer than the share moves the end earlier, never past the start
+        budget.reserve_for_report(10.0);
+        let end = budget.end().expect("an end");
+        assert!((end.duration_since(t0).as_secs_f64() - 90.0).abs() < 1e-9);
+        budget.reserve_for_report(1.0);
+        assert!((budget.end().expect("an end").duration_since(t0).as_secs_f64() - 98.0).abs() < 1e-9);
+        budget.reserve_for_report(500.0);
+        assert_eq!(budget.end(), Some(t0));
+        let open = Budget::since(t0, f64::INFINITY);
+        open.reserve_for_report(10.0);
+        assert!(open.end().is_none());
     }
 
     /// Fresh rig 267's first round, in numbers: the ranking predicted gains for a gravity, a load, a
