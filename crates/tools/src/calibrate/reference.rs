@@ -519,12 +519,12 @@ pub fn black_box(runs: &[super::data::Run], group: &[usize]) -> (Reference, Refe
 }
 
 /// Samples (all runs together) on which the order is chosen at most: longer runs give the choice
-/// the same share of each of their starts. The choice is eight candidate fits on half runs, the
-/// final fit one on whole runs, so this bounds the black box's cost to about that of three whole
-/// fits where it would grow with the records (fresh rig 939: eight runs of 58 s at 5 kHz, 2.3
-/// million samples, 62 s on one core beside the baseline's fit). About one device rig in ten of the
-/// campaign has more. It is a cost, not a property of the data: the order is then read from fewer
-/// cycles of each run, and the model of that order is fitted to all of them.
+/// the same share of each of their starts. The choice is eight candidate fits on half runs (four
+/// whole fits' work), the final fit one on whole runs; past this size the choice costs a fixed
+/// amount and the black box about one fit on every sample (fresh rig 939: eight runs of 58 s at
+/// 5 kHz, 2.3 million samples, 62 → 16 s on one core beside the baseline's fit). About one device
+/// rig in ten of the campaign has more. It is a cost, not a property of the data: the order is then
+/// read from fewer cycles of each run, and the model of that order is fitted to all of them.
 pub const ORDER_CHOICE_SAMPLES: usize = 1 << 18;
 
 /// Highest order of the black box: two modes (motor–link resonance and one more) are what a
