@@ -233,7 +233,7 @@ pub fn calibrate(args: &CalibrateArgs) -> Result<Calibration, Box<dyn std::error
 }
 
 /// The backstop past which every simulation fails before there is a model to report: the first
-/// one (the device baseline's best start with its Jacobian, `search::first_baseline`; a drive's
+/// one (the device baseline's best start with its Jacobian, `search::baseline`; a drive's
 /// baseline) may take a quarter of `--search-budget` more (at least 10 s). Every fit after it, the
 /// device baseline's iterations included, ends at the budget itself (`search::calibrate`,
 /// `drive::calibrate`), a fit in progress at its best so far.

@@ -601,14 +601,19 @@ mod tests {
     const SIGMA: f64 = 1e-4;
     const PLANT: (f64, f64, f64) = (20.0, 0.3, 0.018); // K N·m/rad, C N·m·s/rad, J kg·m²: 5.3 Hz, ζ = 0.25
 
+    /// `PLANT` driven by a 1 Hz sine and by a multisine, `duration` s each at 1 kHz, noise `SIGMA`.
+    fn a_sine_and_a_multisine(seed: u64, duration: f64) -> Vec<Run> {
+        let mut rng = SplitMix::new(seed);
+        let ms = multisine(&mut rng);
+        vec![
+            mass_spring_damper(sine(0.3, 1.0), PLANT, duration, 10, SIGMA, &mut rng),
+            mass_spring_damper(ms, PLANT, duration, 10, SIGMA, &mut rng),
+        ]
+    }
+
     #[test]
     fn the_black_box_reaches_the_noise_on_a_sine_and_a_multisine() {
-        let mut rng = SplitMix::new(0x9E37_79B9_7F4A_7C15);
-        let ms = multisine(&mut rng);
-        let runs = vec![
-            mass_spring_damper(sine(0.3, 1.0), PLANT, 10.0, 10, SIGMA, &mut rng),
-            mass_spring_damper(ms, PLANT, 10.0, 10, SIGMA, &mut rng),
-        ];
+        let runs = a_sine_and_a_multisine(0x9E37_79B9_7F4A_7C15, 10.0);
         let s = signals(&runs);
         let r = arx(&s, 4);
         let t = trivial(&s);
@@ -626,12 +631,7 @@ mod tests {
     /// the model of that order is still fitted to, and scored on, every sample.
     #[test]
     fn long_records_choose_the_order_on_their_start_and_fit_it_to_every_sample() {
-        let mut rng = SplitMix::new(7);
-        let ms = multisine(&mut rng);
-        let runs = vec![
-            mass_spring_damper(sine(0.3, 1.0), PLANT, 140.0, 10, SIGMA, &mut rng),
-            mass_spring_damper(ms, PLANT, 140.0, 10, SIGMA, &mut rng),
-        ];
+        let runs = a_sine_and_a_multisine(7, 140.0);
         assert!(runs.iter().map(|r| r.time.len()).sum::<usize>() > ORDER_CHOICE_SAMPLES);
         let r = arx(&signals(&runs), 4);
         eprintln!("{r:?}");

@@ -290,18 +290,13 @@ fn fit_from_each(prob: &Problem, spec: &ModelSpec, starts: Vec<Vec<f64>>, max_it
 }
 
 /// The nominal model at its optimum under one damping law (issue 10, item 3): every start is
-/// simulated once, and Levenberg–Marquardt runs from the best one.
-pub fn baseline(prob: &Problem, (law, springs): Structure) -> Result<Fit, String> {
-    let starts = baseline_starts(prob, law).into_iter().map(|s| s.1).collect();
-    fit_from_best(prob, ModelSpec { effects: vec![], law, springs, elasto_backlash: false }, starts, MAX_ITERATIONS)
-}
-
-/// [`baseline`] held to `end` like every later fit: Levenberg–Marquardt stops there at its best so
-/// far. Only where `end` comes before its first Jacobian is the best start taken as it is (with its
-/// Jacobian), under the simulator's own deadline (`hard_deadline`'s backstop), so that there is a
-/// model to report. Fresh rig 939 (2.3 million samples) had its baseline run 25 iterations to 90 s
-/// of a 120 s budget alone, and to the backstop, 154 s, beside another rig.
-fn first_baseline(prob: &Problem, (law, springs): Structure, end: Option<std::time::Instant>) -> Result<Fit, String> {
+/// simulated once, and Levenberg–Marquardt runs from the best one, held to `end` like every later
+/// fit (it stops there at its best so far; None: no end of its own). Only where `end` comes before
+/// its first Jacobian is the best start taken as it is (with its Jacobian), under the simulator's
+/// own deadline (`hard_deadline`'s backstop), so that there is a model to report. Fresh rig 939
+/// (2.3 million samples) had its baseline run 25 iterations to 90 s of a 120 s budget alone, and to
+/// the backstop, 154 s, beside another rig.
+pub fn baseline(prob: &Problem, (law, springs): Structure, end: Option<std::time::Instant>) -> Result<Fit, String> {
     let spec = ModelSpec { effects: vec![], law, springs, elasto_backlash: false };
     let starts = baseline_starts(prob, law).into_iter().map(|s| s.1).collect();
     let p0 = best_start(prob, &spec, starts).ok_or("no start")?;
@@ -1624,7 +1619,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Resul
     let estimated_speeds = prob.initial_speeds();
     // timed: on long records the baseline is the longest fit, and the budget's checks after it
     // (whether a backlash scan, a fold, still fits) must know what a fit costs here
-    let first = budget.timed(|| first_baseline(prob, laws.allowed[0], budget.end()))?;
+    let first = budget.timed(|| baseline(prob, laws.allowed[0], budget.end()))?;
     debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
     // With a model to report, the budget is a hard end: a fit in progress when it runs out stops
     // at its best so far. Only this first fit's start may run past it, to the backstop of

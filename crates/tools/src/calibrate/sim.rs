@@ -320,30 +320,22 @@ pub fn simulate(
             dt = nominal;
         }
         let housing = 0.5 * (input.housing_k[k] + input.housing_k[k + 1]);
+        // the cubic Hermite piece through (m0, slope) and (m1, slope) on the logged interval, taken
+        // in equal substeps of the (snapped) step; one substep is the straight line m0 → m1
         let (m0, m1) = (input.motor[k], input.motor[k + 1]);
-        if substeps == 1 {
-            inst.set_reals(&vrs, &[m0, (m1 - m0) / dt, housing])?;
-            inst.step(dt)?;
-        } else {
-            // the cubic Hermite piece through (m0, slope) and (m1, slope) on the logged interval,
-            // taken in equal substeps of the (snapped) step
-            let span = input.time[k + 1] - input.time[k];
+        let span = input.time[k + 1] - input.time[k];
+        let hermite = |s: f64| {
             let (d0, d1) = (slopes[k] * span, slopes[k + 1] * span);
-            let hermite = |s: f64| {
-                let (s2, s3) = (s * s, s * s * s);
-                (2.0 * s3 - 3.0 * s2 + 1.0) * m0
-                    + (s3 - 2.0 * s2 + s) * d0
-                    + (-2.0 * s3 + 3.0 * s2) * m1
-                    + (s3 - s2) * d1
-            };
-            let h_sub = dt / substeps as f64;
-            let mut at = m0;
-            for j in 1..=substeps {
-                let next = if j == substeps { m1 } else { hermite(j as f64 / substeps as f64) };
-                inst.set_reals(&vrs, &[at, (next - at) / h_sub, housing])?;
-                inst.step(h_sub)?;
-                at = next;
-            }
+            let (s2, s3) = (s * s, s * s * s);
+            (2.0 * s3 - 3.0 * s2 + 1.0) * m0 + (s3 - 2.0 * s2 + s) * d0 + (-2.0 * s3 + 3.0 * s2) * m1 + (s3 - s2) * d1
+        };
+        let h_sub = dt / substeps as f64;
+        let mut at = m0;
+        for j in 1..=substeps {
+            let next = if j == substeps { m1 } else { hermite(j as f64 / substeps as f64) };
+            inst.set_reals(&vrs, &[at, (next - at) / h_sub, housing])?;
+            inst.step(h_sub)?;
+            at = next;
         }
         inst.get_reals(&[h.link], &mut y)?;
         out.push(y[0]);
