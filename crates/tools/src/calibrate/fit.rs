@@ -951,7 +951,7 @@ impl<'a> Problem<'a> {
     }
 
     /// The equation error's smoothed (link, motor) angles of every run and their half window: the
-    /// widest that takes out no more than the link angle's noise (`signal::smooth_to_noise`), at
+    /// widest that takes out no more than the link angle's noise or count (`signal::smooth_to_noise`), at
     /// most 1 % of the run each side, at least 5 samples (against encoder steps).
     fn smoothed(&self) -> &[Smoothed] {
         self.smoothed.get_or_init(|| {

@@ -343,11 +343,16 @@ pub fn fade_ends(t: &[f64], band: &[f64], ends: &[f64], edge_hz: f64) -> Vec<f64
 
 /// The widest quintic smoothing, up to `cap` samples each side, that takes out no more than the
 /// signal's noise (the discrepancy principle): half windows from 5 up by factors of 2 while the rms
-/// of x − smooth(x) stays within 1.25× its noise (`cubic_noise`); a window that takes
-/// more has started to flatten the signal (a link ringing at its natural frequency, a step's edge).
+/// of x − smooth(x) stays within 1.25× its noise; a window that takes more has started to flatten
+/// the signal (a link ringing at its natural frequency, a step's edge). The noise is the larger of
+/// the white noise (`cubic_noise`) and the reading's quantisation (`quantisation_floor`), as the
+/// noise floor is: the cubic counts a count held still as nothing, and a coarse encoder's staircase
+/// smoothed only to the white noise under it keeps its steps, which the equation error's
+/// derivatives read as accelerations (fresh rig 1032: 5 mrad counts under 85 µrad of noise, an
+/// inertial torque read 1 200× the swing's, every start 300× the truth's torques).
 /// Returns (half window, smoothed signal, the noise measured).
 pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>, f64) {
-    let noise = cubic_noise(t, x);
+    let noise = cubic_noise(t, x).max(quantisation_floor(x));
     let mut half = 5.min(cap);
     let mut best = smooth(t, x, half);
     while half < cap {
@@ -1005,6 +1010,36 @@ mod tests {
         assert!((quantisation_floor(&counts) - q / 12f64.sqrt()).abs() < 1e-15);
         assert!(resolution(&x) > 0.0, "a continuous signal still has a smallest step");
         assert_eq!(quantisation_floor(&x), 0.0, "but no quantum");
+    }
+
+    /// Fresh rig 1032's link encoder: 1 238 counts a turn (5 mrad) on a 0.43 Hz swing of 0.29 rad at
+    /// 2 kHz, 85 µrad of noise under it. The cubic reads the noise and not the counts held still, so
+    /// smoothed only to the noise (the narrowest window) the staircase kept its steps, which a second
+    /// difference reads as accelerations off by hundreds of times the swing's (rms). Smoothed to the
+    /// count the error is a hundredth of that (measured: 1 794 → 16.9 rad/s², the swing's 2.07).
+    #[test]
+    fn a_coarse_count_is_smoothed_to_its_quantisation_not_to_the_noise_under_it() {
+        let (q, rate, f, a) = (2.0 * std::f64::consts::PI / 1238.0, 2000.0, 0.4257, 0.29);
+        let w = 2.0 * std::f64::consts::PI * f;
+        let mut rng = super::super::synthetic::SplitMix::new(1032);
+        let t: Vec<f64> = (0..(rate * 17.4) as usize).map(|k| k as f64 / rate).collect();
+        let x: Vec<f64> = t.iter().map(|t| ((a * (w * t).sin() + 8.5e-5 * rng.normal()) / q).round() * q).collect();
+        // rms of the second difference's error against the swing's own acceleration, in the middle
+        let acceleration_error = |s: &[f64]| {
+            let n = s.len();
+            let e: Vec<f64> = (n / 10..n - n / 10)
+                .map(|k| (s[k + 1] - 2.0 * s[k] + s[k - 1]) * rate * rate + a * w * w * (w * t[k]).sin())
+                .collect();
+            (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt()
+        };
+        let cap = x.len() / 100;
+        assert!(cubic_noise(&t, &x) < 0.5 * quantisation_floor(&x), "the case: the cubic misses the count");
+        let (half, smoothed, noise) = smooth_to_noise(&t, &x, cap);
+        assert_eq!(noise, quantisation_floor(&x));
+        let swing = a * w * w;
+        let (narrow, wide) = (acceleration_error(&smooth(&t, &x, 5)), acceleration_error(&smoothed));
+        assert!(narrow > 100.0 * swing, "the narrowest smoothing keeps the steps: {narrow:.1} rad/s² for {swing:.2}");
+        assert!(wide < narrow / 30.0, "half window {half}: {wide:.2} rad/s² against the narrowest's {narrow:.1}");
     }
 
     #[test]
