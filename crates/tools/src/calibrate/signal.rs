@@ -349,7 +349,8 @@ pub fn fade_ends(t: &[f64], band: &[f64], ends: &[f64], edge_hz: f64) -> Vec<f64
 /// noise floor is: the cubic counts a count held still as nothing, and a coarse encoder's staircase
 /// smoothed only to the white noise under it keeps its steps, which the equation error's
 /// derivatives read as accelerations (fresh rig 1032: 5 mrad counts under 85 µrad of noise, an
-/// inertial torque read 1 200× the swing's, every start 300× the truth's torques).
+/// inertial torque read 1 200× the swing's, and a combination started from those levels ended with
+/// every torque 300× the truth's).
 /// Returns (half window, smoothed signal, the noise measured).
 pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>, f64) {
     let noise = cubic_noise(t, x).max(quantisation_floor(x));
