@@ -1031,7 +1031,7 @@ mod tests {
             let e: Vec<f64> = (n / 10..n - n / 10)
                 .map(|k| (s[k + 1] - 2.0 * s[k] + s[k - 1]) * rate * rate + a * w * w * (w * t[k]).sin())
                 .collect();
-            (e.iter().map(|e| e * e).sum::<f64>() / e.len() as f64).sqrt()
+            super::super::fit::rms(&e)
         };
         let cap = x.len() / 100;
         assert!(cubic_noise(&t, &x) < 0.5 * quantisation_floor(&x), "the case: the cubic misses the count");
