@@ -354,7 +354,7 @@ pub struct Problem<'a> {
 /// Parameter vector: [ln K_g, ln C_g for each temperature group] (the transmission's stiffness,
 /// N·m/rad, and damping at the group's reference frequency, N·m·s/rad) ++ effect parameters in
 /// `effects` order.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ModelSpec {
     pub effects: Vec<Effect>,
     pub law: DampingLaw,

@@ -317,7 +317,14 @@ fn calibrate_device(
     // by it), and the search's model stands.
     let fold = budget.affords(2.0).then(|| {
         let base = budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.baseline));
-        (base, budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.final_fit)))
+        // a search that added nothing ends where it began: the same refit would give the same error
+        let unchanged = outcome.final_fit.spec == outcome.baseline.spec && outcome.final_fit.p == outcome.baseline.p;
+        let last = if unchanged {
+            base.clone()
+        } else {
+            budget.timed(|| search::blocked_fold_rmse(&prob, &outcome.final_fit))
+        };
+        (base, last)
     });
     let (held_base, held_final) = match fold {
         Some((Ok(b), Ok(f))) => (b, f),
