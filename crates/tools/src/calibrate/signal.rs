@@ -78,8 +78,9 @@ pub fn smooth(t: &[f64], x: &[f64], half: usize) -> Vec<f64> {
 /// The half width from which `smooth` slides its windows' moments instead of summing each window
 /// afresh (2·half+1 samples × 11 powers per sample). The equation error's windows reach 1 % of a
 /// run each side: on fresh rig 1047 (three jittered runs of 168 000 samples, windows of ±1 680)
-/// the fresh sums took about 45 % of the calibration's CPU time (perf). Below it a fresh sum costs
-/// no more than the slide's origin shift and a 6×6 solve per sample.
+/// the fresh sums took about 45 % of the calibration's CPU time (perf). Below it the windows are short:
+/// an even grid's Savitzky–Golay weights (2·half+1 multiply-adds a sample) cost less than the slide's
+/// origin shift and solve, and short windows keep the arithmetic they always had.
 const SLIDING_FROM: usize = 32;
 
 /// The quintic fitted by least squares to the 2m+1 samples around `k`, in their own times, at t_k
