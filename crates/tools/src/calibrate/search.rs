@@ -1462,6 +1462,27 @@ impl Rig for DeviceRig<'_, '_> {
     fn judge(&self, m: &Judged, refit: &Judged) -> Verdict<Evidence> {
         self.with_screen(m, |_, c, s| verdict(c, s, &refit.fit, &refit.sig))
     }
+    fn capped(&self, refit: &Judged) -> bool {
+        refit.fit.iterations == SCREEN_ITERATIONS
+    }
+    fn run_on(&self, m: &Judged, refit: Judged) -> Judged {
+        self.with_screen(m, |sprob, _, _| {
+            let (spec, p) = (refit.fit.spec.clone(), refit.fit.p.clone());
+            match levenberg_marquardt(sprob, spec, p, MAX_ITERATIONS) {
+                Ok(f) if f.bic() < refit.fit.bic() => {
+                    debug(format_args!(
+                        "ran on {:?}: {} iterations, BIC {:.1} to {:.1}",
+                        f.spec.effects,
+                        f.iterations,
+                        refit.fit.bic(),
+                        f.bic()
+                    ));
+                    self.judged(sprob, f)
+                }
+                _ => refit,
+            }
+        })
+    }
     fn converge(&self, m: &Judged, winner: Judged, round: usize) -> Option<Judged> {
         // an effect can change which damping law the data favour (friction read as frequency-
         // dependent loss before it was in): re-chosen on the screening share with it, so only the

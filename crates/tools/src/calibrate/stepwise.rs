@@ -304,6 +304,15 @@ pub trait Rig {
     }
     /// `refit` against `m`, on the same data.
     fn judge(&self, m: &Self::Model, refit: &Self::Model) -> Verdict<Self::Detail>;
+    /// Whether a single refit stopped at the screening cap rather than where it converged (false
+    /// by default: a rig without a cap).
+    fn capped(&self, _refit: &Self::Model) -> bool {
+        false
+    }
+    /// A capped single refit against `m` run on to convergence on the same data (`on_equal_terms`).
+    fn run_on(&self, _m: &Self::Model, refit: Self::Model) -> Self::Model {
+        refit
+    }
     /// A round's winner on every sample, to convergence: None when it no longer earns its place.
     fn converge(&self, m: &Self::Model, winner: Self::Model, round: usize) -> Option<Self::Model>;
     /// Whether a refit that did not earn its place (`v`, against `m`) still lowered the BIC by the
@@ -527,6 +536,29 @@ fn record_combination<E, D, M>(
     }
 }
 
+/// The refits that earned their place on the screen, each compared under one stopping rule: one
+/// the screening cap stopped is run on to convergence wherever a refit that converged or ran on
+/// stands ahead of it in BIC, as it might beat that one once run on too. Fresh rig 1037's first
+/// round: gravity earned its place at the cap (4 iterations, an SSE 33 times what it converged to)
+/// and lost to a Coulomb friction run on to 25 iterations, a comparison that turned on the
+/// eleventh digit of the baseline's BIC.
+fn on_equal_terms<R: Rig>(
+    rig: &R,
+    current: &R::Model,
+    mut earned: Vec<(usize, R::Model)>,
+    budget: &Budget,
+) -> Vec<(usize, R::Model)> {
+    let uncapped_best =
+        earned.iter().filter(|(_, m)| !rig.capped(m)).map(|(_, m)| rig.bic(m)).min_by(|a, b| a.total_cmp(b));
+    let Some(best) = uncapped_best else { return earned };
+    for (_, m) in earned.iter_mut() {
+        if rig.capped(m) && rig.bic(m) > best && budget.allows("a capped refit run on beside one that converged") {
+            *m = budget.timed(|| rig.run_on(current, m.clone()));
+        }
+    }
+    earned
+}
+
 /// Of the refits that earned their place on the screen (each with its index in the round's
 /// record), the lowest BIC that keeps its place on every sample (`Rig::converge`), best BIC first,
 /// and those after it in line, untried; the ones before it lost their place.
@@ -744,6 +776,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             // damping won the screen and lost on every sample, and the round ended with no pair
             // tried, the truth's Coulomb friction and Stribeck excess among them). The singles
             // left in line after the winner are its runners-up.
+            let earned = on_equal_terms(rig, &current, earned, budget);
             let (winner, in_line) = first_to_converge(rig, &current, earned, budget, round_number);
             let mut runners_up: Vec<R::Model> = in_line.into_iter().map(|(_, m)| m).collect();
             only_the_winner_kept(&mut round.attempts, 0, winner.as_ref().map(|(k, _)| *k));
@@ -1157,6 +1190,8 @@ mod tests {
         residual: Vec<f64>,
         sse: f64,
         p: Vec<f64>,
+        /// a screening refit stopped at its cap (`Linear::capped_at`)
+        capped: bool,
     }
 
     /// y and candidate columns; an effect keeps when BIC falls by the margin and the excess of the
@@ -1201,6 +1236,9 @@ mod tests {
         /// a combination that takes this long and proposes nothing (the device's proposals with a
         /// play on a long 5 kHz run, fresh rig 761)
         slow_combination: Option<std::time::Duration>,
+        /// (effect, share): the effect's single refit stops at the screening cap with this share of
+        /// its coefficient (the device's gravity on fresh rig 1037, stopped at 4 iterations)
+        capped_at: Option<(usize, f64)>,
     }
 
     impl Linear {
@@ -1221,6 +1259,7 @@ mod tests {
                 residual: r.iter().copied().collect(),
                 p: beta.iter().copied().collect(),
                 cols,
+                capped: false,
             }
         }
         fn excess(&self, m: &Model) -> f64 {
@@ -1319,12 +1358,30 @@ mod tests {
                         residual,
                         sse,
                         p: m.p.iter().copied().chain(beta.iter().copied()).collect(),
+                        capped: false,
                     });
                 }
             }
             let mut cols = m.cols.clone();
             cols.extend(added.iter().map(|c| c.effect));
-            Some(self.fit(cols))
+            let full = self.fit(cols);
+            match self.capped_at {
+                Some((e, share)) if added.len() == 1 && added[0].effect == e => {
+                    let mut p = full.p.clone();
+                    *p.last_mut().unwrap() *= share;
+                    let fitted = self.design(&full.cols) * DVector::from_column_slice(&p);
+                    let residual: Vec<f64> = self.y.iter().zip(fitted.iter()).map(|(y, f)| y - f).collect();
+                    let sse = residual.iter().map(|r| r * r).sum();
+                    Some(Model { cols: full.cols, residual, sse, p, capped: true })
+                }
+                _ => Some(full),
+            }
+        }
+        fn capped(&self, m: &Model) -> bool {
+            m.capped
+        }
+        fn run_on(&self, _m: &Model, refit: Model) -> Model {
+            self.fit(refit.cols)
         }
         fn refit_beside(&self, m: &Model, added: &[&Ranked<usize>]) -> Option<Model> {
             self.beside.set(self.beside.get() + 1);
@@ -1416,6 +1473,7 @@ mod tests {
             partial: false,
             beside: std::cell::Cell::new(0),
             slow_combination: None,
+            capped_at: None,
         };
         let start = r.fit(vec![]);
         (r, start)
@@ -1474,6 +1532,29 @@ mod tests {
         let pair = s.record.combinations.iter().find(|c| c.verdict.keep).expect("a pair won");
         assert_eq!(sorted(pair.effects.clone()), vec![0, 1]);
         assert_eq!(s.path.len(), 2, "start and the pair");
+    }
+
+    /// A single refit stopped at the screening cap, behind one that converged, is run on before the
+    /// round's winner is chosen: run on, it is the better (fresh rig 1037's gravity, which lost the
+    /// first round at its cap to a Coulomb friction run on to convergence).
+    #[test]
+    fn a_capped_refit_is_compared_run_on_with_one_that_converged() {
+        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 1, N)).collect();
+        // x0 capped at 55 % of its coefficient leaves 0.81 + 3.61 of y's 7.61 (earns its place,
+        // behind x1's 4); run on it leaves 3.61, ahead of x1
+        let (mut r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + 1.9 * x[1][i]);
+        r.capped_at = Some((0, 0.55));
+        let s = search(&r, start, &Budget::seconds(60.0));
+        let first = &s.record.rounds[0];
+        let gained: Vec<usize> = first
+            .attempts
+            .iter()
+            .filter(|a| a.verdict.bic_after < a.verdict.bic_before)
+            .map(|a| a.effects[0])
+            .collect();
+        assert_eq!(sorted(gained), vec![0, 1], "both singles were refitted and lowered the BIC");
+        assert_eq!(s.path[1].cols, vec![0], "the first round's winner, run on");
+        assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
     }
 
     /// An effect that earns its place and then goes below the noise at once (the device's Coulomb
