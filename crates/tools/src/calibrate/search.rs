@@ -1317,10 +1317,9 @@ impl DeviceRig<'_, '_> {
     /// `m` without the effects `drop`, with the candidates `added` (and without what they take the
     /// place of, `Effect::takes_place_of`: both in at once would be one column twice), refitted on
     /// the screening share from `m`'s values (`candidate_starts`).
-    /// A single candidate (`as_single`) is refitted under every structure the data allow and run on
-    /// past the screening iterations where the cap cut off a promising refit (`unless_cut_off`);
-    /// otherwise (several candidates, or a step judged as a pair is) under the current structure,
-    /// capped.
+    /// A single candidate (`as_single`) is refitted under every structure the data allow; otherwise
+    /// (several candidates, or a step judged as a pair is) under the current structure. Capped
+    /// either way: the search runs on a single the cap cut off (`stepwise::run_on_cut_off`).
     fn screened_refit(
         &self,
         m: &Judged,
@@ -1390,14 +1389,12 @@ impl DeviceRig<'_, '_> {
                     best.into_iter().chain(from_here).min_by(|a, b| a.bic().total_cmp(&b.bic()))
                 })
                 .min_by(|a, b| a.bic().total_cmp(&b.bic()))?;
-            // (a pair is a fallback for effects that show only together: run on, two effects find
-            // a valley of their own more often than the truth's; measured on campaign rig 23)
-            let (refit, sig) = if single {
-                unless_cut_off(sprob, current, current_sig, screened)
-            } else {
-                let sig = signatures(sprob, &screened);
-                (screened, sig)
-            };
+            // (a single the cap cut off is run on by the search once the round's shortlist is
+            // screened, `stepwise::run_on_cut_off`; a pair never is, as a fallback for effects that
+            // show only together: run on, two effects find a valley of their own more often than
+            // the truth's, measured on campaign rig 23)
+            let sig = signatures(sprob, &screened);
+            let refit = screened;
             debug(format_args!(
                 "refit {:?} (without {drop:?}) took {:?}, {} iterations, BIC {:.1} against {:.1}",
                 refit.spec.effects,
