@@ -586,7 +586,8 @@ fn run_on_cut_off<R: Rig>(
 /// stands ahead of it in BIC, as it might beat that one once run on too. Fresh rig 1037's first
 /// round: gravity earned its place at the cap (4 iterations, an SSE 33 times what it converged to)
 /// and lost to a Coulomb friction run on to 25 iterations, a comparison that turned on the
-/// eleventh digit of the baseline's BIC.
+/// eleventh digit of the baseline's BIC. "Ahead" is read from the list as it stands on entry: a
+/// capped refit ahead of every converged one but behind one run on here stays at its cap.
 fn on_equal_terms<R: Rig>(
     rig: &R,
     current: &R::Model,
