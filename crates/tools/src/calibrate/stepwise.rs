@@ -586,34 +586,23 @@ fn run_on_cut_off<R: Rig>(
 /// stands ahead of it in BIC, as it might beat that one once run on too. Fresh rig 1037's first
 /// round: gravity earned its place at the cap (4 iterations, an SSE 33 times what it converged to)
 /// and lost to a Coulomb friction run on to 25 iterations, a comparison that turned on the
-/// eleventh digit of the baseline's BIC. A refit run on here counts as one that ran on: a capped
-/// refit ahead of every converged one and behind one run on here is run on in turn, best BIC
-/// first, until none stands behind.
+/// eleventh digit of the baseline's BIC. "Ahead" is read from the list as it stands on entry: a
+/// capped refit ahead of every converged one but behind one run on here stays at its cap.
 fn on_equal_terms<R: Rig>(
     rig: &R,
     current: &R::Model,
     mut earned: Vec<(usize, R::Model)>,
     budget: &Budget,
 ) -> Vec<(usize, R::Model)> {
-    let mut ran_on = vec![false; earned.len()];
-    loop {
-        let on_terms = |i: usize| ran_on[i] || !rig.capped(&earned[i].1);
-        let Some(best) =
-            (0..earned.len()).filter(|&i| on_terms(i)).map(|i| rig.bic(&earned[i].1)).min_by(f64::total_cmp)
-        else {
-            return earned;
-        };
-        let behind = (0..earned.len())
-            .filter(|&i| !on_terms(i) && rig.bic(&earned[i].1) > best)
-            .min_by(|&a, &b| rig.bic(&earned[a].1).total_cmp(&rig.bic(&earned[b].1)));
-        let Some(i) = behind else { return earned };
-        if !budget.allows("a capped refit run on beside one that converged") {
-            return earned;
+    let uncapped_best =
+        earned.iter().filter(|(_, m)| !rig.capped(m)).map(|(_, m)| rig.bic(m)).min_by(|a, b| a.total_cmp(b));
+    let Some(best) = uncapped_best else { return earned };
+    for (_, m) in earned.iter_mut() {
+        if rig.capped(m) && rig.bic(m) > best && budget.allows("a capped refit run on beside one that converged") {
+            *m = budget.timed(|| rig.run_on(current, m.clone()));
         }
-        let m = earned[i].1.clone();
-        earned[i].1 = budget.timed(|| rig.run_on(current, m));
-        ran_on[i] = true;
     }
+    earned
 }
 
 /// Of the refits that earned their place on the screen (each with its index in the round's
@@ -1300,10 +1289,7 @@ mod tests {
         slow_combination: Option<std::time::Duration>,
         /// (effect, share): the effect's single refit stops at the screening cap with this share of
         /// its coefficient (the device's gravity on fresh rig 1037, stopped at 4 iterations)
-        capped_at: Vec<(usize, f64)>,
-        /// a refit earns its place where it leaves at most this share of the excess (2/3 unless
-        /// a test needs several singles to earn theirs at once)
-        earn_share: f64,
+        capped_at: Option<(usize, f64)>,
         /// single refits made so far, and how many had been made when a capped one was first run on
         refits: std::cell::Cell<usize>,
         run_on_after: std::cell::Cell<Option<usize>>,
@@ -1434,8 +1420,8 @@ mod tests {
             cols.extend(added.iter().map(|c| c.effect));
             self.refits.set(self.refits.get() + 1);
             let full = self.fit(cols);
-            match self.capped_at.iter().find(|(e, _)| added.len() == 1 && added[0].effect == *e) {
-                Some(&(_, share)) => {
+            match self.capped_at {
+                Some((e, share)) if added.len() == 1 && added[0].effect == e => {
                     let mut p = full.p.clone();
                     *p.last_mut().unwrap() *= share;
                     let fitted = self.design(&full.cols) * DVector::from_column_slice(&p);
@@ -1460,8 +1446,7 @@ mod tests {
             self.refit_with(m, added)
         }
         fn judge(&self, m: &Model, refit: &Model) -> Verdict<()> {
-            let keep =
-                self.bic(refit) < self.bic(m) - BIC_MARGIN && self.excess(refit) <= self.earn_share * self.excess(m);
+            let keep = self.bic(refit) < self.bic(m) - BIC_MARGIN && self.excess(refit) <= 2.0 / 3.0 * self.excess(m);
             Verdict { keep, bic_before: self.bic(m), bic_after: self.bic(refit), detail: () }
         }
         fn converge(&self, m: &Model, winner: Model, _round: usize) -> Option<Model> {
@@ -1546,8 +1531,7 @@ mod tests {
             partial: false,
             beside: std::cell::Cell::new(0),
             slow_combination: None,
-            capped_at: Vec::new(),
-            earn_share: 2.0 / 3.0,
+            capped_at: None,
             refits: std::cell::Cell::new(0),
             run_on_after: std::cell::Cell::new(None),
         };
@@ -1619,7 +1603,7 @@ mod tests {
         // x0 capped at 55 % of its coefficient leaves 0.81 + 3.61 of y's 7.61 (earns its place,
         // behind x1's 4); run on it leaves 3.61, ahead of x1
         let (mut r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + 1.9 * x[1][i]);
-        r.capped_at = vec![(0, 0.55)];
+        r.capped_at = Some((0, 0.55));
         let s = search(&r, start, &Budget::seconds(60.0));
         let first = &s.record.rounds[0];
         let gained: Vec<usize> = first
@@ -1633,30 +1617,6 @@ mod tests {
         assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
     }
 
-    /// A capped refit that stood ahead of every converged one, but behind one run on in the same
-    /// comparison, is run on too: "ahead" is what the comparison has reached, not what it started
-    /// from.
-    #[test]
-    fn a_capped_refit_behind_one_run_on_is_run_on_in_turn() {
-        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 1, N)).collect();
-        // of y's 12.45: x1 converged leaves 8.84; x0 at its cap 9.26, run on 8.45; x2 at its cap
-        // 8.63 (ahead of x1, behind x0 run on), run on 7.61
-        let (mut r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + 1.9 * x[1][i] + 2.2 * x[2][i]);
-        r.capped_at = vec![(0, 0.55), (2, 0.54)];
-        r.earn_share = 0.8;
-        let at_cap = |e: usize| {
-            r.bic(&r.refit_with(&start, &[&r.rank(&start).into_iter().find(|c| c.effect == e).unwrap()]).unwrap())
-        };
-        let run_on = |e: usize| r.bic(&r.fit(vec![e]));
-        assert!(at_cap(0) > run_on(1) && run_on(0) < run_on(1), "x0 is run on in any case");
-        assert!(at_cap(2) < run_on(1) && at_cap(2) > run_on(0), "x2 at its cap: ahead of x1, behind x0 run on");
-        assert!(run_on(2) < run_on(0));
-        let s = search(&r, start, &Budget::seconds(60.0));
-        assert_eq!(s.record.rounds[0].attempts.len(), 3, "three singles in the first round");
-        assert_eq!(s.path[1].cols, vec![2], "the first round's winner: x2, run on in turn");
-        assert_eq!(sorted(s.model.cols.clone()), vec![0, 1, 2]);
-    }
-
     /// A single refit the cap cut off short of its place, with the BIC already down, is run on once
     /// the round's other candidates are screened, and then judged on its converged fit (fresh rig
     /// 1109: run on as soon as it was screened, a gravity's run-on took the budget before the
@@ -1667,7 +1627,7 @@ mod tests {
         // x0 capped at 10 % of its coefficient leaves 3.24 + 2.25 of y's 6.25 (short of a third
         // off the excess); x1's refit leaves 4 (earns its place); run on, x0 leaves 2.25
         let (mut r, start) = rig(x.clone(), |i| 2.0 * x[0][i] + 1.5 * x[1][i]);
-        r.capped_at = vec![(0, 0.1)];
+        r.capped_at = Some((0, 0.1));
         let s = search(&r, start, &Budget::seconds(60.0));
         let first = &s.record.rounds[0];
         assert_eq!(first.attempts.len(), 2, "two singles in the first round");
