@@ -50,8 +50,11 @@ pub const SHORTLIST_SHARE: f64 = 0.25;
 
 /// `THERMOVIA_DEBUG=1`: where the loop's time goes, on stderr.
 pub fn debug(what: std::fmt::Arguments) {
+    // each line stamped with the time since the first, so that where a budget went reads off the log
+    static FIRST: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
     if std::env::var_os("THERMOVIA_DEBUG").is_some() {
-        eprintln!("{what}");
+        let first = FIRST.get_or_init(std::time::Instant::now);
+        eprintln!("[{:7.2} s] {what}", first.elapsed().as_secs_f64());
     }
 }
 
