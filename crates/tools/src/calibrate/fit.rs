@@ -192,6 +192,17 @@ impl Effect {
         }
     }
 
+    /// The effects whose levels this one splits per direction: asymmetric friction's half-differences
+    /// are over Coulomb friction's and link damping's levels, and without them one direction's level
+    /// is below zero (a friction that pushes, which interfaces.md refuses). A refit of it brings in
+    /// whichever of them the model lacks, from zero (`DeviceRig::screened_refit`).
+    pub fn levels_over(self) -> &'static [Effect] {
+        match self {
+            Effect::AsymmetricFriction => &[Effect::CoulombFriction, Effect::LinkDamping],
+            _ => &[],
+        }
+    }
+
     /// The lighter effect that does much of what this one does on runs that show little more of it,
     /// with fewer parameters: a gravity whose link angle barely moves is a constant torque, and an
     /// asymmetric friction whose viscous levels are alike is (Coulomb and link damping besides) a

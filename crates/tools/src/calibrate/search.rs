@@ -732,6 +732,26 @@ fn stribeck_velocity_starts(
 /// `current`'s parameters with the effects of `added` appended off: their levels at zero, their
 /// time or speed scales (the `ln_` parameters, which no level-zero fit can place) at the ranking's
 /// starts. The model these parameters make is `current`'s.
+/// The effects whose levels the candidates split per direction (`Effect::levels_over`) that
+/// neither the model's `effects` nor the candidates hold, as candidates started at zero.
+fn levels_lacking(effects: &[Effect], added: &[&Ranked<Effect>]) -> Vec<Ranked<Effect>> {
+    let mut lacking: Vec<Ranked<Effect>> = Vec::new();
+    for &e in added.iter().flat_map(|c| c.effect.levels_over()) {
+        let held = effects.contains(&e) || added.iter().any(|c| c.effect == e) || lacking.iter().any(|b| b.effect == e);
+        if !held {
+            lacking.push(Ranked {
+                effect: e,
+                score: 0.0,
+                predicted_delta_bic: 0.0,
+                start: vec![0.0; e.params().len()],
+                moved: Vec::new(),
+                evidence: String::new(),
+            });
+        }
+    }
+    lacking
+}
+
 fn off(current: &[f64], added: &[&Ranked<Effect>]) -> Vec<f64> {
     let mut q = current.to_vec();
     for c in added {
@@ -1330,6 +1350,13 @@ impl DeviceRig<'_, '_> {
         let drop: Vec<Effect> =
             drop.iter().copied().chain(added.iter().filter_map(|c| c.effect.takes_place_of())).collect();
         let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
+        // the levels a candidate splits per direction come in with it where the model lacks them
+        // (fresh rigs 1195, 1199 and 1201: asymmetric friction over Coulomb friction alone, its
+        // viscous levels at 0 and the link's drag taken by C, +14 to +117 %)
+        let base = levels_lacking(&spec.effects, added);
+        let single = as_single && added.len() == 1;
+        let added: Vec<&Ranked<Effect>> = base.iter().chain(added.iter().copied()).collect();
+        let added = &added[..];
         spec.effects.extend(added.iter().map(|c| c.effect));
         // What the runs cannot show is never refitted, alone, in a pair or in a swap (the ranking
         // lists it unprobed): its refit could only stand in for something else, or cost time for nothing.
@@ -1341,7 +1368,6 @@ impl DeviceRig<'_, '_> {
         // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
-        let single = as_single && added.len() == 1;
         let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
         let takes_nothing_out = !drop.iter().any(|e| m.fit.spec.effects.contains(e));
         let structures: Vec<Structure> =
@@ -1880,5 +1906,33 @@ mod tests {
             (ranked(Effect::StribeckFriction, vec![0.05, 0.3f64.ln()]), ranked(Effect::Gravity, vec![0.2, -0.1]));
         let current = [3.5, -1.0, 0.46];
         assert_eq!(off(&current, &[&stribeck, &gravity]), vec![3.5, -1.0, 0.46, 0.0, 0.3f64.ln(), 0.0, 0.0]);
+    }
+    #[test]
+    fn asymmetric_friction_brings_in_the_levels_it_splits_where_the_model_lacks_them() {
+        let ranked = |effect: Effect| Ranked {
+            effect,
+            score: 0.5,
+            predicted_delta_bic: -100.0,
+            start: vec![0.01; effect.params().len()],
+            moved: Vec::new(),
+            evidence: String::new(),
+        };
+        let (asym, coulomb, gravity) =
+            (ranked(Effect::AsymmetricFriction), ranked(Effect::CoulombFriction), ranked(Effect::Gravity));
+        let effects = |l: Vec<Ranked<Effect>>| l.iter().map(|c| (c.effect, c.start.clone())).collect::<Vec<_>>();
+        // over a model with a constant load only: both levels, from zero
+        assert_eq!(
+            effects(levels_lacking(&[Effect::ConstantLoad], &[&asym])),
+            vec![(Effect::CoulombFriction, vec![0.0]), (Effect::LinkDamping, vec![0.0])]
+        );
+        // Coulomb friction in the model or in the pair is not brought twice
+        assert_eq!(
+            effects(levels_lacking(&[Effect::CoulombFriction], &[&asym])),
+            vec![(Effect::LinkDamping, vec![0.0])]
+        );
+        assert_eq!(effects(levels_lacking(&[], &[&coulomb, &asym])), vec![(Effect::LinkDamping, vec![0.0])]);
+        assert!(levels_lacking(&[Effect::CoulombFriction, Effect::LinkDamping], &[&asym]).is_empty());
+        // an effect that splits no levels brings nothing
+        assert!(levels_lacking(&[], &[&gravity, &coulomb]).is_empty());
     }
 }
