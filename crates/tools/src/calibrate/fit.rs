@@ -194,7 +194,7 @@ impl Effect {
 
     /// The effects whose levels this one splits per direction: asymmetric friction's half-differences
     /// are over Coulomb friction's and link damping's levels, and without them one direction's level
-    /// is below zero (a friction that pushes, which interfaces.md refuses). A refit of it brings in
+    /// is below zero (a friction that pushes, where friction levels are ≥ 0). A refit of it brings in
     /// whichever of them the model lacks, from zero (`DeviceRig::screened_refit`).
     pub fn levels_over(self) -> &'static [Effect] {
         match self {

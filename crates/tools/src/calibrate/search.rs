@@ -729,9 +729,6 @@ fn stribeck_velocity_starts(
     Some(each)
 }
 
-/// `current`'s parameters with the effects of `added` appended off: their levels at zero, their
-/// time or speed scales (the `ln_` parameters, which no level-zero fit can place) at the ranking's
-/// starts. The model these parameters make is `current`'s.
 /// The effects whose levels the candidates split per direction (`Effect::levels_over`) that
 /// neither the model's `effects` nor the candidates hold, as candidates started at zero.
 fn levels_lacking(effects: &[Effect], added: &[&Ranked<Effect>]) -> Vec<Ranked<Effect>> {
@@ -752,6 +749,9 @@ fn levels_lacking(effects: &[Effect], added: &[&Ranked<Effect>]) -> Vec<Ranked<E
     lacking
 }
 
+/// `current`'s parameters with the effects of `added` appended off: their levels at zero, their
+/// time or speed scales (the `ln_` parameters, which no level-zero fit can place) at the ranking's
+/// starts. The model these parameters make is `current`'s.
 fn off(current: &[f64], added: &[&Ranked<Effect>]) -> Vec<f64> {
     let mut q = current.to_vec();
     for c in added {
@@ -1907,6 +1907,7 @@ mod tests {
         let current = [3.5, -1.0, 0.46];
         assert_eq!(off(&current, &[&stribeck, &gravity]), vec![3.5, -1.0, 0.46, 0.0, 0.3f64.ln(), 0.0, 0.0]);
     }
+
     #[test]
     fn asymmetric_friction_brings_in_the_levels_it_splits_where_the_model_lacks_them() {
         let ranked = |effect: Effect| Ranked {
