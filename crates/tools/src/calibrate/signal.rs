@@ -114,6 +114,21 @@ const BINOMIAL: [[u64; 11]; 11] = {
     c
 };
 
+/// `BINOMIAL` as floats, for the slide's origin shift.
+const BINOMIAL_F64: [[f64; 11]; 11] = {
+    let mut c = [[0.0f64; 11]; 11];
+    let mut j = 0;
+    while j < 11 {
+        let mut l = 0;
+        while l <= j {
+            c[j][l] = BINOMIAL[j][l] as f64;
+            l += 1;
+        }
+        j += 1;
+    }
+    c
+};
+
 /// A window's moments about an origin: Σu^j (j ≤ 10) and Σx·u^j (j ≤ 5), u the samples' times
 /// from the origin in some fixed unit; what a local least-squares quintic needs.
 #[derive(Clone, Copy, Default)]
@@ -141,21 +156,63 @@ impl WindowMoments {
         for j in 1..11 {
             d[j] = -delta * d[j - 1];
         }
-        let moved = |sums: &[f64], j: usize| (0..=j).map(|l| BINOMIAL[j][l] as f64 * d[j - l] * sums[l]).sum::<f64>();
         let (u, xu) = (self.u, self.xu);
         for j in 0..11 {
-            self.u[j] = moved(&u, j);
+            let mut sum = 0.0;
+            for l in 0..=j {
+                sum += BINOMIAL_F64[j][l] * d[j - l] * u[l];
+            }
+            self.u[j] = sum;
         }
         for j in 0..6 {
-            self.xu[j] = moved(&xu, j);
+            let mut sum = 0.0;
+            for l in 0..=j {
+                sum += BINOMIAL_F64[j][l] * d[j - l] * xu[l];
+            }
+            self.xu[j] = sum;
         }
     }
 
-    /// The least-squares quintic's value at the origin (None where the fit is singular).
+    /// The least-squares quintic's value at the origin (None where the fit is singular): the
+    /// first unknown of the normal equations H β = Σx·u^j, H the Hankel matrix of Σu^(i+j), by an
+    /// LDLᵀ factorisation written out for 6×6 (H is symmetric positive definite wherever the
+    /// window holds six distinct times; nalgebra's general LU took half of a jittered run's
+    /// smoothing, perf).
     fn centre(&self) -> Option<f64> {
-        let a = nalgebra::SMatrix::<f64, 6, 6>::from_fn(|i, j| self.u[i + j]);
-        let b = nalgebra::SVector::<f64, 6>::from_column_slice(&self.xu);
-        a.lu().solve(&b).map(|beta| beta[0]).filter(|v| v.is_finite())
+        let h = &self.u;
+        let mut l = [[0.0f64; 6]; 6];
+        let (mut d, mut inv) = ([0.0f64; 6], [0.0f64; 6]);
+        for i in 0..6 {
+            for j in 0..i {
+                let mut sum = h[i + j];
+                for k in 0..j {
+                    sum -= l[i][k] * l[j][k] * d[k];
+                }
+                l[i][j] = sum * inv[j];
+            }
+            let mut pivot = h[2 * i];
+            for k in 0..i {
+                pivot -= l[i][k] * l[i][k] * d[k];
+            }
+            if !(pivot > 0.0) {
+                return None;
+            }
+            (d[i], inv[i]) = (pivot, 1.0 / pivot);
+        }
+        // L z = b, then Lᵀ β = D⁻¹ z, back to β₀
+        let mut z = self.xu;
+        for i in 0..6 {
+            for k in 0..i {
+                z[i] -= l[i][k] * z[k];
+            }
+        }
+        for i in (0..6).rev() {
+            z[i] *= inv[i];
+            for k in i + 1..6 {
+                z[i] -= l[k][i] * z[k];
+            }
+        }
+        Some(z[0]).filter(|v| v.is_finite())
     }
 }
 
@@ -1184,6 +1241,29 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The written-out LDLᵀ solve gives the quintic nalgebra's LU gives, to rounding, on windows
+    /// narrow and wide, even and jittered; a window of one time has none.
+    #[test]
+    fn the_window_quintic_solves_as_a_general_lu_does() {
+        let mut rng = super::super::synthetic::SplitMix::new(28);
+        for (m, jitter) in [(3usize, 0.0), (3, 0.2), (40, 0.2), (600, 0.2), (600, 0.0)] {
+            let mut moments = WindowMoments::default();
+            for i in 0..=2 * m {
+                let u = (i as f64 - m as f64 + jitter * (2.0 * rng.uniform() - 1.0)) / m as f64;
+                moments.add(u, (3.0 * u).sin() + 0.01 * rng.normal(), 1.0);
+            }
+            let a = nalgebra::SMatrix::<f64, 6, 6>::from_fn(|i, j| moments.u[i + j]);
+            let b = nalgebra::SVector::<f64, 6>::from_column_slice(&moments.xu);
+            let lu = a.lu().solve(&b).unwrap()[0];
+            let ldl = moments.centre().unwrap();
+            assert!((ldl - lu).abs() <= 1e-9 * lu.abs().max(1.0), "±{m}, jitter {jitter}: {ldl} against {lu}");
+        }
+        assert_eq!(WindowMoments::default().centre(), None, "an empty window");
+        let mut one = WindowMoments::default();
+        one.add(0.0, 1.0, 1.0);
+        assert_eq!(one.centre(), None, "one time");
     }
 
     #[test]
