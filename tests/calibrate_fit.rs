@@ -383,3 +383,31 @@ fn a_jittered_log_is_simulated_on_a_uniform_grid_and_read_at_its_stamps() {
     assert!(jittered_error < 1.2 * even_error, "jittered {jittered_error:.2e} rad, even {even_error:.2e} rad");
     assert!(cubic < noise / 4.0, "{} substeps: {cubic:.2e} rad", jittered.substeps);
 }
+
+/// Why a thermal lag's visibility is simulated (`Effect::level_is_linear`): a link swung at 0.5 Hz
+/// while its housing drifts 5 K up from 45 °C over 60 s. Behind a lag as long as the run (50 s,
+/// fresh rig 1261's), the Jacobian times the time constant reads well under what the lag does to
+/// the link (its outputs less those without it); behind a short one (0.5 s) the two agree.
+#[test]
+fn a_lag_as_long_as_the_run_does_more_than_its_slope_times_its_constant() {
+    use thermovia_tools::calibrate::fit::rms;
+    let sim = Simulator::new(common::fmu(), 2).unwrap();
+    let spec = viscous_spec(vec![Effect::ThermalLag]);
+    let mut input = sine_input(250.0, 60.0, 0.5, 0.3, 0.018);
+    input.housing_k = input.time.iter().map(|t| 318.15 + 5.0 * (1.0 - (-t / 50.0).exp())).collect();
+    let prob = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[45.0]).unwrap();
+    let ratio = |tau: f64| {
+        let p = vec![240f64.ln(), 1.5f64.ln(), tau];
+        let with = prob.outputs(&spec, &p).unwrap();
+        let without = prob.outputs(&spec, &[p[0], p[1], 0.0]).unwrap();
+        let jacobian = prob.jacobian(&spec, &p, &with).unwrap();
+        let linearised: Vec<f64> = jacobian.column(2).iter().map(|j| j * tau).collect();
+        let simulated: Vec<f64> = with[0].iter().zip(&without[0]).map(|(a, b)| a - b).collect();
+        assert!(rms(&simulated) > 0.0, "a {tau} s lag does nothing");
+        rms(&linearised) / rms(&simulated)
+    };
+    let (long, short) = (ratio(50.0), ratio(0.5));
+    eprintln!("linearised over simulated share: 50 s lag {long:.3}, 0.5 s lag {short:.3}");
+    assert!(long < 0.8, "a 50 s lag: the slope reads {long:.3} of the share");
+    assert!((short - 1.0).abs() < 0.1, "a 0.5 s lag: the slope reads {short:.3} of the share");
+}

@@ -398,7 +398,9 @@ fn visibility(prob: &Problem, fit: &Fit, floor: f64, e: Effect) -> Option<f64> {
     if cols.is_empty() || rows == 0 || columns != fit.p.len() {
         return None;
     }
-    let share = super::fit::linearised_shares(&fit.jacobian, &fit.p, &cols);
+    let linearised = || super::fit::linearised_shares(&fit.jacobian, &fit.p, &cols);
+    let share =
+        if e.level_is_linear() { linearised() } else { simulated_share(prob, fit, &cols).unwrap_or_else(linearised) };
     let per_sample = super::fit::rms(&share) / floor;
     let lengths = prob.lengths();
     if rows != fit.residual.len() || lengths.iter().sum::<usize>() != rows {
@@ -408,6 +410,22 @@ fn visibility(prob: &Problem, fit: &Fit, floor: f64, e: Effect) -> Option<f64> {
         fit.spec.offset_of(e, prob.n_groups).map_or_else(Vec::new, |o| (o..o + e.params().len()).collect());
     let beyond = super::fit::share_beyond_the_rest(&fit.jacobian, &share, &own);
     Some(per_sample.max(super::fit::own_time_scale_share(&beyond, &fit.residual, &lengths, fit.p.len())))
+}
+
+/// What the levels `cols` of `fit` do to its outputs, simulated: the fit's outputs less the same
+/// model's with those levels at zero (for an effect whose outputs do not move in proportion to
+/// its levels, `Effect::level_is_linear`). None where the model without them does not simulate or
+/// the fit's outputs are not the problem's samples.
+fn simulated_share(prob: &Problem, fit: &Fit, cols: &[usize]) -> Option<Vec<f64>> {
+    let mut without = fit.p.clone();
+    for &c in cols {
+        without[c] = 0.0;
+    }
+    let outputs = prob.outputs(&fit.spec, &without)?;
+    let share: Vec<f64> =
+        fit.outputs.iter().zip(&outputs).flat_map(|(a, b)| a.iter().zip(b).map(|(x, y)| x - y)).collect();
+    (share.len() == fit.residual.len() && fit.outputs.iter().map(Vec::len).eq(outputs.iter().map(Vec::len)))
+        .then_some(share)
 }
 
 /// The indices of `e`'s levels in `fit`'s parameters: the effect is gone when they are zero. A
