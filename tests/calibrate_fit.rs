@@ -298,6 +298,18 @@ fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
     assert!(e.p[2] > 0.0 && e.p[3] >= 0.0 && (k / 82.0).ln().abs() < 3f64.ln(), "start {:?}, K {k:.1}", e.p);
 }
 
+/// `input` (`sine_input`'s 5 Hz swing of 0.38 rad) with a logger's stamps: each but the first and
+/// the last moved by up to ±20 % of `period`, the motor read at the moved stamps.
+fn jittered_5hz(input: &SimInput, period: f64) -> SimInput {
+    let mut jittered = input.clone();
+    let n = jittered.time.len();
+    for (k, t) in jittered.time.iter_mut().enumerate().take(n - 1).skip(1) {
+        *t += 0.2 * period * ((k as f64 * 0.7548776662).fract() * 2.0 - 1.0);
+    }
+    jittered.motor = jittered.time.iter().map(|t| 0.38 * (std::f64::consts::TAU * 5.0 * t).sin()).collect();
+    jittered
+}
+
 /// A 5 Hz sine logged at 200 Hz (fresh rig 852's shape: 40 samples a period, a link at 10.5 Hz):
 /// driven by straight lines between its samples, the link errs by 0.2 % of the swing against the
 /// same motion driven at 4 kHz; the cubic's substeps (`motor_substeps` takes them where the chords'
@@ -318,11 +330,7 @@ fn a_motor_logged_coarsely_drives_the_link_through_the_cubic_between_its_samples
     assert_eq!(motor_substeps(&fine.time, &fine.motor, noise), 1, "40 samples a period at 4 kHz need no substeps");
     // a logger's stamps jittered by up to ±20 % of the period (the motor read at each stamp): the
     // curvature is read in the samples' own times, so the count stays within one of the even grid's
-    let mut jittered = coarse.clone();
-    for (k, t) in jittered.time.iter_mut().enumerate().skip(1) {
-        *t += 0.2 * 0.005 * ((k as f64 * 0.7548776662).fract() * 2.0 - 1.0);
-    }
-    jittered.motor = jittered.time.iter().map(|t| 0.38 * (std::f64::consts::TAU * 5.0 * t).sin()).collect();
+    let jittered = jittered_5hz(&coarse, 0.005);
     let m_jittered = motor_substeps(&jittered.time, &jittered.motor, noise);
     assert!(m_jittered.abs_diff(m) <= 1, "jittered stamps: {m_jittered} substeps, {m} on the even grid");
     let slow = sine_input(1000.0, 4.0, 0.5, 0.38, 0.055);
@@ -365,12 +373,7 @@ fn a_jittered_log_is_simulated_on_a_uniform_grid_and_read_at_its_stamps() {
         (y.iter().zip(&input.time).map(|(a, &t)| (a - at(t)).powi(2)).sum::<f64>() / y.len() as f64).sqrt()
     };
     let even = sine_input(1000.0, 2.0, 5.0, 0.38, 0.055);
-    let mut jittered = even.clone();
-    let n = jittered.time.len();
-    for (k, t) in jittered.time.iter_mut().enumerate().take(n - 1).skip(1) {
-        *t += 0.2 * 1e-3 * ((k as f64 * 0.7548776662).fract() * 2.0 - 1.0);
-    }
-    jittered.motor = jittered.time.iter().map(|t| 0.38 * (std::f64::consts::TAU * 5.0 * t).sin()).collect();
+    let mut jittered = jittered_5hz(&even, 1e-3);
     let (even_error, jittered_error) = (error(&even), error(&jittered));
     let noise = 1e-5;
     jittered.substeps = motor_substeps(&jittered.time, &jittered.motor, noise);

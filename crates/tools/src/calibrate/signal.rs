@@ -98,30 +98,16 @@ fn local_quintic(t: &[f64], x: &[f64], k: usize, m: usize) -> f64 {
     moments.centre().unwrap_or(x[k])
 }
 
-/// Binomial coefficients C(j, l) for j, l ≤ 10 (Pascal's triangle).
-const BINOMIAL: [[u64; 11]; 11] = {
-    let mut c = [[0u64; 11]; 11];
-    let mut j = 0;
-    while j < 11 {
-        c[j][0] = 1;
-        let mut l = 1;
-        while l <= j {
-            c[j][l] = c[j - 1][l - 1] + c[j - 1][l];
-            l += 1;
-        }
-        j += 1;
-    }
-    c
-};
-
-/// `BINOMIAL` as floats, for the slide's origin shift.
-const BINOMIAL_F64: [[f64; 11]; 11] = {
+/// Binomial coefficients C(j, l) for j, l ≤ 10 (Pascal's triangle), as floats (exact: at most 252)
+/// for the slide's origin shift.
+const BINOMIAL: [[f64; 11]; 11] = {
     let mut c = [[0.0f64; 11]; 11];
     let mut j = 0;
     while j < 11 {
-        let mut l = 0;
+        c[j][0] = 1.0;
+        let mut l = 1;
         while l <= j {
-            c[j][l] = BINOMIAL[j][l] as f64;
+            c[j][l] = c[j - 1][l - 1] + c[j - 1][l];
             l += 1;
         }
         j += 1;
@@ -156,21 +142,8 @@ impl WindowMoments {
         for j in 1..11 {
             d[j] = -delta * d[j - 1];
         }
-        let (u, xu) = (self.u, self.xu);
-        for j in 0..11 {
-            let mut sum = 0.0;
-            for l in 0..=j {
-                sum += BINOMIAL_F64[j][l] * d[j - l] * u[l];
-            }
-            self.u[j] = sum;
-        }
-        for j in 0..6 {
-            let mut sum = 0.0;
-            for l in 0..=j {
-                sum += BINOMIAL_F64[j][l] * d[j - l] * xu[l];
-            }
-            self.xu[j] = sum;
-        }
+        shift_sums(&mut self.u, &d);
+        shift_sums(&mut self.xu, &d);
     }
 
     /// The least-squares quintic's value at the origin (None where the fit is singular): the
@@ -213,6 +186,18 @@ impl WindowMoments {
             }
         }
         Some(z[0]).filter(|v| v.is_finite())
+    }
+}
+
+/// Power sums Σu^j moved to a new origin in place, `d[k]` = (−δ)^k: each new sum reads only the
+/// old sums of lower or equal order, so the orders are taken from the highest down.
+fn shift_sums(sums: &mut [f64], d: &[f64; 11]) {
+    for j in (0..sums.len()).rev() {
+        let mut sum = 0.0;
+        for l in 0..=j {
+            sum += BINOMIAL[j][l] * d[j - l] * sums[l];
+        }
+        sums[j] = sum;
     }
 }
 
