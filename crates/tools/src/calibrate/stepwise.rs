@@ -803,8 +803,11 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
             // Where the ranking is blind (`Rig::rankable`), its predictions say nothing of what a
             // refit from a start away from the current model finds: every candidate left is tried
             // (fresh rig 178: a limp, dragging transmission standing in for a 9 mrad backlash, whose
-            // linearised share at zero width predicted no gain; it was never refitted).
-            if !white && (!rankable || !round.attempts.is_empty()) && round.attempts.iter().all(|a| !a.verdict.keep) {
+            // linearised share at zero width predicted no gain; it was never refitted), whether or not
+            // one the ranking promised has earned its place already, and the best is the round's (fresh
+            // rig 1211: gravity earned its place on a limp baseline and the Coulomb friction it stood
+            // in for was never refitted).
+            if !white && (!rankable || (!round.attempts.is_empty() && round.attempts.iter().all(|a| !a.verdict.keep))) {
                 let tried: Vec<R::Effect> = round.attempts.iter().map(|a| a.effects[0]).collect();
                 for c in candidates
                     .iter()
@@ -1790,6 +1793,26 @@ mod tests {
         let kept: Vec<usize> =
             s.record.rounds[0].attempts.iter().filter(|a| a.verdict.keep).map(|a| a.effects[0]).collect();
         assert_eq!(kept, vec![1], "found by a single refit of its own");
+    }
+
+    /// Where the ranking is blind, the candidates it predicts nothing for are refitted even when one
+    /// it predicted for has earned its place, and the round keeps the better: the first to earn its
+    /// place is not the round's winner by default (fresh rig 1211, a link the baseline made limp:
+    /// gravity, predicted, earned its place first, and Coulomb friction, predicted nothing, was
+    /// never refitted; the search stayed in gravity's valley and ended with no effect at 8× its floor).
+    #[test]
+    fn a_blind_ranking_refits_every_candidate_even_after_one_earned_its_place() {
+        let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 1, N)).collect();
+        let (mut r, start) = rig(x.clone(), |i| x[0][i] + 1.2 * x[1][i]);
+        r.unseen = Some(1);
+        r.blind = true;
+        let s = search(&r, start, &Budget::seconds(60.0));
+        let first = &s.record.rounds[0];
+        let tried: Vec<usize> = first.attempts.iter().map(|a| a.effects[0]).collect();
+        assert!(tried.contains(&0) && tried.contains(&1), "both refitted in round 1: {tried:?}");
+        let kept: Vec<usize> = first.attempts.iter().filter(|a| a.verdict.keep).map(|a| a.effects[0]).collect();
+        assert_eq!(kept, vec![1], "the larger gain wins the round");
+        assert_eq!(sorted(s.model.cols.clone()), vec![0, 1]);
     }
 
     /// An excess the ranking sees only over its base (the Stribeck excess over Coulomb friction) is
