@@ -291,8 +291,8 @@ pub trait Rig {
     fn structure_left(&self, m: &Self::Model) -> bool;
     /// False where the linearised ranking is blind (the device's fit at a bound, where a rigid link
     /// does not feel a small probe, or dragging the link through its damper): the shortlist then
-    /// takes the candidates predicting a gain whatever their score, and where none of them earns
-    /// its place, every candidate left is refitted (pairs are formed either way).
+    /// takes the candidates predicting a gain whatever their score, and every candidate left is
+    /// refitted too, whether or not one of those earned its place (pairs are formed either way).
     fn rankable(&self, m: &Self::Model) -> bool;
     fn state(&self, m: &Self::Model) -> Self::State;
     /// Candidates, best first.
@@ -1799,7 +1799,7 @@ mod tests {
     /// it predicted for has earned its place, and the round keeps the better: the first to earn its
     /// place is not the round's winner by default (fresh rig 1211, a link the baseline made limp:
     /// gravity, predicted, earned its place first, and Coulomb friction, predicted nothing, was
-    /// never refitted; the search stayed in gravity's valley and ended with no effect at 8× its floor).
+    /// never refitted; the search stayed in gravity's valley and ended with no effect, 6.6× its floor).
     #[test]
     fn a_blind_ranking_refits_every_candidate_even_after_one_earned_its_place() {
         let x: Vec<Vec<f64>> = (0..3).map(|k| normals(k + 1, N)).collect();
