@@ -34,7 +34,7 @@ fn run() -> Result<(), Error> {
     let report = read_json(&rig.join("calibration/report.json"))?;
     let runs = data::read_inputs_with(&[rig.join("runs")], data::ReadOptions { repair_samples: false })?;
     let (group, temperatures) = conditioning::group_runs(&runs);
-    let inputs = runs.iter().map(|r| conditioning::sim_input(r, None).0).collect();
+    let inputs = runs.iter().map(|r| conditioning::sim_input(r, None, false).0).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();
     let fmu = thermovia_tools::open_fmu(None)?;
     let simulator = sim::Simulator::new(fmu, 2)?;

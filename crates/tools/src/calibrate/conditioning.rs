@@ -101,8 +101,15 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>, sinusoid: bool) -> us
 /// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
 /// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
 /// rectifies into bias. Returns how the motor angle was conditioned too, for the report.
-pub fn sim_input(r: &Run, smoothing_seconds: Option<f64>) -> (super::sim::SimInput, MotorConditioning) {
-    let (motor, conditioning) = model_motor(r, smoothing_seconds);
+/// `count_edge`: a run that is not a single sinusoid has its band's edge where the motion stands out
+/// of the count's whole error (`signal::band_limited_to_count`; `calibrate` fits the baseline both
+/// ways and keeps the lower BIC).
+pub fn sim_input(
+    r: &Run,
+    smoothing_seconds: Option<f64>,
+    count_edge: bool,
+) -> (super::sim::SimInput, MotorConditioning) {
+    let (motor, conditioning) = model_motor(r, smoothing_seconds, count_edge);
     let substeps = super::sim::motor_substeps(&r.time, &motor, super::signal::robust_noise(&r.time, &r.link));
     let input = super::sim::SimInput {
         time: r.time.clone(),
@@ -135,7 +142,7 @@ pub enum MotorConditioning {
 /// backlash take a kick that stays in its play: 3.7× the noise floor on a synthetic backlash rig).
 /// Band-limited rather than smoothed by default: on the campaign's CI subset, device rigs inside
 /// the library 17/28 → 19/28, held-out seeds 51–90 12/22 → 15/22, none lost (docs/calibration.md).
-fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorConditioning) {
+fn model_motor(r: &Run, smoothing_seconds: Option<f64>, count_edge: bool) -> (Vec<f64>, MotorConditioning) {
     let n = r.time.len();
     let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
     // only the band limit (no smoothing given) asks whether the run is a sinusoid
@@ -148,8 +155,18 @@ fn model_motor(r: &Run, smoothing_seconds: Option<f64>) -> (Vec<f64>, MotorCondi
         // multisines have no top frequency to cap at: three times the rms frequency put the edge
         // under the motion that rings the link (campaign rig 243, steps: 7.3 Hz on a 7.3 Hz link,
         // 1.24× the floor with every parameter within 0.4 %; uncapped 1.02×), so theirs is the noise's.
+        // With `count_edge`, theirs is where the motion stands out of the count's whole error
+        // (`signal::band_limited_to_count`): the noise's edge can pass an encoder's count the noise
+        // does not dither (fresh rig 1292, a 0.2–3 Hz multisine on 1 580 counts a turn: its edge at
+        // 120 Hz drove an 18 Hz link with the count's steps, C +628 %; capped at 4 Hz, C within 10 %
+        // and the BIC 11 900 lower). Which of the two holds is the fit's to say.
         let cap = sinusoid.then(|| band_edge_cap(r.frequency_hz)).filter(|&cap| cap > 0.0);
-        if let Some((limited, edge_hz)) = band_limited(&r.time, &r.motor, cap) {
+        let limited = if count_edge && !sinusoid {
+            super::signal::band_limited_to_count(&r.time, &r.motor)
+        } else {
+            band_limited(&r.time, &r.motor, cap)
+        };
+        if let Some((limited, edge_hz)) = limited {
             return (fade_ends(&r.time, &limited, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
         }
     }
@@ -192,7 +209,7 @@ mod tests {
     }
 
     fn edge(r: &Run) -> f64 {
-        match sim_input(r, None).1 {
+        match sim_input(r, None, false).1 {
             MotorConditioning::BandLimited { edge_hz } => edge_hz,
             other => panic!("not band-limited: {other:?}"),
         }

@@ -286,18 +286,53 @@ fn calibrate_device(
     let (group, temperatures) = group_runs(&runs);
     let conditioning_started = std::time::Instant::now();
     let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
-        runs.iter().map(|r| sim_input(r, args.input_smoothing)).unzip();
+        runs.iter().map(|r| sim_input(r, args.input_smoothing, false)).unzip();
     let conditioning_seconds = conditioning_started.elapsed().as_secs_f64();
-    let measured = runs.iter().map(|r| r.link.clone()).collect();
-    let mut prob = fit::Problem::new(sim, inputs, measured, group, &temperatures)?;
+    let measured: Vec<Vec<f64>> = runs.iter().map(|r| r.link.clone()).collect();
+    let budget = stepwise::Budget::since(t0, args.search_budget);
+    let mut prob = fit::Problem::new(sim, inputs, measured.clone(), group.clone(), &temperatures)?;
+    // Runs that are not single sinusoids: their motor's band edge as the noise sets it, or as their
+    // count's whole error does, whichever the baseline fits with a BIC lower by the margin
+    // (`sim_input`); the search starts from that baseline.
+    let mut conditioning = conditioning;
+    let mut count_edge = false;
+    let mut band_bics: Option<(f64, f64)> = None;
+    let mut first: Option<(search::Structure, fit::Fit)> = None;
+    if args.input_smoothing.is_none() {
+        let (capped, capped_conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
+            runs.iter().map(|r| sim_input(r, None, true)).unzip();
+        if capped_conditioning != conditioning {
+            let other = fit::Problem::new(sim, capped, measured, group, &temperatures)?;
+            // each fit timed as the search's first is (the budget's checks need what a fit costs)
+            let law = search::damping_laws(&prob).allowed[0];
+            let noise = budget.timed(|| search::baseline(&prob, law, budget.end()));
+            let count = budget.timed(|| search::baseline(&other, law, budget.end()));
+            stepwise::debug(format_args!(
+                "motor band: the noise's edge, baseline BIC {:?}; the count's, {:?}",
+                noise.as_ref().map(|f| f.bic()),
+                count.as_ref().map(|f| f.bic())
+            ));
+            if let (Ok(noise), Ok(count)) = (noise, count) {
+                band_bics = Some((noise.bic(), count.bic()));
+                if count.bic() < noise.bic() - stepwise::BIC_MARGIN {
+                    prob = other;
+                    conditioning = capped_conditioning;
+                    count_edge = true;
+                    first = Some((law, count));
+                } else {
+                    first = Some((law, noise));
+                }
+            }
+        }
+    }
     let laws = search::damping_laws(&prob);
+    let first = first.filter(|(law, _)| *law == laws.allowed[0]).map(|(_, f)| f);
     // the black-box references need no FMU: computed beside the search
     let groups = prob.group.clone();
-    let budget = stepwise::Budget::since(t0, args.search_budget);
     budget.reserve_for_report(REPORT_PER_CONDITIONING * conditioning_seconds);
     let (outcome, references) = std::thread::scope(|scope| {
         let refs = scope.spawn(|| reference::black_box(&runs, &groups));
-        (search::calibrate(&mut prob, &laws, &budget), refs.join())
+        (search::calibrate(&mut prob, &laws, &budget, first), refs.join())
     });
     let mut outcome = outcome?;
     stepwise::debug(format_args!("search and reference: {:?}", t0.elapsed()));
@@ -305,7 +340,7 @@ fn calibrate_device(
     let mut notes: Vec<String> = Vec::new();
     let held_prob = (!held.is_empty()).then(|| {
         prob.held_out(
-            held.iter().map(|r| sim_input(r, args.input_smoothing).0).collect(),
+            held.iter().map(|r| sim_input(r, args.input_smoothing, count_edge).0).collect(),
             held.iter().map(|r| r.link.clone()).collect(),
             held_out_groups(&held, &temperatures),
         )
@@ -402,6 +437,14 @@ fn calibrate_device(
     let reverted = !dropped.is_empty();
     let seconds = t0.elapsed().as_secs_f64();
     let mut report = report::report_json(&runs, &prob, &outcome, &temperatures, seconds);
+    if let Some((noise, count)) = band_bics {
+        report["motor_band"] = serde_json::json!({
+            "edge": if count_edge { "count" } else { "noise" },
+            "baseline_bic_noise": noise,
+            "baseline_bic_count": count,
+            "rule": format!("runs that are not single sinusoids: the motor angle's band edge where its variance above meets twice white noise's at its second-difference noise (noise), or at least its count's whole error q²/12 (count); the baseline is fitted with both and the count's taken where its BIC is lower by more than {}", stepwise::BIC_MARGIN),
+        });
+    }
     let lengths = prob.lengths();
     let mut offset = 0;
     for (i, (j, r)) in report["runs"].as_array_mut().into_iter().flatten().zip(&runs).enumerate() {
@@ -447,7 +490,14 @@ fn calibrate_device(
     let simulated = (!budget.past_end())
         .then(|| {
             prob.sim.within(budget.end(), || {
-                input_error_floor(&runs, &prob, &outcome.final_fit, args.input_smoothing, &budget, conditioning_seconds)
+                input_error_floor(
+                    &runs,
+                    &prob,
+                    &outcome.final_fit,
+                    (args.input_smoothing, count_edge),
+                    &budget,
+                    conditioning_seconds,
+                )
             })
         })
         .flatten();
@@ -541,7 +591,7 @@ fn input_error_floor(
     runs: &[data::Run],
     prob: &fit::Problem,
     fit: &fit::Fit,
-    smoothing: Option<f64>,
+    (smoothing, count_edge): (Option<f64>, bool),
     budget: &stepwise::Budget,
     conditioning_seconds: f64,
 ) -> Option<f64> {
@@ -580,7 +630,7 @@ fn input_error_floor(
                     })
                     .collect();
                 let perturbed = data::Run { motor, ..r.clone() };
-                sim::SimInput { motor: sim_input(&perturbed, smoothing).0.motor, ..input.clone() }
+                sim::SimInput { motor: sim_input(&perturbed, smoothing, count_edge).0.motor, ..input.clone() }
             })
             .collect();
         let other = prob.held_out(inputs, prob.measured.clone(), prob.group.clone());

@@ -1675,13 +1675,18 @@ fn drop_unseen(
     (model.fit, model.sig)
 }
 
-pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget) -> Result<Outcome, String> {
+/// `first`: the baseline under the first structure the laws allow, where the caller fitted it
+/// already (`calibrate`'s choice of the motor's band), timed by `budget`.
+pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget, first: Option<Fit>) -> Result<Outcome, String> {
     let mut rows = Vec::new();
     let t = std::time::Instant::now();
     let estimated_speeds = prob.initial_speeds();
     // timed: on long records the baseline is the longest fit, and the budget's checks after it
     // (whether a backlash scan, a fold, still fits) must know what a fit costs here
-    let first = budget.timed(|| baseline(prob, laws.allowed[0], budget.end()))?;
+    let first = match first {
+        Some(f) => f,
+        None => budget.timed(|| baseline(prob, laws.allowed[0], budget.end()))?,
+    };
     debug(format_args!("baseline {:?}: {:?}, {} iterations", laws.allowed[0], t.elapsed(), first.iterations));
     // With a model to report, the budget is a hard end: a fit in progress when it runs out stops
     // at its best so far. Only this first fit's start may run past it, to the backstop of
