@@ -51,7 +51,7 @@ fn top_frequency(r: &Run, sinusoid: bool) -> f64 {
 /// A sinusoidal motor angle's band reaches at most this many times its frequency, its half-power
 /// point there (`band_edge_cap`): the passband of the smoothing the band fades into at its ends (a
 /// quintic Savitzky–Golay window of half-width 0.1 s over the top frequency passes up to about ten
-/// times it, Schafer 2011); other runs are not capped (`model_motor`). The noise alone does not set
+/// times it, Schafer 2011); other runs are not capped (`MotorReading::motor`). The noise alone does not set
 /// a sinusoid's edge: an encoder's error near its turns, where it dwells on a count, is no white
 /// noise, and up to 13 Hz of it (a 10 000-count encoder, 0.5 Hz at 1 kHz) stood above the white
 /// level; passed to a never-pulling backlash it left the fit at 2.2× its noise floor.
@@ -70,7 +70,7 @@ pub fn band_edge_cap(top_hz: f64) -> f64 {
 }
 
 /// Half-width in samples of the motor angle's smoothing (`seconds`: given, or None for the
-/// band limit's ends, `model_motor`): 0.1 s over the highest frequency the run carries
+/// band limit's ends, `MotorReading::motor`): 0.1 s over the highest frequency the run carries
 /// (`top_frequency`). A quintic Savitzky–Golay window of M samples passes up to about fs/M
 /// (Schafer 2011), ten times that frequency. A motor angle without noise (second-difference noise
 /// below 1e-12 of its swing) is not smoothed. `sinusoid`: whether the run reads as a single one
@@ -96,7 +96,7 @@ pub fn smoothing_half_width(r: &Run, seconds: Option<f64>, sinusoid: bool) -> us
 }
 
 /// The model's inputs from a measured run. The motor angle is band-limited to its motion
-/// (`model_motor`), or smoothed with `smoothing_seconds` (its half-width, 0 the raw samples),
+/// (`MotorReading::motor`), or smoothed with `smoothing_seconds` (its half-width, 0 the raw samples),
 /// because it sets the commanded speed of every step: encoder steps of 2π/10000 at 1 kHz make the
 /// raw slope jitter by ~0.6 rad/s, which the PCL damper (C = E''κr_p²/ω, ~20 N·m·s/rad at 40 °C
 /// and 0.5 Hz) passes to the link as torque noise, and which a never-pulling backlash contact
@@ -109,9 +109,25 @@ pub fn sim_input(
     smoothing_seconds: Option<f64>,
     count_edge: bool,
 ) -> (super::sim::SimInput, MotorConditioning) {
-    let (motor, conditioning) = model_motor(r, smoothing_seconds, count_edge);
-    let substeps = super::sim::motor_substeps(&r.time, &motor, super::signal::robust_noise(&r.time, &r.link));
-    let input = super::sim::SimInput {
+    let reading = MotorReading::of(r, smoothing_seconds);
+    let (motor, conditioning) = reading.motor(r, count_edge);
+    (input_of(r, motor, reading.link_noise), conditioning)
+}
+
+/// [`sim_input`] by the noise's band edge, and the run's reading, which gives the count's edge
+/// without reading the run again ([`MotorReading::by_count`]).
+pub fn sim_input_and_reading(
+    r: &Run,
+    smoothing_seconds: Option<f64>,
+) -> ((super::sim::SimInput, MotorConditioning), MotorReading) {
+    let reading = MotorReading::of(r, smoothing_seconds);
+    let (motor, conditioning) = reading.motor(r, false);
+    ((input_of(r, motor, reading.link_noise), conditioning), reading)
+}
+
+fn input_of(r: &Run, motor: Vec<f64>, link_noise: f64) -> super::sim::SimInput {
+    let substeps = super::sim::motor_substeps(&r.time, &motor, link_noise);
+    super::sim::SimInput {
         time: r.time.clone(),
         motor,
         housing_k: r.temperature_c.iter().map(|t| t + crate::report::ZERO_CELSIUS).collect(),
@@ -123,8 +139,7 @@ pub fn sim_input(
         after_gap: r.segment.is_some_and(|(k, _)| k > 1),
         housing_before: r.thermocouple_before.clone(),
         substeps,
-    };
-    (input, conditioning)
+    }
 }
 
 /// How the motor angle that drives the model was conditioned: the band's edge (Hz) or the
@@ -135,42 +150,72 @@ pub enum MotorConditioning {
     Smoothed { half_width_s: f64 },
 }
 
-/// The motor angle that drives the model, and how it was conditioned (`sim_input`): with
-/// `smoothing_seconds`, smoothed; else band-limited to its motion (`signal::band_limited`, a
-/// sinusoid's edge capped by `band_edge_cap`) and faded into the smoothing within one period of the edge of either
-/// end, where the band limit's reflection is a guess (raw samples there let a never-pulling
-/// backlash take a kick that stays in its play: 3.7× the noise floor on a synthetic backlash rig).
-/// Band-limited rather than smoothed by default: on the campaign's CI subset, device rigs inside
-/// the library 17/28 → 19/28, held-out seeds 51–90 12/22 → 15/22, none lost (docs/calibration.md).
-fn model_motor(r: &Run, smoothing_seconds: Option<f64>, count_edge: bool) -> (Vec<f64>, MotorConditioning) {
-    let n = r.time.len();
-    let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
-    // only the band limit (no smoothing given) asks whether the run is a sinusoid
-    let sinusoid = smoothing_seconds.is_none() && super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz);
-    let half = smoothing_half_width(r, smoothing_seconds, sinusoid);
-    let smoothed = smooth(&r.time, &r.motor, half);
-    if smoothing_seconds.is_none() {
-        // A sinusoid's edge is capped where its smoothing's passband ends (`band_edge_cap`): at its
-        // turns the encoder dwells on a count, an error the white-noise rule cannot see. Steps and
-        // multisines have no top frequency to cap at: three times the rms frequency put the edge
-        // under the motion that rings the link (campaign rig 243, steps: 7.3 Hz on a 7.3 Hz link,
-        // 1.24× the floor with every parameter within 0.4 %; uncapped 1.02×), so theirs is the noise's.
-        // With `count_edge`, theirs is where the motion stands out of the count's whole error
-        // (`signal::band_limited_to_count`): the noise's edge can pass an encoder's count the noise
-        // does not dither (fresh rig 1292, a 0.2–3 Hz multisine on 1 580 counts a turn: its edge at
-        // 120 Hz drove an 18 Hz link with the count's steps, C +628 %; capped at 4 Hz, C within 10 %
-        // and the BIC 11 900 lower). Which of the two holds is the fit's to say.
-        let cap = sinusoid.then(|| band_edge_cap(r.frequency_hz)).filter(|&cap| cap > 0.0);
-        let limited = if count_edge && !sinusoid {
-            super::signal::band_limited_to_count(&r.time, &r.motor)
-        } else {
-            band_limited(&r.time, &r.motor, cap)
-        };
-        if let Some((limited, edge_hz)) = limited {
-            return (fade_ends(&r.time, &limited, &smoothed, edge_hz), MotorConditioning::BandLimited { edge_hz });
-        }
+/// A run's motor angle read once for [`MotorReading::motor`]: whether it is a single sinusoid,
+/// and its smoothing (both band edges need them).
+pub struct MotorReading {
+    /// whether the band limit reads the run as a single sinusoid (asked only without a smoothing)
+    sinusoid: bool,
+    /// the link angle's noise, which sets the model's substeps (`sim::motor_substeps`)
+    link_noise: f64,
+    smoothing_seconds: Option<f64>,
+    half: usize,
+    smoothed: Vec<f64>,
+}
+
+impl MotorReading {
+    fn of(r: &Run, smoothing_seconds: Option<f64>) -> Self {
+        let sinusoid =
+            smoothing_seconds.is_none() && super::fit::is_sinusoidal_signal(&r.time, &r.motor, r.frequency_hz);
+        let half = smoothing_half_width(r, smoothing_seconds, sinusoid);
+        let link_noise = super::signal::robust_noise(&r.time, &r.link);
+        MotorReading { sinusoid, link_noise, smoothing_seconds, half, smoothed: smooth(&r.time, &r.motor, half) }
     }
-    (smoothed, MotorConditioning::Smoothed { half_width_s: half as f64 * dt })
+
+    /// [`sim_input`] by the count's band edge, where the run is band-limited and not a single
+    /// sinusoid; None where the count's rule does not reach it.
+    pub fn by_count(&self, r: &Run) -> Option<(super::sim::SimInput, MotorConditioning)> {
+        (self.smoothing_seconds.is_none() && !self.sinusoid).then(|| {
+            let (motor, conditioning) = self.motor(r, true);
+            (input_of(r, motor, self.link_noise), conditioning)
+        })
+    }
+
+    /// The motor angle that drives the model, and how it was conditioned (`sim_input`): with
+    /// `smoothing_seconds`, smoothed; else band-limited to its motion (`signal::band_limited`, a
+    /// sinusoid's edge capped by `band_edge_cap`) and faded into the smoothing within one period of the edge of either
+    /// end, where the band limit's reflection is a guess (raw samples there let a never-pulling
+    /// backlash take a kick that stays in its play: 3.7× the noise floor on a synthetic backlash rig).
+    /// Band-limited rather than smoothed by default: on the campaign's CI subset, device rigs inside
+    /// the library 17/28 → 19/28, held-out seeds 51–90 12/22 → 15/22, none lost (docs/calibration.md).
+    fn motor(&self, r: &Run, count_edge: bool) -> (Vec<f64>, MotorConditioning) {
+        let n = r.time.len();
+        let dt = (r.time[n - 1] - r.time[0]) / (n - 1).max(1) as f64;
+        if self.smoothing_seconds.is_none() {
+            // A sinusoid's edge is capped where its smoothing's passband ends (`band_edge_cap`): at its
+            // turns the encoder dwells on a count, an error the white-noise rule cannot see. Steps and
+            // multisines have no top frequency to cap at: three times the rms frequency put the edge
+            // under the motion that rings the link (campaign rig 243, steps: 7.3 Hz on a 7.3 Hz link,
+            // 1.24× the floor with every parameter within 0.4 %; uncapped 1.02×), so theirs is the noise's.
+            // With `count_edge`, theirs is where the motion stands out of the count's whole error
+            // (`signal::band_limited_to_count`): the noise's edge can pass an encoder's count the noise
+            // does not dither (fresh rig 1292, a 0.2–3 Hz multisine on 1 580 counts a turn: its edge at
+            // 120 Hz drove an 18 Hz link with the count's steps, C +628 %; capped at 4 Hz, C within 10 %
+            // and the BIC 11 900 lower). Which of the two holds is the fit's to say.
+            let cap = self.sinusoid.then(|| band_edge_cap(r.frequency_hz)).filter(|&cap| cap > 0.0);
+            let limited = if count_edge && !self.sinusoid {
+                super::signal::band_limited_to_count(&r.time, &r.motor)
+            } else {
+                band_limited(&r.time, &r.motor, cap)
+            };
+            if let Some((limited, edge_hz)) = limited {
+                return (
+                    fade_ends(&r.time, &limited, &self.smoothed, edge_hz),
+                    MotorConditioning::BandLimited { edge_hz },
+                );
+            }
+        }
+        (self.smoothed.clone(), MotorConditioning::Smoothed { half_width_s: self.half as f64 * dt })
+    }
 }
 
 /// Speed at the first sample when the data show one (a run need not start at rest): the slope of

@@ -23,7 +23,7 @@ pub mod sim;
 pub mod stepwise;
 pub mod synthetic;
 
-use conditioning::{group_runs, held_out_groups, sim_input, MotorConditioning};
+use conditioning::{group_runs, held_out_groups, sim_input, sim_input_and_reading, MotorConditioning};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -285,9 +285,17 @@ fn calibrate_device(
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
     let conditioning_started = std::time::Instant::now();
-    let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
-        runs.iter().map(|r| sim_input(r, args.input_smoothing, false)).unzip();
+    let (by_noise, readings): (Vec<_>, Vec<_>) =
+        runs.iter().map(|r| sim_input_and_reading(r, args.input_smoothing)).unzip();
+    // timed before the count's edge: the report's reserve is in units of one conditioning
     let conditioning_seconds = conditioning_started.elapsed().as_secs_f64();
+    let by_count: Vec<_> = readings.iter().zip(&runs).map(|(reading, r)| reading.by_count(r)).collect();
+    drop(readings);
+    // where the count's rule reaches some run: a run it does not reach (a sinusoid) keeps its noise's edge
+    let by_count: Option<Vec<(sim::SimInput, MotorConditioning)>> = by_count.iter().any(Option::is_some).then(|| {
+        by_count.into_iter().zip(&by_noise).map(|(count, noise)| count.unwrap_or_else(|| noise.clone())).collect()
+    });
+    let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) = by_noise.into_iter().unzip();
     let measured: Vec<Vec<f64>> = runs.iter().map(|r| r.link.clone()).collect();
     let budget = stepwise::Budget::since(t0, args.search_budget);
     let mut prob = fit::Problem::new(sim, inputs, measured.clone(), group.clone(), &temperatures)?;
@@ -298,11 +306,11 @@ fn calibrate_device(
     let mut count_edge = false;
     let mut band_bics: Option<(f64, f64)> = None;
     let mut first: Option<(search::Structure, fit::Fit)> = None;
-    if args.input_smoothing.is_none() {
-        let (capped, capped_conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
-            runs.iter().map(|r| sim_input(r, None, true)).unzip();
-        if capped_conditioning != conditioning {
-            let other = fit::Problem::new(sim, capped, measured, group, &temperatures)?;
+    if let Some(by_count) = by_count {
+        let (count_inputs, count_conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) =
+            by_count.into_iter().unzip();
+        if count_conditioning != conditioning {
+            let other = fit::Problem::new(sim, count_inputs, measured, group, &temperatures)?;
             // each fit timed as the search's first is (the budget's checks need what a fit costs)
             let law = search::damping_laws(&prob).allowed[0];
             let noise = budget.timed(|| search::baseline(&prob, law, budget.end()));
@@ -316,7 +324,7 @@ fn calibrate_device(
                 band_bics = Some((noise.bic(), count.bic()));
                 if count.bic() < noise.bic() - stepwise::BIC_MARGIN {
                     prob = other;
-                    conditioning = capped_conditioning;
+                    conditioning = count_conditioning;
                     count_edge = true;
                     first = Some((law, count));
                 } else {

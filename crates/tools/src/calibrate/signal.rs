@@ -378,8 +378,9 @@ fn band_limited_over(t: &[f64], x: &[f64], most_hz: Option<f64>, count: bool) ->
     if noise_free(x) {
         return Some((x.to_vec(), nyquist));
     }
-    let sigma2 = second_difference_noise(x).powi(2);
-    let sigma2 = if count { sigma2.max(quantisation_floor(x).powi(2)) } else { sigma2 };
+    let white2 = second_difference_noise(x).powi(2);
+    let count2 = quantisation_floor(x).powi(2);
+    let sigma2 = if count { white2.max(count2) } else { white2 };
     // the variance above each bin, and the lowest bin above which it is noise's
     let mut above = vec![0.0; bins + 1];
     for k in (0..bins).rev() {
@@ -403,7 +404,7 @@ fn band_limited_over(t: &[f64], x: &[f64], most_hz: Option<f64>, count: bool) ->
     // q/√12): it dwells on a count, an error that stands above the white level at every frequency
     // (rig 299: 14 900 counts, noise 1.4e-5 rad; 2–10 N from 25 Hz to 200 Hz, and C 536 % high at
     // its 32 Hz link).
-    let dithered = sigma2 >= quantisation_floor(x).powi(2);
+    let dithered = sigma2 >= count2;
     let gains: Option<Vec<f64>> = (most_hz.is_none() && dithered && !count).then(|| {
         let hann = |k: usize| 0.5 - 0.5 * (2.0 * std::f64::consts::PI * k as f64 / (n_u - 1) as f64).cos();
         let weight: f64 = (0..n_u).map(|k| hann(k).powi(2)).sum();
