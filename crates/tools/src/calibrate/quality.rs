@@ -332,9 +332,11 @@ pub fn refusal(path: &Path, lines: &[usize], column: (usize, &str), x: &[f64], f
     let f = &found[0];
     let k = f.index;
     let what = match f.kind {
+        // the deviation itself, as the neighbours' values can agree with the spike's to every digit shown
         FindingKind::Spike => format!(
-            "an isolated spike: {} where its neighbours read {} and {}",
+            "an isolated spike: {}, {} off the line through its neighbours ({} and {})",
             short(f.value),
+            short(f.value - f.repaired),
             short(x[k - 1]),
             short(x[k + 1])
         ),
@@ -428,6 +430,22 @@ mod tests {
             }
             assert!(find_corrupt(&t, &y, Quantity::Position).is_empty(), "case {i}");
         }
+    }
+
+    /// A spike too small for the values' six digits to differ: the refusal names its size, which the
+    /// values cannot show (a noise-free column once read "-0.112133 where its neighbours read
+    /// -0.112133 and -0.112133").
+    #[test]
+    fn a_spike_below_the_digits_shown_is_refused_with_its_size() {
+        // a noise-free 0.5 Hz sine at 10 kHz, the spike at its turn, where neighbours move by 5e-9
+        let t: Vec<f64> = (0..20_000).map(|k| k as f64 * 1e-4).collect();
+        let mut x: Vec<f64> = t.iter().map(|&t| -0.112133 + 0.1 * (std::f64::consts::PI * t).sin()).collect();
+        x[5000] += 2e-7;
+        let found = find_corrupt(&t, &x, Quantity::Angle);
+        assert_eq!(found.len(), 1, "{found:?}");
+        let lines: Vec<usize> = (0..20_000).map(|k| k + 3).collect();
+        let message = refusal(Path::new("run.csv"), &lines, (2, "motor_angle_rad"), &x, &found).message;
+        assert!(message.contains(", 2.0493e-7 off the line through its neighbours"), "{message}");
     }
 
     #[test]
