@@ -5,6 +5,9 @@
 //! Arguments after the folder, `INDEX=VALUE`, replace entries of the start (the printed `fitted p`'s
 //! order): how far from the truth a refit still finds it; `speeds=V1,V2,...` sets every run's (or
 //! segment's) initial link speed, rad/s, before the fit (the search's debug output prints its own).
+//! `TRUTH_FIT_SHARE=0.35` fits on that share of every run's start, as the search screens its
+//! candidates; `TRUTH_FIT_ITERATIONS=N` caps the first fit's iterations (4: a screening refit's cap).
+//! Prints the first fit (before the initial speeds are chosen again), the final one and the speeds.
 use std::path::{Path, PathBuf};
 
 use serde_json::Value;
@@ -100,8 +103,19 @@ fn run() -> Result<(), Error> {
         let n = start.len();
         *start.get_mut(i).ok_or_else(|| format!("{arg}: the start has {n} entries"))? = v;
     }
+    if let Some(share) = std::env::var("TRUTH_FIT_SHARE").ok().and_then(|s| s.parse::<f64>().ok()) {
+        prob = prob.truncated(share);
+    }
+    let iterations =
+        std::env::var("TRUTH_FIT_ITERATIONS").ok().and_then(|s| s.parse().ok()).unwrap_or(search::MAX_ITERATIONS);
     let at_truth = fit::Fit::evaluate(&prob, spec.clone(), p).ok_or("could not simulate the truth")?;
-    let fitted = fit::levenberg_marquardt(&prob, spec, start, search::MAX_ITERATIONS)?;
+    let fitted = fit::levenberg_marquardt(&prob, spec, start, iterations)?;
+    println!(
+        "LM: {} iterations, bic {:.1}, p {:?}",
+        fitted.iterations,
+        fitted.bic(),
+        fitted.p.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>()
+    );
     let fitted = search::resolve_initial_speeds(&mut prob, fitted);
     let fitted = search::fit_initial_speeds(&mut prob, fitted);
     let final_bic = report["final"]["bic"].as_f64().unwrap_or(f64::NAN);
@@ -118,6 +132,7 @@ fn run() -> Result<(), Error> {
         fitted.bic() - final_bic
     );
     println!("fitted p: {:?}", fitted.p.iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>());
+    println!("initial speeds: {:?}", prob.initial_speeds().iter().map(|x| format!("{x:.4}")).collect::<Vec<_>>());
     Ok(())
 }
 

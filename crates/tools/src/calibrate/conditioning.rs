@@ -221,12 +221,13 @@ impl MotorReading {
 /// Speed at the first sample when the data show one (a run need not start at rest): the slope of
 /// the start's quadratic over the first 20 ms (at least 10 samples), shortened where the motion is
 /// not quadratic over it (`signal::start_speed`), kept only when it stands out of its own standard
-/// error by 3 (at rest, encoder noise alone must not set the link moving). A link that starts at
-/// rest and catches up with the motor within a millisecond looks the same over 20 ms, so
-/// `search::resolve_initial_speeds` lets the baseline fit decide.
+/// error by 3 (at rest, encoder noise alone must not set the link moving) and only where the start
+/// reads as motion rather than as a link at rest set off (`signal::moving_start_speed`). A link
+/// that starts at rest and catches up with the motor within a millisecond looks the same over
+/// 20 ms, so `search::resolve_initial_speeds` lets the baseline fit decide.
 pub fn initial_speed(t: &[f64], x: &[f64]) -> f64 {
     let most = t.iter().take_while(|&&ti| ti - t[0] <= 0.02).count().max(10);
-    match super::signal::start_speed(t, x, most) {
+    match super::signal::moving_start_speed(t, x, most) {
         Some((v, se)) if v.abs() > 3.0 * se => v,
         _ => 0.0,
     }

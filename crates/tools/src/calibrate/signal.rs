@@ -803,15 +803,42 @@ fn start_quadratic(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64, f64)> {
 /// saturated reverses its acceleration within a few samples, and 11 samples read that as speed
 /// (3.5 rad/s on a drive starting at rest, measured). None with fewer than 4 samples.
 pub fn start_speed(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64)> {
+    start_speed_over(t, x, most).map(|(v, se, _)| (v, se))
+}
+
+/// [`start_speed`] with the number of samples its quadratic took.
+fn start_speed_over(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64, usize)> {
     let noise = robust_noise(t, x);
     let mut n = x.len().min(most);
     while n > 4 {
         match start_quadratic(t, x, n) {
-            Some((v, se, rms)) if rms <= 2.0 * noise => return Some((v, se)),
+            Some((v, se, rms)) if rms <= 2.0 * noise => return Some((v, se, n)),
             _ => n -= 1,
         }
     }
-    start_quadratic(t, x, 4).map(|(v, se, _)| (v, se))
+    start_quadratic(t, x, 4).map(|(v, se, _)| (v, se, 4))
+}
+
+/// [`start_speed`] where the start reads as motion rather than as rest: its quadratic
+/// (x₀ + v t + c t²) follows the samples more closely than a start from rest with the same number
+/// of parameters (x₀ + c t² + d t³, the acceleration free to grow). A link at rest that the motor
+/// sets off builds its acceleration through the transmission, and a quadratic reads that t³ as a
+/// speed of the wrong sign that turns within the window (fresh rig 1314: −0.06 to −0.19 rad/s on
+/// links at rest, each turning within 1.5 ms of a 20 ms window; moving, the start held a Stribeck
+/// excess out of the model, 1.38× its floor).
+pub fn moving_start_speed(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64)> {
+    let (v, se, n) = start_speed_over(t, x, most)?;
+    let rest = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi([0, 2, 3][j]));
+    let moving = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
+    let y = DVector::from_column_slice(&x[..n]);
+    let sse = |a: DMatrix<f64>| -> Option<f64> {
+        let beta = (a.transpose() * &a).lu().solve(&(a.transpose() * &y))?;
+        Some((&y - &a * beta).norm_squared())
+    };
+    match (sse(moving), sse(rest)) {
+        (Some(moving), Some(rest)) if rest <= moving => Some((0.0, se)),
+        _ => Some((v, se)),
+    }
 }
 
 /// Noise of a sampled signal robust to its fast moves, and at least what its quantum (`quantum`:
@@ -1095,6 +1122,32 @@ mod tests {
         let x: Vec<f64> = t.iter().zip(&noise).map(|(&t, e)| v0 * t + 20.0 * t * t + sigma * e).collect();
         let (v, se) = start_speed(&t, &x, 11).unwrap();
         assert!((v - v0).abs() < 4.0 * se && se < 0.1 * v0, "speed {v} ± {se}, truth {v0}");
+    }
+
+    /// A link at rest that a spring sets off (x ∝ t³ at first) reads as rest; one that moves reads as
+    /// its speed, at any rate and through an encoder's counts.
+    #[test]
+    fn a_start_from_rest_whose_acceleration_grows_is_no_speed_and_a_moving_one_is() {
+        for (i, &(dt, jerk, v0, sigma, q)) in
+            [(2e-4, 2e4, 0.5, 2.4e-5, 1.5e-4), (1e-3, 500.0, 0.05, 1e-5, 6e-6), (5e-3, 200.0, 0.2, 1e-4, 1e-4)]
+                .iter()
+                .enumerate()
+        {
+            // the window `conditioning::initial_speed` takes: 20 ms, at least 10 samples
+            let n = ((0.02 / dt) as usize + 1).max(10);
+            let t: Vec<f64> = (0..n).map(|k| k as f64 * dt).collect();
+            let read = |x: Vec<f64>, seed: u64| -> Vec<f64> {
+                x.iter().zip(normals(seed, n)).map(|(x, e)| q * ((x + sigma * e) / q).round()).collect()
+            };
+            let at_rest = read(t.iter().map(|&t| jerk * t.powi(3) / 6.0).collect(), 20 + i as u64);
+            let (quadratic, se) = start_speed(&t, &at_rest, n).unwrap();
+            assert!(quadratic.abs() > 3.0 * se, "case {i}: the quadratic must read a speed ({quadratic} ± {se})");
+            assert_eq!(moving_start_speed(&t, &at_rest, n).unwrap().0, 0.0, "case {i}");
+            // moving, its speed doubling over the window
+            let moving = read(t.iter().map(|&t| v0 * t + 0.5 * (v0 / 0.02) * t * t).collect(), 30 + i as u64);
+            let (v, se) = moving_start_speed(&t, &moving, n).unwrap();
+            assert!((v - v0).abs() < 4.0 * se + 0.1 * v0, "case {i}: {v} ± {se}, truth {v0}");
+        }
     }
 
     #[test]
