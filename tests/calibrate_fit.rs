@@ -414,3 +414,39 @@ fn a_lag_as_long_as_the_run_does_more_than_its_slope_times_its_constant() {
     assert!(long < 0.8, "a 50 s lag: the slope reads {long:.3} of the share");
     assert!((short - 1.0).abs() < 0.1, "a 0.5 s lag: the slope reads {short:.3} of the share");
 }
+
+/// A run that starts its file moving has its speed fitted once the effects are settled
+/// (`search::fit_moving_starts`): the window's quadratic reads a start at mid-swing short, and the
+/// start's transient then stays in the residual; a run that starts at rest stays at rest, and the
+/// segments-only pass (`fit_initial_speeds`) leaves a file's start as the window read it.
+#[test]
+fn a_file_that_starts_moving_has_its_speed_fitted_once_the_effects_are_settled() {
+    use thermovia_tools::calibrate::fit::Fit;
+    use thermovia_tools::calibrate::search::{fit_initial_speeds, fit_moving_starts};
+    let sim = Simulator::new(common::fmu(), 2).unwrap();
+    let spec = viscous_spec(vec![Effect::CoulombFriction]);
+    // [ln K, ln C] ++ Coulomb level, N·m
+    let truth = vec![34.0f64.ln(), 0.4f64.ln(), 0.03];
+    let moving = SimInput { initial_link_speed: 0.3, ..sine_input(1000.0, 4.0, 1.0, 0.1, 0.02) };
+    let resting = sine_input(1000.0, 4.0, 2.0, 0.1, 0.02);
+    let noise = |k: usize| 1e-5 * ((k * 7919 % 1000) as f64 / 500.0 - 1.0);
+    let measured: Vec<Vec<f64>> = [&moving, &resting]
+        .iter()
+        .map(|input| {
+            let mut y = simulated(&sim, input, &spec, &truth).remove(0);
+            y.iter_mut().enumerate().for_each(|(k, v)| *v += noise(k));
+            y
+        })
+        .collect();
+    // the window's reading: the moving start 30 % short
+    let read = SimInput { initial_link_speed: 0.21, ..moving };
+    let mut prob = Problem::new(&sim, vec![read, resting], measured, vec![0, 0], &[22.0]).unwrap();
+    let start = Fit::evaluate(&prob, spec.clone(), truth.clone()).unwrap();
+    let segments_only = fit_initial_speeds(&mut prob, start.clone());
+    assert_eq!(prob.initial_speeds(), vec![0.21, 0.0], "no segment after a gap: nothing to fit");
+    assert_eq!(segments_only.sse, start.sse);
+    let fitted = fit_moving_starts(&mut prob, start.clone());
+    let speeds = prob.initial_speeds();
+    assert!((speeds[0] / 0.3 - 1.0).abs() < 0.02 && speeds[1] == 0.0, "speeds {speeds:?}, truth [0.3, 0]");
+    assert!(fitted.sse < 0.1 * start.sse, "SSE {:.3e} from {:.3e}", fitted.sse, start.sse);
+}
