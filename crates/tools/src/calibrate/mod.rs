@@ -295,14 +295,13 @@ fn calibrate_device(
     let by_count: Option<Vec<(sim::SimInput, MotorConditioning)>> = by_count.iter().any(Option::is_some).then(|| {
         by_count.into_iter().zip(&by_noise).map(|(count, noise)| count.unwrap_or_else(|| noise.clone())).collect()
     });
-    let (inputs, conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) = by_noise.into_iter().unzip();
+    let (inputs, mut conditioning): (Vec<sim::SimInput>, Vec<MotorConditioning>) = by_noise.into_iter().unzip();
     let measured: Vec<Vec<f64>> = runs.iter().map(|r| r.link.clone()).collect();
     let budget = stepwise::Budget::since(t0, args.search_budget);
     let mut prob = fit::Problem::new(sim, inputs, measured.clone(), group.clone(), &temperatures)?;
     // Runs that are not single sinusoids: their motor's band edge as the noise sets it, or as their
     // count's whole error does, whichever the baseline fits with a BIC lower by the margin
     // (`sim_input`); the search starts from that baseline.
-    let mut conditioning = conditioning;
     let mut count_edge = false;
     let mut band_bics: Option<(f64, f64)> = None;
     let mut first: Option<(search::Structure, fit::Fit)> = None;

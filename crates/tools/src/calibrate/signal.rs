@@ -803,20 +803,20 @@ fn start_quadratic(t: &[f64], x: &[f64], n: usize) -> Option<(f64, f64, f64)> {
 /// saturated reverses its acceleration within a few samples, and 11 samples read that as speed
 /// (3.5 rad/s on a drive starting at rest, measured). None with fewer than 4 samples.
 pub fn start_speed(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64)> {
-    start_speed_over(t, x, most).map(|(v, se, _)| (v, se))
+    start_speed_over(t, x, most).map(|(v, se, _, _)| (v, se))
 }
 
-/// [`start_speed`] with the number of samples its quadratic took.
-fn start_speed_over(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64, usize)> {
+/// [`start_speed`] with its quadratic's residual rms and the number of samples it took.
+fn start_speed_over(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64, f64, usize)> {
     let noise = robust_noise(t, x);
     let mut n = x.len().min(most);
     while n > 4 {
         match start_quadratic(t, x, n) {
-            Some((v, se, rms)) if rms <= 2.0 * noise => return Some((v, se, n)),
+            Some((v, se, rms)) if rms <= 2.0 * noise => return Some((v, se, rms, n)),
             _ => n -= 1,
         }
     }
-    start_quadratic(t, x, 4).map(|(v, se, _)| (v, se, 4))
+    start_quadratic(t, x, 4).map(|(v, se, rms)| (v, se, rms, 4))
 }
 
 /// [`start_speed`] where the start reads as motion rather than as rest: its quadratic
@@ -827,16 +827,14 @@ fn start_speed_over(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64, usiz
 /// links at rest, each turning within 1.5 ms of a 20 ms window; moving, the start held a Stribeck
 /// excess out of the model, 1.38× its floor).
 pub fn moving_start_speed(t: &[f64], x: &[f64], most: usize) -> Option<(f64, f64)> {
-    let (v, se, n) = start_speed_over(t, x, most)?;
-    let rest = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi([0, 2, 3][j]));
-    let moving = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi(j as i32));
+    let (v, se, rms, n) = start_speed_over(t, x, most)?;
+    // the quadratic's sum of squares, from its residual variance over n − 3 degrees of freedom
+    let moving = rms * rms * (n - 3) as f64;
+    let a = DMatrix::from_fn(n, 3, |i, j| (t[i] - t[0]).powi([0, 2, 3][j]));
     let y = DVector::from_column_slice(&x[..n]);
-    let sse = |a: DMatrix<f64>| -> Option<f64> {
-        let beta = (a.transpose() * &a).lu().solve(&(a.transpose() * &y))?;
-        Some((&y - &a * beta).norm_squared())
-    };
-    match (sse(moving), sse(rest)) {
-        (Some(moving), Some(rest)) if rest <= moving => Some((0.0, se)),
+    let rest = (a.transpose() * &a).lu().solve(&(a.transpose() * &y)).map(|beta| (&y - &a * beta).norm_squared());
+    match rest {
+        Some(rest) if rest <= moving => Some((0.0, se)),
         _ => Some((v, se)),
     }
 }
