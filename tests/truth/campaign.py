@@ -585,21 +585,39 @@ def bin_order(item):
     return (0, edge + (1e-9 * abs(edge) if label.startswith(">") else 0.0), label)
 
 
+def grouped(results, label):
+    """`results` split by `label` (a rig it cannot label goes under 'unknown'), as (label, rigs) in
+    the bins' order."""
+    groups = {}
+    for r in results:
+        try:
+            key = label(r)
+        except (KeyError, TypeError, ZeroDivisionError):
+            key = "unknown"
+        groups.setdefault(key, []).append(r)
+    return sorted(groups.items(), key=bin_order)
+
+
 def print_classes(results, title, classes):
     """Pass rates of `results` split every way `classes` splits them."""
     if not results:
         return
     print(f"\n{title}")
     for name, label in classes:
-        counts = {}
-        for r in results:
-            try:
-                key = label(r)
-            except (KeyError, TypeError, ZeroDivisionError):
-                key = "unknown"
-            passed, total = counts.get(key, (0, 0))
-            counts[key] = (passed + r["passed"], total + 1)
-        print(f"  {name}: " + ", ".join(f"{k} {p}/{n}" for k, (p, n) in sorted(counts.items(), key=bin_order)))
+        print(f"  {name}: " + ", ".join(f"{k} {sum(r['passed'] for r in rs)}/{len(rs)}"
+                                        for k, rs in grouped(results, label)))
+
+
+def print_class_times(results, title, classes):
+    """The median calibration wall time of `results` split every way `classes` splits them, with
+    the rigs in each: which rigs the median waits on (on fresh seeds 1371–1410, those with a drifting
+    thermocouple, docs/performance.md)."""
+    if not results:
+        return
+    print(f"\n{title}")
+    for name, label in classes:
+        print(f"  {name}: " + ", ".join(f"{k} {statistics.median(r['seconds'] for r in rs):.1f} s ({len(rs)})"
+                                        for k, rs in grouped(results, label)))
 
 
 def main(argv=None):
@@ -670,6 +688,8 @@ def main(argv=None):
             short.append(f"{kind} rigs pass {rate:.1f} %, below the {float(percent):g} % required")
     secs = [r["seconds"] for r in results]
     print(f"calibration wall time: median {statistics.median(secs):.1f} s, max {max(secs):.1f} s")
+    print_class_times([r for r in results if not r["class"].startswith("drive")],
+                      "device rigs' calibration wall time, median per class (rigs):", DEVICE_CLASSES)
     for line in short:
         print(f"campaign: {line}", file=sys.stderr)
     if short:
