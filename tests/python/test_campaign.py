@@ -347,10 +347,10 @@ def test_the_pass_rate_is_printed_per_class_in_the_bins_order(capsys):
 def test_the_median_wall_time_is_printed_per_class(capsys):
     def result(drift, seconds):
         return {"class": "1 effect", "passed": True, "seconds": seconds, "rig": {"drift_k": drift}}
-    campaign.print_class_times([result(0.0, 4.0), result(3.0, 60.0), result(0.0, 10.0), result(5.0, 90.0),
-                                result(2.0, 20.0), result(0.0, 2.0)],
-                               "title", [("temperature", lambda r: "drifting" if r["rig"]["drift_k"] else "steady"),
-                                         ("missing", lambda r: r["rig"]["jitter"])])
+    campaign.print_classes([result(0.0, 4.0), result(3.0, 60.0), result(0.0, 10.0), result(5.0, 90.0),
+                            result(2.0, 20.0), result(0.0, 2.0)],
+                           "title", [("temperature", lambda r: "drifting" if r["rig"]["drift_k"] else "steady"),
+                                     ("missing", lambda r: r["rig"]["jitter"])], campaign.median_time)
     lines = capsys.readouterr().out.splitlines()
     assert lines == ["", "title", "  temperature: drifting 60.0 s (3), steady 4.0 s (3)",
                      "  missing: unknown 15.0 s (6)"]

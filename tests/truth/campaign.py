@@ -598,26 +598,24 @@ def grouped(results, label):
     return sorted(groups.items(), key=bin_order)
 
 
-def print_classes(results, title, classes):
-    """Pass rates of `results` split every way `classes` splits them."""
+def passed_of(rigs):
+    """How many of `rigs` passed, of how many."""
+    return f"{sum(r['passed'] for r in rigs)}/{len(rigs)}"
+
+
+def median_time(rigs):
+    """The median calibration wall time of `rigs`, with their number: which rigs a campaign's median
+    waits on (on fresh seeds 1371–1410, those with a drifting thermocouple, docs/performance.md)."""
+    return f"{statistics.median(r['seconds'] for r in rigs):.1f} s ({len(rigs)})"
+
+
+def print_classes(results, title, classes, summary=passed_of):
+    """`summary` (the pass rate) of `results` split every way `classes` splits them."""
     if not results:
         return
     print(f"\n{title}")
     for name, label in classes:
-        print(f"  {name}: " + ", ".join(f"{k} {sum(r['passed'] for r in rs)}/{len(rs)}"
-                                        for k, rs in grouped(results, label)))
-
-
-def print_class_times(results, title, classes):
-    """The median calibration wall time of `results` split every way `classes` splits them, with
-    the rigs in each: which rigs the median waits on (on fresh seeds 1371–1410, those with a drifting
-    thermocouple, docs/performance.md)."""
-    if not results:
-        return
-    print(f"\n{title}")
-    for name, label in classes:
-        print(f"  {name}: " + ", ".join(f"{k} {statistics.median(r['seconds'] for r in rs):.1f} s ({len(rs)})"
-                                        for k, rs in grouped(results, label)))
+        print(f"  {name}: " + ", ".join(f"{k} {summary(rs)}" for k, rs in grouped(results, label)))
 
 
 def main(argv=None):
@@ -688,8 +686,8 @@ def main(argv=None):
             short.append(f"{kind} rigs pass {rate:.1f} %, below the {float(percent):g} % required")
     secs = [r["seconds"] for r in results]
     print(f"calibration wall time: median {statistics.median(secs):.1f} s, max {max(secs):.1f} s")
-    print_class_times([r for r in results if not r["class"].startswith("drive")],
-                      "device rigs' calibration wall time, median per class (rigs):", DEVICE_CLASSES)
+    print_classes([r for r in results if not r["class"].startswith("drive")],
+                  "device rigs' calibration wall time, median per class (rigs):", DEVICE_CLASSES, median_time)
     for line in short:
         print(f"campaign: {line}", file=sys.stderr)
     if short:
