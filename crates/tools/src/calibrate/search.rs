@@ -1071,8 +1071,12 @@ pub fn fit_initial_speeds(prob: &mut Problem, fit: Fit) -> Fit {
 /// for friction the model did not yet have, above). A run that starts at rest stays at rest. A
 /// 0.1 rad/s start at mid-swing read 0.06–0.09 rad/s and left 2.8× the floor and a residual
 /// flagged as structure, every parameter right (a truth-model rig of this session's; at 0.1 rad/s,
-/// 1.0×).
+/// 1.0×). Where no file starts moving, `fit` as it is: the segments after gaps alone were fitted
+/// before ([`fit_initial_speeds`]), and fitting them again would only repeat that.
 pub fn fit_moving_starts(prob: &mut Problem, fit: Fit) -> Fit {
+    if !prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
+        return fit;
+    }
     let free: Vec<bool> = prob.inputs.iter().map(|i| i.after_gap || i.initial_link_speed != 0.0).collect();
     initial_speeds_passes(prob, fit, &free)
 }
@@ -1744,7 +1748,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget, first: O
     if zeroed {
         current = budget.timed(|| restart_moving_runs(prob, current, &estimated_speeds));
     }
-    if !budget.spent() && prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
+    if !budget.spent() {
         let before = current.sse;
         current = budget.timed(|| resolve_initial_speeds(prob, current));
         if current.sse != before || zeroed {
@@ -1831,7 +1835,7 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget, first: O
             }
         }
     }
-    if !budget.spent() && prob.inputs.iter().any(|i| i.initial_link_speed != 0.0) {
+    if !budget.spent() {
         let before = current.sse;
         current = budget.timed(|| fit_moving_starts(prob, current));
         if current.sse != before {
