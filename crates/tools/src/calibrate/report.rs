@@ -485,15 +485,37 @@ pub fn report_markdown(j: &Value, o: &Outcome) -> String {
         s += &truth_markdown(t);
     }
     s += &format!(
-        "\n## Residual\n\n{}\n\nAgainst a flexible reference fitted to the same runs: {}.\n\nunexplained: **{}** ({})\n\n",
+        "\n## Residual\n\n{}\n\nAgainst a flexible reference fitted to the same runs: {}.\n\nunexplained: **{}**{} ({})\n\n",
         remaining_structure(&o.final_signatures),
         j["reference"]["words"].as_str().unwrap_or("no reference computed"),
         o.unexplained,
+        unexplained_by(&j["reference"]["unexplained_by"]),
         j["reference"]["rule"].as_str().unwrap_or("")
     );
     s += "Plots: `plots/identified.svg` (stiffness and damping per temperature), `plots/fit_*.svg` (measured vs model \
           before and after), `plots/residual_*.svg`, `plots/residual_spectrum.svg`.\n";
     s
+}
+
+/// Which branches of the `unexplained` rule held, in words (" by …"; empty where none did).
+fn unexplained_by(by: &Value) -> String {
+    let words: Vec<&str> = by
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(Value::as_str)
+        .map(|name| match name {
+            "linear_black_box" => "the linear black box fits better",
+            "nonlinear" => "harmonics are left above the noise's",
+            "far_above_noise" => "the rms is far above the noise floor",
+            other => other,
+        })
+        .collect();
+    if words.is_empty() {
+        String::new()
+    } else {
+        format!(", as {}", words.join(" and "))
+    }
 }
 
 /// The held-out fold's errors, "not measured" where the budget left the fold out (null).
