@@ -531,15 +531,15 @@ fn calibrate_device(
         "motor_quantisation_floor_rad": count_floor,
         "unexplained_by": unexplained_by,
     });
-    if outcome.unexplained && report["remaining_structure"].is_null() {
-        report["remaining_structure"] = serde_json::json!(report::remaining_structure(&outcome.final_signatures));
-    }
-    if !outcome.unexplained && !outcome.final_signatures.white() {
-        report["remaining_structure"] = serde_json::json!(format!(
-            "{} — but a linear black box explains no more of it than the model, and no harmonic of the excitation is left above the noise's",
-            report::remaining_structure(&outcome.final_signatures)
-        ));
-    }
+    // from the final verdict (`report_json` wrote it from the search's, the structure test's alone)
+    let remaining = report::remaining_structure(&outcome.final_signatures);
+    report["remaining_structure"] = match (outcome.unexplained, outcome.final_signatures.white()) {
+        (true, _) => serde_json::json!(remaining),
+        (false, false) => serde_json::json!(format!(
+            "{remaining} — but a linear black box explains no more of it than the model, and no harmonic of the excitation is left above the noise's"
+        )),
+        (false, true) => serde_json::Value::Null,
+    };
     report["held_out"] = serde_json::json!({
         "method": method,
         "baseline_rmse_rad": held_base,
@@ -671,23 +671,29 @@ fn unexplained_by(
     harmonics_left: bool,
     far_above_noise: bool,
 ) -> Vec<&'static str> {
-    [
-        (!white && box_beats_model, "linear_black_box"),
-        (!white && harmonics_left, "nonlinear"),
-        (far_above_noise, "far_above_noise"),
-    ]
-    .into_iter()
-    .filter_map(|(held, name)| held.then_some(name))
-    .collect()
+    [!white && box_beats_model, !white && harmonics_left, far_above_noise]
+        .into_iter()
+        .zip(UNEXPLAINED_BRANCHES)
+        .filter_map(|(held, (name, _))| held.then_some(name))
+        .collect()
 }
+
+/// The `unexplained` rule's branches as `reference.unexplained_by` names them, with report.md's
+/// words for each, in [`unexplained_by`]'s order.
+pub(super) const UNEXPLAINED_BRANCHES: [(&str, &str); 3] = [
+    ("linear_black_box", "the linear black box fits better"),
+    ("nonlinear", "harmonics are left above the noise's"),
+    ("far_above_noise", "the rms is far above the noise floor"),
+];
 
 /// The black box must beat the model's rms above the noise by this factor for the leftover
 /// structure to count as unexplained (a margin for the reference's own fitting freedom).
 const REFERENCE_MARGIN: f64 = 1.1;
 
 /// A final rms error this many times the data's noise floor (the link sensor's with the motor log's
-/// own error, `input_error_floor`) is unexplained whatever the references and the structure test say: the line of "explained" is 1.2× the floor, with room for what the floor
-/// leaves out (what the conditioning itself costs a right model, a few draws' spread; measured in
+/// own error, `input_error_floor`) is unexplained whatever the references and the structure test
+/// say: the line of "explained" is 1.2× the floor, with room for what the floor leaves out
+/// (what the conditioning itself costs a right model, a few draws' spread; measured in
 /// docs/calibration.md); between 1.2× and this the references decide.
 const FAR_ABOVE_NOISE: f64 = 1.5;
 

@@ -504,12 +504,7 @@ fn unexplained_by(by: &Value) -> String {
         .into_iter()
         .flatten()
         .filter_map(Value::as_str)
-        .map(|name| match name {
-            "linear_black_box" => "the linear black box fits better",
-            "nonlinear" => "harmonics are left above the noise's",
-            "far_above_noise" => "the rms is far above the noise floor",
-            other => other,
-        })
+        .map(|name| super::UNEXPLAINED_BRANCHES.iter().find(|(n, _)| *n == name).map_or(name, |(_, words)| words))
         .collect();
     if words.is_empty() {
         String::new()
