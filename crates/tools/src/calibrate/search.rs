@@ -1416,24 +1416,29 @@ impl DeviceRig<'_, '_> {
                 .iter()
                 .filter_map(|&(law, springs)| {
                     let spec = ModelSpec { law, springs, ..spec.clone() };
-                    let fit = |replace| {
+                    // the starts Levenberg–Marquardt runs from: the best by cost, or it at each
+                    // Stribeck velocity
+                    let chosen = |replace| {
                         let starts = candidate_starts(self.prob, &p, added, law, replace);
                         let with_excess = spec.effects.contains(&Effect::StribeckFriction);
                         if self.velocity_grid && with_excess && far_above_floor(current_sig) {
-                            let each = stribeck_velocity_starts(self.prob, sprob, &spec, starts)?;
-                            fit_from_each(sprob, &spec, each, SCREEN_ITERATIONS).ok()
+                            stribeck_velocity_starts(self.prob, sprob, &spec, starts)
                         } else {
-                            fit_from_best(sprob, spec.clone(), starts, SCREEN_ITERATIONS).ok()
+                            best_start(sprob, &spec, starts).map(|p0| vec![p0])
                         }
                     };
-                    let table = fit(true);
+                    let fit = |each: Vec<Vec<f64>>| fit_from_each(sprob, &spec, each, SCREEN_ITERATIONS).ok();
+                    let table_starts = chosen(true);
+                    let table = table_starts.clone().and_then(fit);
                     // a transmission on a bound, or dragging, may be where the effect's absence put
                     // it (the table's start then finds the effect's valley) or where the truth has
                     // it (a link damper that took the transmission's damping, rig 185: C → 0): where
                     // the table's start ends above the current model, the current transmission's
-                    // start is refitted too, and the lower BIC kept
+                    // start is refitted too, and the lower BIC kept. Where the starts chosen are the
+                    // table's again (both lost to a start they share), the fit would repeat to the
+                    // digit: fresh rig 1432's gravity, 20 s of its 59 s refit.
                     let here = if any_no_start && table.as_ref().is_none_or(|t| t.bic() >= current.bic()) {
-                        fit(false)
+                        chosen(false).filter(|s| Some(s) != table_starts.as_ref()).and_then(fit)
                     } else {
                         None
                     };
