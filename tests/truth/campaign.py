@@ -630,7 +630,8 @@ def main(argv=None):
     ap.add_argument("--search-budget", type=float, default=120.0, help="thermovia calibrate --search-budget, s")
     ap.add_argument("--jobs", type=int, default=1,
                     help="rigs at once (each calibration already uses every core; 2 overlaps one rig's Python "
-                         "truth model with another's calibration)")
+                         "truth model with another's calibration, and each rig's wall time is then a shared "
+                         "machine's: 1 measures a rig's own)")
     ap.add_argument("--require", nargs=2, action="append", default=[], metavar=("KIND", "PERCENT"),
                     help="exit 1 when the pass rate of KIND (device, drive, outside) falls below PERCENT: CI holds "
                          "the subset to the rates measured when it was last improved (a ratchet, never a target)")
@@ -685,7 +686,8 @@ def main(argv=None):
         if rate < float(percent):
             short.append(f"{kind} rigs pass {rate:.1f} %, below the {float(percent):g} % required")
     secs = [r["seconds"] for r in results]
-    print(f"calibration wall time: median {statistics.median(secs):.1f} s, max {max(secs):.1f} s")
+    print(f"calibration wall time ({a.jobs} rig{'s' if a.jobs > 1 else ''} at a time): "
+          f"median {statistics.median(secs):.1f} s, max {max(secs):.1f} s")
     print_classes([r for r in results if not r["class"].startswith("drive")],
                   "device rigs' calibration wall time, median per class (rigs):", DEVICE_CLASSES, median_time)
     for line in short:
