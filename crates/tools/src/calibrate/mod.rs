@@ -531,7 +531,7 @@ fn calibrate_device(
         "motor_quantisation_floor_rad": count_floor,
         "unexplained_by": unexplained_by,
     });
-    // from the final verdict (`report_json` wrote it from the search's, the structure test's alone)
+    // `unexplained` and `remaining_structure` come from the final verdict, which needs the references
     let remaining = report::remaining_structure(&outcome.final_signatures);
     report["remaining_structure"] = match (outcome.unexplained, outcome.final_signatures.white()) {
         (true, _) => serde_json::json!(remaining),

@@ -237,10 +237,8 @@ pub fn report_json(runs: &[Run], prob: &Problem, o: &Outcome, temps: &[f64], sec
         "diagnosis": diagnosis,
         "added_effects": added,
         "final": metrics(prob, &o.final_fit),
-        "unexplained": o.unexplained,
         "pruned_effects": record["pruned_effects"],
         "equivalent_forms": forms,
-        "remaining_structure": if o.unexplained { Value::String(remaining_structure(&o.final_signatures)) } else { Value::Null },
         "noise_floor_rad": o.final_signatures.noise_floor,
         "plausibility": prob.torque_scale().map(|t| json!({
             "transmission_torque_nm": t.transmission_nm, "inertial_torque_nm": t.inertial_nm, "link_speed_rad_s": t.speed,
