@@ -473,7 +473,7 @@ fn backward_step<R: Rig>(
     below_noise_only: bool,
 ) -> Option<(Pruned<R::Effect>, R::Model)> {
     for e in rig.effects(current) {
-        let below_noise = !rig.visible(current, e) && !rig.absence_shown(current, e);
+        let below_noise = !rig.absence_shown(current, e) && !rig.visible(current, e);
         let hidden = !below_noise && rig.lighter_hidden(current, e);
         if below_noise_only && !below_noise && !hidden {
             continue;
@@ -1520,8 +1520,8 @@ mod tests {
             share > self.noise_var
         }
         fn absence_shows(&self, with: &Model, without: &Model) -> bool {
-            let n = self.y.len() as f64;
-            self.absence_measured && (without.sse - with.sse) / n > (1.2f64.powi(2) - 1.0) * self.noise_var
+            let rms = |m: &Model| (m.sse / self.y.len() as f64).sqrt();
+            self.absence_measured && super::super::search::absence_shows(rms(with), rms(without), self.noise_var.sqrt())
         }
         fn defined_over(&self, e: usize) -> Option<usize> {
             self.over.filter(|&(x, _)| x == e).map(|(_, b)| b)
