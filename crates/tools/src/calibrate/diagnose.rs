@@ -33,11 +33,15 @@ pub fn stribeck_velocity_grid(prob: &Problem) -> [f64; 4] {
 /// level with the thermocouple and falls behind it by its drift rate times the lag, so the lag's
 /// effect on a run changes shape with its size, not only its scale: one secant of 0.5 s projected
 /// campaign rig 55's 2.5 s lag (a 5 K heating over 17 s) on the wrong sign, and it was never refitted.
-/// (A lag as long as the run is plausible: the paper heats its PCL over 30–90 s.)
-pub const THERMAL_LAG_SHARES: [f64; 5] = [0.01, 0.03, 0.1, 0.3, 1.0];
+/// (A lag as long as the run is plausible: the paper heats its PCL over 30–90 s.) Lags longer
+/// than the span change the shape again: the PCL barely leaves its start, where a short lag's PCL
+/// follows the thermocouple. Rig 1526's 13.2 s lag over two 6.5 s segments (screened on their
+/// first 2.4 s) projected on the wrong sign from every probe up to 2.4 s (−1.7 to −2.2 s), and
+/// from 7 and 24 s projected at +10 and +20 s.
+pub const THERMAL_LAG_SHARES: [f64; 7] = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
 
 /// The thermal lags probed for `prob`'s runs, s (`THERMAL_LAG_SHARES` of their median span).
-pub fn thermal_lag_grid(prob: &Problem) -> [f64; 5] {
+pub fn thermal_lag_grid(prob: &Problem) -> [f64; 7] {
     let mut spans: Vec<f64> =
         prob.inputs.iter().filter(|i| i.time.len() > 1).map(|i| i.time[i.time.len() - 1] - i.time[0]).collect();
     spans.sort_by(f64::total_cmp);
@@ -517,6 +521,9 @@ pub fn rank(prob: &Problem, fit: &Fit, sig: &Signatures, unseen: impl Fn(Effect)
                 }
             }
             let gain = if physical { (sse_now - sse_aug).max(0.0) } else { 0.0 };
+            super::stepwise::debug(format_args!(
+                "probe {effect:?} × {size:.3}: linearised start {start:?}, SSE {sse_now:.4e} → {sse_aug:.4e}"
+            ));
             if best.as_ref().is_none_or(|b| gain > b.0) {
                 best = Some((gain, start, beta.rows(0, base).iter().copied().collect()));
             }
