@@ -33,7 +33,19 @@ fn viscous_spec(effects: Vec<Effect>) -> ModelSpec {
 
 /// The link angle the FMU gives `input` under `spec` at `truth`, without noise: a truth's runs.
 fn simulated(sim: &Simulator, input: &SimInput, spec: &ModelSpec, truth: &[f64]) -> Vec<Vec<f64>> {
-    let blank = Problem::new(sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[22.0]).unwrap();
+    simulated_at(sim, input, spec, truth, 22.0)
+}
+
+/// `simulated` with the run grouped at `temperature_c` (`simulated`: 22 °C).
+fn simulated_at(
+    sim: &Simulator,
+    input: &SimInput,
+    spec: &ModelSpec,
+    truth: &[f64],
+    temperature_c: f64,
+) -> Vec<Vec<f64>> {
+    let blank =
+        Problem::new(sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[temperature_c]).unwrap();
     blank.outputs(spec, truth).expect("the truth simulates")
 }
 
@@ -473,8 +485,7 @@ fn a_lag_longer_than_the_runs_ranks_with_its_sign() {
     // [ln K, ln C] ++ backlash width ++ link damping ++ lag, the rig's truth
     let truth = vec![36.86f64.ln(), 0.278f64.ln(), 0.0054, 0.16, 13.2];
     let spec = viscous_spec(vec![Effect::Backlash, Effect::LinkDamping, Effect::ThermalLag]);
-    let blank = Problem::new(&sim, vec![input.clone()], vec![vec![0.0; input.time.len()]], vec![0], &[60.0]).unwrap();
-    let mut measured = blank.outputs(&spec, &truth).unwrap();
+    let mut measured = simulated_at(&sim, &input, &spec, &truth, 60.0);
     measured[0].iter_mut().enumerate().for_each(|(k, v)| *v += 3e-5 * ((k * 7919 % 1000) as f64 / 500.0 - 1.0));
     let prob = Problem::new(&sim, vec![input], measured, vec![0], &[60.0]).unwrap();
     // where the search stood: link damping in, the backlash and the lag not yet

@@ -24,7 +24,7 @@ pub const STRIBECK_VELOCITY_SHARES: [f64; 4] = [0.02, 0.06, 0.2, 0.6];
 
 /// The Stribeck velocities tried for `prob`'s runs, rad/s (the paper's bench's scale, 1 rad/s,
 /// where the runs are too short to tell theirs).
-pub fn stribeck_velocity_grid(prob: &Problem) -> [f64; 4] {
+pub fn stribeck_velocity_grid(prob: &Problem) -> [f64; STRIBECK_VELOCITY_SHARES.len()] {
     let scale = prob.speed_scale().unwrap_or(1.0);
     STRIBECK_VELOCITY_SHARES.map(|share| share * scale)
 }
@@ -41,7 +41,7 @@ pub fn stribeck_velocity_grid(prob: &Problem) -> [f64; 4] {
 pub const THERMAL_LAG_SHARES: [f64; 7] = [0.01, 0.03, 0.1, 0.3, 1.0, 3.0, 10.0];
 
 /// The thermal lags probed for `prob`'s runs, s (`THERMAL_LAG_SHARES` of their median span).
-pub fn thermal_lag_grid(prob: &Problem) -> [f64; 7] {
+pub fn thermal_lag_grid(prob: &Problem) -> [f64; THERMAL_LAG_SHARES.len()] {
     let mut spans: Vec<f64> =
         prob.inputs.iter().filter(|i| i.time.len() > 1).map(|i| i.time[i.time.len() - 1] - i.time[0]).collect();
     spans.sort_by(f64::total_cmp);
