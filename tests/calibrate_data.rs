@@ -312,7 +312,7 @@ fn corrupt_samples_are_refused_by_line_and_column_or_repaired_on_request() {
     // repaired on request: both, by line, and the repaired run matches the clean one
     let both = with_link(&wrapped, 900, "1000000");
     let clean = parse_run(Path::new("good.csv"), &good).unwrap();
-    let r = parse_run_with(Path::new("both.csv"), &both, ReadOptions { repair_samples: true }).unwrap();
+    let r = parse_run_with(Path::new("both.csv"), &both, ReadOptions { repair_samples: true, threads: 1 }).unwrap();
     let found: Vec<(usize, &str)> = r.repairs.iter().map(|p| (p.line, p.kind.name())).collect();
     assert_eq!(found, vec![(905, "spike"), (1205, "encoder_wrap")]);
     let worst = r.link.iter().zip(&clean.link).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);

@@ -310,6 +310,48 @@ fn the_equation_error_reads_a_stuck_link_as_friction_not_play() {
     assert!(e.p[2] > 0.0 && e.p[3] >= 0.0 && (k / 82.0).ln().abs() < 3f64.ln(), "start {:?}, K {k:.1}", e.p);
 }
 
+/// The equation error at the backlash grid's widths from one pass over the samples
+/// (`normal_equations_at`, which the subsets and the width's profile use) is, width by width, the
+/// pass of its own: every entry equal to the last bit, on two temperature groups (so each width's
+/// columns land in its own group's place) with every linear effect in and rows at rest left out.
+#[test]
+fn the_backlash_grid_in_one_pass_is_each_width_on_its_own() {
+    use thermovia_tools::calibrate::fit::EQUATION_ERROR_EFFECTS;
+    use thermovia_tools::calibrate::synthetic::SplitMix;
+    let sim = Simulator::new(common::fmu(), 2).unwrap();
+    let (input, spec, truth, mut measured) = held_steps(&sim);
+    let mut warm = input.clone();
+    warm.housing_k.iter_mut().for_each(|k| *k += 30.0);
+    measured.extend(simulated_at(&sim, &warm, &spec, &truth, 52.0));
+    let mut rng = SplitMix::new(5);
+    measured.iter_mut().flatten().for_each(|y| *y += 2.9e-4 * rng.normal());
+    let prob = Problem::new(&sim, vec![input, warm], measured, vec![0, 1], &[22.0, 52.0]).unwrap();
+    let widths: Vec<f64> = std::iter::once(0.0).chain(prob.backlash_width_grid()).collect();
+    for law in [DampingLaw::Viscous, DampingLaw::Hysteretic] {
+        for moving_only in [true, false] {
+            let all =
+                prob.normal_equations_at(law, &EQUATION_ERROR_EFFECTS, &widths, moving_only).expect("rows enough");
+            assert_eq!(all.len(), widths.len());
+            for (normal, &w) in all.iter().zip(&widths) {
+                let alone = prob.normal_equations(law, &EQUATION_ERROR_EFFECTS, w, moving_only).expect("rows enough");
+                assert_eq!(normal.ata, alone.ata, "width {w}");
+                assert_eq!(
+                    (&normal.atb, normal.btb, normal.samples),
+                    (&alone.atb, alone.btb, alone.samples),
+                    "width {w}"
+                );
+            }
+            // the widths differ where the play clips the relative angle, and only in the transmission's columns
+            let (first, last) = (&all[1].ata, &all[widths.len() - 1].ata);
+            assert_ne!(first.columns(0, 4), last.columns(0, 4));
+            assert_eq!(
+                first.view((4, 4), (first.nrows() - 4, first.ncols() - 4)),
+                last.view((4, 4), (last.nrows() - 4, last.ncols() - 4))
+            );
+        }
+    }
+}
+
 /// `input` (`sine_input`'s 5 Hz swing of 0.38 rad) with a logger's stamps: each but the first and
 /// the last moved by up to ±20 % of `period`, the motor read at the moved stamps.
 fn jittered_5hz(input: &SimInput, period: f64) -> SimInput {

@@ -35,7 +35,7 @@ fn run() -> Result<(), Error> {
     let rig = PathBuf::from(std::env::args().nth(1).ok_or("usage: truth_fit RIG_FOLDER")?);
     let truth = read_json(&rig.join("runs/truth.json"))?;
     let report = read_json(&rig.join("calibration/report.json"))?;
-    let runs = data::read_inputs_with(&[rig.join("runs")], data::ReadOptions { repair_samples: false })?;
+    let runs = data::read_inputs_with(&[rig.join("runs")], data::ReadOptions { repair_samples: false, threads: 2 })?;
     let (group, temperatures) = conditioning::group_runs(&runs);
     let inputs = runs.iter().map(|r| conditioning::sim_input(r, None, false).0).collect();
     let measured = runs.iter().map(|r| r.link.clone()).collect();

@@ -136,6 +136,8 @@ impl From<Vec<(f64, f64)>> for HousingHistory {
 pub struct ReadOptions {
     /// Repair isolated spikes and encoder wraps (listed in the report) instead of refusing them.
     pub repair_samples: bool,
+    /// Files read at once (0 or 1: one at a time).
+    pub threads: usize,
 }
 
 impl Run {
@@ -738,25 +740,33 @@ pub fn read_inputs(inputs: &[PathBuf]) -> Result<Vec<Run>, DataError> {
 /// Reads every input; the first error stops everything. A file with gaps in its time base becomes
 /// one run per segment between them (docs/interfaces.md, "Data quality").
 pub fn read_inputs_with(inputs: &[PathBuf], options: ReadOptions) -> Result<Vec<Run>, DataError> {
+    let files = expand_inputs(inputs)?;
+    // every file read, then the first error in the files' order: the one a reading in turn meets
+    let read = super::parallel::map(options.threads, &files, |f| read_segments(f, options));
     let mut runs = Vec::new();
-    for f in expand_inputs(inputs)? {
-        let run = read_run_with(&f, options)?;
-        let longest = super::quality::stretches(&run.time).iter().map(|(a, b)| b - a).max().unwrap_or(0);
-        let segments = split_at_gaps(run);
-        if segments.is_empty() {
-            return Err(file_error(
-                &f,
-                format!(
-                    "no segment to fit: gaps (intervals over {} median sample periods) cut the run into stretches \
-                     of at most {longest} samples, and a segment needs {}",
-                    super::quality::GAP_PERIODS,
-                    super::quality::MIN_SEGMENT_SAMPLES
-                ),
-            ));
-        }
-        runs.extend(segments.into_iter().map(choose_time_base));
+    for segments in read {
+        runs.extend(segments?);
     }
     Ok(runs)
+}
+
+/// One file's runs: one per stretch between its gaps, each on its time base.
+fn read_segments(f: &Path, options: ReadOptions) -> Result<Vec<Run>, DataError> {
+    let run = read_run_with(f, options)?;
+    let longest = super::quality::stretches(&run.time).iter().map(|(a, b)| b - a).max().unwrap_or(0);
+    let segments = split_at_gaps(run);
+    if segments.is_empty() {
+        return Err(file_error(
+            f,
+            format!(
+                "no segment to fit: gaps (intervals over {} median sample periods) cut the run into stretches \
+                 of at most {longest} samples, and a segment needs {}",
+                super::quality::GAP_PERIODS,
+                super::quality::MIN_SEGMENT_SAMPLES
+            ),
+        ));
+    }
+    Ok(segments.into_iter().map(choose_time_base).collect())
 }
 
 /// An uneven time base is either a logger's timestamps jittering around a uniform clock (the

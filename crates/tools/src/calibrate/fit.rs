@@ -729,7 +729,15 @@ impl<'a> Problem<'a> {
             normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())
         };
         let width = if effects.contains(&Effect::Backlash) {
-            self.profile_backlash_width(|w| solve(w).map_or(f64::INFINITY, |(_, sse)| sse))?
+            // the grid's widths from one pass (`normal_equations_at`), the refinement's one by one
+            let sse_of = |normal: &NormalEquations| {
+                normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>()).map_or(f64::INFINITY, |(_, sse)| sse)
+            };
+            let on_grid = |widths: &[f64]| match self.normal_equations_at(law, effects, widths, moving_only) {
+                Some(normals) => normals.iter().map(sse_of).collect(),
+                None => vec![f64::INFINITY; widths.len()],
+            };
+            self.profile_backlash_width(on_grid, |w| solve(w).map_or(f64::INFINITY, |(_, sse)| sse))?
         } else {
             0.0
         };
@@ -771,14 +779,19 @@ impl<'a> Problem<'a> {
         (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
     }
 
-    /// The width of least `sse` over the grid, refined by golden section between its neighbours;
-    /// None when the runs show no relative motion.
-    pub fn profile_backlash_width(&self, sse: impl Fn(f64) -> f64) -> Option<f64> {
+    /// The width of least `sse` over the grid (`on_grid`: the sums of squares at every width of
+    /// it at once), refined by golden section between its neighbours; None when the runs show no
+    /// relative motion.
+    pub fn profile_backlash_width(
+        &self,
+        on_grid: impl Fn(&[f64]) -> Vec<f64>,
+        sse: impl Fn(f64) -> f64,
+    ) -> Option<f64> {
         let grid = self.backlash_width_grid();
         if !(grid[0] > 0.0) {
             return None;
         }
-        let values: Vec<f64> = grid.iter().map(|&w| sse(w)).collect();
+        let values: Vec<f64> = on_grid(&grid);
         let best = (0..grid.len()).min_by(|&a, &b| values[a].total_cmp(&values[b]))?;
         if !values[best].is_finite() {
             return None;
@@ -818,38 +831,55 @@ impl<'a> Problem<'a> {
         width: f64,
         moving_only: bool,
     ) -> Option<NormalEquations> {
+        self.normal_equations_at(law, effects, &[width], moving_only)?.pop()
+    }
+
+    /// [`Problem::normal_equations`] at each of `widths`, from one pass over the samples: only a
+    /// group's two transmission columns depend on the width, so the effects' columns against each
+    /// other and the torque are summed once for them all (the backlash grid's twelve widths cost
+    /// about one). Every entry is the same sum, in the same order, as a pass of its own would make
+    /// (a column that is zero on a sample adds nothing exactly), so the equations are identical.
+    pub fn normal_equations_at(
+        &self,
+        law: DampingLaw,
+        effects: &[Effect],
+        widths: &[f64],
+        moving_only: bool,
+    ) -> Option<Vec<NormalEquations>> {
         if effects.iter().any(|e| !EQUATION_ERROR_EFFECTS.contains(e)) {
             return None;
         }
-        let half_play = 0.5 * width;
+        let (n_groups, n_t) = (self.n_groups, 2 * self.n_groups);
         let n_eff: usize = effects.iter().map(|&e| regressor_columns(e)).sum();
-        let cols = 2 * self.n_groups + n_eff;
-        let mut ata = DMatrix::<f64>::zeros(cols, cols);
-        let mut atb = DVector::<f64>::zeros(cols);
+        let cols = n_t + n_eff;
+        // shared by every width: the effects' columns (upper triangle) and their products with the torque
+        let mut eff_ata = vec![0.0; n_eff * n_eff];
+        let mut eff_atb = vec![0.0; n_eff];
         let (mut btb, mut samples) = (0.0, 0usize);
-        let mut row = DVector::<f64>::zeros(cols);
+        // per width and group: its two transmission columns against themselves, each effect column
+        // and the torque
+        let mut tt = vec![[0.0; 3]; widths.len() * n_groups];
+        let mut te = vec![0.0; widths.len() * n_groups * 2 * n_eff];
+        let mut tb = vec![[0.0; 2]; widths.len() * n_groups];
+        let mut eff = vec![0.0; n_eff];
         let independent = self.for_each_sample(law, moving_only, |s| {
-            row.fill(0.0);
             let g = s.group;
-            let beyond = s.phi - s.phi.clamp(-half_play, half_play);
-            row[2 * g] = beyond;
-            row[2 * g + 1] = if beyond != 0.0 || half_play == 0.0 { s.w * s.dphi } else { 0.0 };
-            let mut c = 2 * self.n_groups;
+            let mut c = 0;
             // the model's smooth sign s = tanh(v / 1 mm/s)
             let sign = (s.v / 1e-3).tanh();
             for e in effects {
                 match e {
                     Effect::Gravity => {
-                        row[c] = -s.angle.sin();
-                        row[c + 1] = s.angle.cos();
+                        eff[c] = -s.angle.sin();
+                        eff[c + 1] = s.angle.cos();
                     }
-                    Effect::CoulombFriction => row[c] = -sign,
-                    Effect::LinkDamping => row[c] = -s.v,
-                    Effect::ConstantLoad => row[c] = 1.0,
+                    Effect::CoulombFriction => eff[c] = -sign,
+                    Effect::LinkDamping => eff[c] = -s.v,
+                    Effect::ConstantLoad => eff[c] = 1.0,
                     Effect::AsymmetricFriction => {
                         // −a_c s² − a_v s v
-                        row[c] = -sign * sign;
-                        row[c + 1] = -sign * s.v;
+                        eff[c] = -sign * sign;
+                        eff[c + 1] = -sign * s.v;
                     }
                     Effect::Backlash => {}
                     _ => unreachable!("checked above"),
@@ -857,13 +887,64 @@ impl<'a> Problem<'a> {
                 c += regressor_columns(*e);
             }
             let b = s.inertial;
-            // in place (a rank-1 update per sample; no temporaries)
-            ata.ger(1.0, &row, &row, 1.0);
-            atb.axpy(b, &row, 1.0);
+            for i in 0..n_eff {
+                for j in i..n_eff {
+                    eff_ata[i * n_eff + j] += eff[i] * eff[j];
+                }
+                eff_atb[i] += b * eff[i];
+            }
             btb += b * b;
             samples += 1;
+            for (k, &width) in widths.iter().enumerate() {
+                let half_play = 0.5 * width;
+                let beyond = s.phi - s.phi.clamp(-half_play, half_play);
+                let t = [beyond, if beyond != 0.0 || half_play == 0.0 { s.w * s.dphi } else { 0.0 }];
+                let at = k * n_groups + g;
+                tt[at][0] += t[0] * t[0];
+                tt[at][1] += t[0] * t[1];
+                tt[at][2] += t[1] * t[1];
+                tb[at][0] += b * t[0];
+                tb[at][1] += b * t[1];
+                let te = &mut te[at * 2 * n_eff..(at + 1) * 2 * n_eff];
+                for (i, &x) in eff.iter().enumerate() {
+                    te[i] += t[0] * x;
+                    te[n_eff + i] += t[1] * x;
+                }
+            }
         });
-        (samples > cols).then_some(NormalEquations { ata, atb, btb, samples, independent })
+        if samples <= cols {
+            return None;
+        }
+        let normal = |k: usize| {
+            let mut ata = DMatrix::<f64>::zeros(cols, cols);
+            let mut atb = DVector::<f64>::zeros(cols);
+            for i in 0..n_eff {
+                for j in i..n_eff {
+                    ata[(n_t + i, n_t + j)] = eff_ata[i * n_eff + j];
+                    ata[(n_t + j, n_t + i)] = eff_ata[i * n_eff + j];
+                }
+                atb[n_t + i] = eff_atb[i];
+            }
+            for g in 0..n_groups {
+                let at = k * n_groups + g;
+                let (kc, cc) = (2 * g, 2 * g + 1);
+                ata[(kc, kc)] = tt[at][0];
+                ata[(kc, cc)] = tt[at][1];
+                ata[(cc, kc)] = tt[at][1];
+                ata[(cc, cc)] = tt[at][2];
+                atb[kc] = tb[at][0];
+                atb[cc] = tb[at][1];
+                for i in 0..n_eff {
+                    let (a, b) = (te[at * 2 * n_eff + i], te[at * 2 * n_eff + n_eff + i]);
+                    ata[(kc, n_t + i)] = a;
+                    ata[(n_t + i, kc)] = a;
+                    ata[(cc, n_t + i)] = b;
+                    ata[(n_t + i, cc)] = b;
+                }
+            }
+            NormalEquations { ata, atb, btb, samples, independent }
+        };
+        Some((0..widths.len()).map(normal).collect())
     }
 
     /// Calls `f` with every usable sample of the equation error (runs of at least 40 samples,

@@ -14,6 +14,7 @@ pub mod diagnose;
 pub mod drive;
 pub mod fit;
 pub mod paper;
+pub mod parallel;
 pub mod quality;
 pub mod reference;
 pub mod report;
@@ -23,7 +24,7 @@ pub mod sim;
 pub mod stepwise;
 pub mod synthetic;
 
-use conditioning::{group_runs, held_out_groups, sim_input, sim_input_and_reading, MotorConditioning};
+use conditioning::{group_runs, held_out_groups, sim_input, sim_input_and_reading, MotorConditioning, MotorReading};
 pub use synthetic::SynthArgs;
 
 /// `thermovia calibrate` options.
@@ -67,7 +68,8 @@ pub struct CalibrateArgs {
     /// Packaged FMU to use (default target/fmu/ThermoVIA.fmu).
     #[cfg_attr(feature = "cli", arg(long))]
     pub fmu: Option<std::path::PathBuf>,
-    /// FMU instances simulating in parallel (the default is this machine's core count).
+    /// Threads: FMU instances simulating in parallel, and runs read and conditioned at once (the
+    /// default is this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
     /// Smooth the measured motor angle instead of band-limiting it: the half-width in seconds of a
@@ -117,7 +119,7 @@ impl CalibrateArgs {
 
 impl CalibrateArgs {
     pub fn read_options(&self) -> data::ReadOptions {
-        data::ReadOptions { repair_samples: self.repair_samples }
+        data::ReadOptions { repair_samples: self.repair_samples, threads: self.threads }
     }
 }
 
@@ -284,12 +286,17 @@ fn calibrate_device(
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
-    let conditioning_started = std::time::Instant::now();
-    let (by_noise, readings): (Vec<_>, Vec<_>) =
-        runs.iter().map(|r| sim_input_and_reading(r, args.input_smoothing)).unzip();
-    // timed before the count's edge: the report's reserve is in units of one conditioning
-    let conditioning_seconds = conditioning_started.elapsed().as_secs_f64();
-    let by_count: Vec<_> = readings.iter().zip(&runs).map(|(reading, r)| reading.by_count(r)).collect();
+    // each run conditioned on its own, the runs over the threads; timed before the count's edge,
+    // and as if in turn: the report's reserve is in units of one conditioning on one thread
+    let conditioned = parallel::map(args.threads, &runs, |r| {
+        let started = std::time::Instant::now();
+        let out = sim_input_and_reading(r, args.input_smoothing);
+        (out, started.elapsed().as_secs_f64())
+    });
+    let conditioning_seconds: f64 = conditioned.iter().map(|(_, seconds)| seconds).sum();
+    let (by_noise, readings): (Vec<_>, Vec<_>) = conditioned.into_iter().map(|(out, _)| out).unzip();
+    let pairs: Vec<(&MotorReading, &data::Run)> = readings.iter().zip(&runs).collect();
+    let by_count: Vec<_> = parallel::map(args.threads, &pairs, |(reading, r)| reading.by_count(r));
     drop(readings);
     // where the count's rule reaches some run: a run it does not reach (a sinusoid) keeps its noise's edge
     let by_count: Option<Vec<(sim::SimInput, MotorConditioning)>> = by_count.iter().any(Option::is_some).then(|| {
@@ -625,11 +632,11 @@ fn input_error_floor(
             return None;
         }
         let started = std::time::Instant::now();
-        let inputs: Vec<sim::SimInput> = runs
+        // the draws in the runs' order (one stream), then each run conditioned on its own
+        let perturbed: Vec<data::Run> = runs
             .iter()
-            .zip(&prob.inputs)
             .zip(&encoders)
-            .map(|((r, input), &(q, sigma))| {
+            .map(|(r, &(q, sigma))| {
                 let mut offset = 0.0;
                 let motor: Vec<f64> = r
                     .motor
@@ -642,10 +649,12 @@ fn input_error_floor(
                         m + offset + sigma * rng.normal()
                     })
                     .collect();
-                let perturbed = data::Run { motor, ..r.clone() };
-                sim::SimInput { motor: sim_input(&perturbed, smoothing, count_edge).0.motor, ..input.clone() }
+                data::Run { motor, ..r.clone() }
             })
             .collect();
+        let motors = parallel::map(prob.sim.threads(), &perturbed, |r| sim_input(r, smoothing, count_edge).0.motor);
+        let inputs: Vec<sim::SimInput> =
+            prob.inputs.iter().zip(motors).map(|(input, motor)| sim::SimInput { motor, ..input.clone() }).collect();
         let other = prob.held_out(inputs, prob.measured.clone(), prob.group.clone());
         let moved = fit::Fit::evaluate(&other, fit.spec.clone(), fit.p.clone())?;
         let diff: Vec<f64> = moved.residual.iter().zip(&fit.residual).map(|(a, b)| a - b).collect();

@@ -317,10 +317,10 @@ pub fn baseline(prob: &Problem, (law, springs): Structure, end: Option<std::time
 /// normal equations.
 pub fn equation_error_subsets(prob: &Problem, law: DampingLaw, count: usize) -> Vec<Vec<Effect>> {
     let all = EQUATION_ERROR_EFFECTS;
-    let Some(normal) = prob.normal_equations(law, &all, 0.0, true) else { return Vec::new() };
     // with backlash: the same regression at each width of the grid (the best width per subset)
-    let with_play: Vec<NormalEquations> =
-        prob.backlash_width_grid().into_iter().filter_map(|w| prob.normal_equations(law, &all, w, true)).collect();
+    let widths: Vec<f64> = std::iter::once(0.0).chain(prob.backlash_width_grid()).collect();
+    let Some(mut with_play) = prob.normal_equations_at(law, &all, &widths, true) else { return Vec::new() };
+    let normal: NormalEquations = with_play.remove(0);
     let n_t = 2 * prob.n_groups;
     let mut offsets = Vec::with_capacity(all.len());
     let mut next = n_t;

@@ -528,27 +528,9 @@ impl Simulator {
 
     /// Runs `f` on every job with an instance of the pool, in parallel; results in job order.
     pub fn map<T: Sync, R: Send>(&self, jobs: &[T], f: impl Fn(&mut Instance, &T) -> R + Sync) -> Vec<R> {
-        let next = AtomicUsize::new(0);
-        let results: Vec<Mutex<Option<R>>> = jobs.iter().map(|_| Mutex::new(None)).collect();
-        let workers = self.instances.len().min(jobs.len()).max(1);
-        std::thread::scope(|s| {
-            for w in 0..workers {
-                let (next, results, inst, f) = (&next, &results, &self.instances[w], &f);
-                s.spawn(move || {
-                    let mut inst = inst.lock().unwrap_or_else(|p| p.into_inner());
-                    loop {
-                        let j = next.fetch_add(1, Ordering::Relaxed);
-                        if j >= jobs.len() {
-                            break;
-                        }
-                        let r = f(&mut inst, &jobs[j]);
-                        *results[j].lock().unwrap_or_else(|p| p.into_inner()) = Some(r);
-                    }
-                });
-            }
-        });
+        let out = super::parallel::map_with(&self.instances, jobs, f);
         self.simulations.fetch_add(jobs.len(), Ordering::Relaxed);
-        results.into_iter().map(|m| m.into_inner().unwrap_or_else(|p| p.into_inner()).expect("every job ran")).collect()
+        out
     }
 
     /// The FMU's transmission with the table's moduli at a housing (and PCL) temperature and an
