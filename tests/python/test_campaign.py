@@ -83,6 +83,42 @@ def test_an_equivalent_form_counts_only_where_the_report_declares_it_and_it_is_t
     assert not equivalent
 
 
+def test_each_missed_or_extra_effect_is_traced_through_the_chain_of_evidence():
+    def attempt(effects, before, after, kept, stage="round", failed=None):
+        a = {"effects": effects, "bic_before": before, "bic_after": after, "kept": kept, "stage": stage}
+        return a if failed is None else dict(a, failed=failed)
+    report = {
+        "rounds": [
+            {"ranking": [{"effect": e} for e in ("gravity", "backlash", "stribeck_friction", "thermal_lag")],
+             "attempts": [attempt(["gravity"], -100.0, -200.0, True),
+                          attempt(["backlash"], -200.0, -205.0, False),
+                          attempt(["stribeck_friction"], -200.0, -260.0, False)]},
+        ],
+        "combinations": [attempt(["coulomb_friction", "link_damping"], -50.0, -100.0, True, "baseline")],
+        "pruned_effects": [{"effect": "link_damping", "below_noise": True},
+                           {"effect": "gravity", "below_noise": True, "replaced_by": "constant_load"}],
+    }
+    truth = {e: {} for e in ("gravity", "backlash", "stribeck_friction", "thermal_lag", "link_damping",
+                             "asymmetric_friction")}
+    found = {"coulomb_friction", "constant_load"}
+    missed, extra = campaign.effect_fates(report, found, truth)
+    assert missed == {
+        "gravity": "pruned below the noise, replaced by constant_load",
+        "link_damping": "pruned below the noise",
+        "backlash": "refitted, its BIC never fell",
+        "stribeck_friction": "refitted, its BIC fell, not kept",
+        "thermal_lag": "ranked, never refitted",
+        "asymmetric_friction": "never ranked",
+    }
+    assert extra == {"coulomb_friction": "kept at baseline", "constant_load": "the lighter form of gravity"}
+    # a drive's refits name the tests they failed; the BIC's own failure is the other branch's
+    drive = {"rounds": [{"ranking": [], "attempts": [
+        attempt(["stribeck_friction"], -10.0, -90.0, False, failed=["wald", "visibility"]),
+        attempt(["stribeck_friction", "asymmetric_friction"], -10.0, -95.0, False, failed=["bic", "wald"])]}]}
+    missed, _ = campaign.effect_fates(drive, set(), {"stribeck_friction": {}})
+    assert missed == {"stribeck_friction": "refitted, its BIC fell, not kept (visibility, wald)"}
+
+
 def drive_report(effects, load, forms=()):
     return {"added_effects": [{"effect": k, "parameters": v} for k, v in effects.items()],
             "parameters": {"final": [{"name": "inertia", "value": 5.7e-5}, {"name": "constant_load", "value": load}]},

@@ -502,10 +502,74 @@ def calibrate_and_score(rig, data, result, budget, scorer, replay_floor=None):
     if not passed and replay_floor is not None and final_rmse(report) > 1.2 * rig["floor"]:
         rig["floor"] = replay_floor()
         passed, why = scorer(rig, report)
+    found = set(in_truths_form(report, rig["expected"])[0]) if rig.get("kind") != "drive" else \
+        {e["effect"] for e in report["added_effects"]}
+    missed, extra = effect_fates(report, found, rig["expected"]) if not rig["outside"] else ({}, {})
     return {"seed": rig["seed"], "class": rig["class"], "passed": passed, "why": why, "seconds": seconds,
             "ratio": final_rmse(report) / rig["floor"], "added": [e["effect"] for e in report["added_effects"]],
             "equivalent_form": rig.get("equivalent_form", False),
-            "expected": sorted(rig["expected"]), "rig": rig["rig"]}
+            "expected": sorted(rig["expected"]), "missed": missed, "extra": extra, "rig": rig["rig"]}
+
+
+# The search's margin on the BIC (stepwise::BIC_MARGIN): a refit that did not lower it by more failed the BIC.
+BIC_MARGIN = 10.0
+
+
+def attempts_of(report):
+    """Every refit of the report's chain of evidence, rounds' and combinations' alike."""
+    return [a for r in report.get("rounds", []) for a in r.get("attempts", [])] + report.get("combinations", [])
+
+
+def not_kept(tried):
+    """Why refits with an effect were not kept: whether any lowered the BIC by the margin (then the
+    rest of the acceptance rule refused it: the structure removed, a bound, a drive's Wald test or
+    visibility, named where the report lists them), or none did (the fits never found it worth it)."""
+    fell = [a for a in tried if a["bic_after"] < a["bic_before"] - BIC_MARGIN]
+    if not fell:
+        return "refitted, its BIC never fell"
+    failed = sorted({t for a in fell for t in a.get("failed", []) if t != "bic"})
+    return "refitted, its BIC fell, not kept" + (f" ({', '.join(failed)})" if failed else "")
+
+
+def effect_fates(report, found, expected):
+    """What the chain of evidence did with each effect the truth has and `found` (the report's
+    effects, in the truth's form where it declares one) lacks, and with each it has that the truth
+    lacks: {effect: words}, missed and extra."""
+    attempts = attempts_of(report)
+    ranked = {c["effect"] for r in report.get("rounds", []) for c in r.get("ranking", [])}
+    pruned = {p["effect"]: p for p in report.get("pruned_effects", [])}
+    missed = {}
+    for e in sorted(set(expected) - set(found)):
+        tried = [a for a in attempts if e in a.get("effects", [])]
+        if e in pruned:
+            p = pruned[e]
+            how = "below the noise" if p.get("below_noise") else "by the BIC"
+            missed[e] = f"pruned {how}" + (f", replaced by {p['replaced_by']}" if p.get("replaced_by") else "")
+        elif any(a.get("kept") for a in tried):
+            missed[e] = "kept, then swapped out or folded away"
+        elif tried:
+            missed[e] = not_kept(tried)
+        elif e in ranked:
+            missed[e] = "ranked, never refitted"
+        else:
+            missed[e] = "never ranked"
+    extra = {}
+    for e in sorted(set(found) - set(expected)):
+        kept = [a["stage"] for a in attempts if a.get("kept") and e in a.get("effects", [])]
+        replaced = [p["effect"] for p in pruned.values() if p.get("replaced_by") == e]
+        extra[e] = ("kept at " + ", ".join(dict.fromkeys(kept))) if kept else \
+            (f"the lighter form of {', '.join(replaced)}" if replaced else "in by no refit the chain lists")
+    return missed, extra
+
+
+def print_fates(results):
+    """How often each fate met a missed or an extra effect over `results` (the rigs' `missed` and
+    `extra`): where the loop's misses come from."""
+    for key, title in (("missed", "the truth's effects the reports lack"), ("extra", "effects the reports add that the truth lacks")):
+        fates = [f.split(" (")[0] for r in results for f in r.get(key, {}).values()]
+        if fates:
+            counts = sorted(((fates.count(f), f) for f in set(fates)), reverse=True)
+            print(f"\n{title} ({len(fates)}): " + "; ".join(f"{f} {n}" for n, f in counts))
 
 
 def first_small_seeds(drawer, count):
@@ -666,12 +730,14 @@ def main(argv=None):
         equivalent = sum(r["passed"] and r.get("equivalent_form", False) for r in inside)
         if equivalent:
             print(f"  of which {equivalent} passed in the equivalent form of the truth's effects (equivalent_forms)")
+    print_fates(inside)
     print_classes(inside, "device rigs inside the library, per class (passed/rigs):", DEVICE_CLASSES)
     drive_results = [r for r in results if r["class"].startswith("drive")]
     print_classes(drive_results, "drive rigs, per class (passed/rigs):", DRIVE_CLASSES)
     if drive_results:
         print(f"drive rigs: {100 * sum(r['passed'] for r in drive_results) / len(drive_results):.1f} %")
         print_offset_breakdown(drive_results)
+        print_fates(drive_results)
     kinds = {
         "device": inside,
         "drive": [r for r in results if r["class"].startswith("drive")],
