@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use thermovia_tools::calibrate::data::{parse_run, read_inputs, DataError};
+use thermovia_tools::calibrate::data::{parse_run, read_inputs, read_inputs_with, DataError, ReadOptions};
 
 const GOOD: &str = "# temperature_c=40\n# source=test\n# frequency_hz=0.5\ntime_s,motor_angle_rad,link_angle_rad,extra\n0.000,0.0,0.0,a\n0.001,0.001,0.0005,b\n0.002,0.002,0.0011,c\n0.003,0.003,0.0016,d\n";
 
@@ -219,6 +219,18 @@ fn folders_expand_to_their_csv_files_and_the_first_bad_file_stops_everything() {
     std::fs::write(d.join("b.csv"), GOOD.replace("0.0005", "x")).unwrap();
     let e = read_inputs(std::slice::from_ref(&d)).unwrap_err().to_string();
     assert!(e.contains("b.csv:6:3"), "{e}");
+    // read on several threads, the error is still the first bad file's in the files' order
+    std::fs::write(d.join("c.csv"), GOOD.replace("0.0005", "y")).unwrap();
+    std::fs::write(d.join("d.csv"), GOOD).unwrap();
+    for threads in [1, 2, 4] {
+        let options = ReadOptions { repair_samples: false, threads };
+        let e = read_inputs_with(std::slice::from_ref(&d), options).unwrap_err().to_string();
+        assert!(e.contains("b.csv:6:3"), "{threads} threads: {e}");
+    }
+    std::fs::remove_file(d.join("b.csv")).unwrap();
+    std::fs::remove_file(d.join("c.csv")).unwrap();
+    let runs = read_inputs_with(std::slice::from_ref(&d), ReadOptions { repair_samples: false, threads: 2 }).unwrap();
+    assert_eq!(runs.iter().map(|r| r.name()).collect::<Vec<_>>(), ["a.csv", "d.csv"], "in the files' order");
 }
 
 #[test]
@@ -290,7 +302,7 @@ fn with_link(text: &str, k: usize, value: &str) -> String {
 /// with the option and listed.
 #[test]
 fn corrupt_samples_are_refused_by_line_and_column_or_repaired_on_request() {
-    use thermovia_tools::calibrate::data::{parse_run_with, ReadOptions};
+    use thermovia_tools::calibrate::data::parse_run_with;
     let good = sine_run(2000, 1000.0, even(1000.0));
     parse_run(Path::new("good.csv"), &good).expect("a clean run has no findings");
     let e = err(&with_link(&good, 700, "1e300"));

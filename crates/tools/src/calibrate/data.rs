@@ -737,12 +737,25 @@ pub fn read_inputs(inputs: &[PathBuf]) -> Result<Vec<Run>, DataError> {
     read_inputs_with(inputs, ReadOptions::default())
 }
 
-/// Reads every input; the first error stops everything. A file with gaps in its time base becomes
-/// one run per segment between them (docs/interfaces.md, "Data quality").
+/// Reads every input, `options.threads` files at once; the first error in the files' order is the
+/// answer (the one a reading in turn meets), and no file after a failed one is read. A file with
+/// gaps in its time base becomes one run per segment between them (docs/interfaces.md, "Data
+/// quality").
 pub fn read_inputs_with(inputs: &[PathBuf], options: ReadOptions) -> Result<Vec<Run>, DataError> {
-    let files = expand_inputs(inputs)?;
-    // every file read, then the first error in the files' order: the one a reading in turn meets
-    let read = super::parallel::map(options.threads, &files, |f| read_segments(f, options));
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    let files: Vec<(usize, PathBuf)> = expand_inputs(inputs)?.into_iter().enumerate().collect();
+    let first_failed = AtomicUsize::new(usize::MAX);
+    let read = super::parallel::map(options.threads, &files, |(i, f)| {
+        // (a file after one that failed is never needed: the loop below returns before it)
+        if *i > first_failed.load(Ordering::Relaxed) {
+            return Ok(Vec::new());
+        }
+        let segments = read_segments(f, options);
+        if segments.is_err() {
+            first_failed.fetch_min(*i, Ordering::Relaxed);
+        }
+        segments
+    });
     let mut runs = Vec::new();
     for segments in read {
         runs.extend(segments?);
