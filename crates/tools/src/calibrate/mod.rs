@@ -68,8 +68,8 @@ pub struct CalibrateArgs {
     /// Packaged FMU to use (default target/fmu/ThermoVIA.fmu).
     #[cfg_attr(feature = "cli", arg(long))]
     pub fmu: Option<std::path::PathBuf>,
-    /// Threads: FMU instances simulating in parallel, and runs read and conditioned at once (the
-    /// default is this machine's core count).
+    /// Threads: FMU instances simulating in parallel, and run files read at once (the default is
+    /// this machine's core count).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = std::thread::available_parallelism().map_or(2, |n| n.get())))]
     pub threads: usize,
     /// Smooth the measured motor angle instead of band-limiting it: the half-width in seconds of a
@@ -286,15 +286,14 @@ fn calibrate_device(
     t0: std::time::Instant,
 ) -> Result<Calibration, Box<dyn std::error::Error>> {
     let (group, temperatures) = group_runs(&runs);
-    // each run conditioned on its own, the runs over the threads; timed before the count's edge,
-    // and as if in turn: the report's reserve is in units of one conditioning on one thread
-    let conditioned = parallel::map(args.threads, &runs, |r| {
-        let started = std::time::Instant::now();
-        let out = sim_input_and_reading(r, args.input_smoothing);
-        (out, started.elapsed().as_secs_f64())
-    });
-    let conditioning_seconds: f64 = conditioned.iter().map(|(_, seconds)| seconds).sum();
-    let (by_noise, readings): (Vec<_>, Vec<_>) = conditioned.into_iter().map(|(out, _)| out).unzip();
+    // on this thread, timed before the count's edge: the report's reserve is in units of one
+    // conditioning, and the report's work after the last fit is this thread's alone (conditioned
+    // over the threads, each run's time summed, the unit doubled where another calibration shared
+    // the machine: CI device rig 22, two at a time, lost the end of its search to the reserve)
+    let conditioning_started = std::time::Instant::now();
+    let (by_noise, readings): (Vec<_>, Vec<_>) =
+        runs.iter().map(|r| sim_input_and_reading(r, args.input_smoothing)).unzip();
+    let conditioning_seconds = conditioning_started.elapsed().as_secs_f64();
     let pairs: Vec<(&MotorReading, &data::Run)> = readings.iter().zip(&runs).collect();
     let by_count: Vec<_> = parallel::map(args.threads, &pairs, |(reading, r)| reading.by_count(r));
     drop(readings);
