@@ -724,24 +724,14 @@ impl<'a> Problem<'a> {
         // with a friction among the effects no row at rest holds (`for_each_sample`); without one
         // they do, and a link hanging at rest is where gravity and a play read best
         let moving_only = effects.iter().any(|e| matches!(e, Effect::CoulombFriction | Effect::AsymmetricFriction));
-        let solve = |width: f64| {
-            let normal = self.normal_equations(law, effects, width, moving_only)?;
-            normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>())
+        let solve = |normal: &NormalEquations| normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>());
+        // the sums of squares at several widths from one pass (`normal_equations_at`)
+        let sse_at = |widths: &[f64]| match self.normal_equations_at(law, effects, widths, moving_only) {
+            Some(normals) => normals.iter().map(|n| solve(n).map_or(f64::INFINITY, |(_, sse)| sse)).collect(),
+            None => vec![f64::INFINITY; widths.len()],
         };
-        let width = if effects.contains(&Effect::Backlash) {
-            // the grid's widths from one pass (`normal_equations_at`), the refinement's one by one
-            let sse_of = |normal: &NormalEquations| {
-                normal.solve(&(0..normal.atb.len()).collect::<Vec<_>>()).map_or(f64::INFINITY, |(_, sse)| sse)
-            };
-            let on_grid = |widths: &[f64]| match self.normal_equations_at(law, effects, widths, moving_only) {
-                Some(normals) => normals.iter().map(sse_of).collect(),
-                None => vec![f64::INFINITY; widths.len()],
-            };
-            self.profile_backlash_width(on_grid, |w| solve(w).map_or(f64::INFINITY, |(_, sse)| sse))?
-        } else {
-            0.0
-        };
-        let (beta, _) = solve(width)?;
+        let width = if effects.contains(&Effect::Backlash) { self.profile_backlash_width(sse_at)? } else { 0.0 };
+        let (beta, _) = solve(&self.normal_equations(law, effects, width, moving_only)?)?;
         let table = self.table_start();
         let mut p = Vec::with_capacity(beta.len());
         let mut repaired = Vec::new();
@@ -779,19 +769,16 @@ impl<'a> Problem<'a> {
         (0..n).map(|i| lo * (hi / lo).powf(i as f64 / (n - 1) as f64)).collect()
     }
 
-    /// The width of least `sse` over the grid (`on_grid`: the sums of squares at every width of
-    /// it at once), refined by golden section between its neighbours; None when the runs show no
-    /// relative motion.
-    pub fn profile_backlash_width(
-        &self,
-        on_grid: impl Fn(&[f64]) -> Vec<f64>,
-        sse: impl Fn(f64) -> f64,
-    ) -> Option<f64> {
+    /// The width of least sum of squares over the grid (`sse_at`: the sums at several widths,
+    /// the grid's at once), refined by golden section between its neighbours; None when the runs
+    /// show no relative motion.
+    pub fn profile_backlash_width(&self, sse_at: impl Fn(&[f64]) -> Vec<f64>) -> Option<f64> {
         let grid = self.backlash_width_grid();
         if !(grid[0] > 0.0) {
             return None;
         }
-        let values: Vec<f64> = on_grid(&grid);
+        let sse = |w: f64| sse_at(&[w])[0];
+        let values: Vec<f64> = sse_at(&grid);
         let best = (0..grid.len()).min_by(|&a, &b| values[a].total_cmp(&values[b]))?;
         if !values[best].is_finite() {
             return None;
