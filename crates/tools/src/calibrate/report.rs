@@ -365,7 +365,7 @@ pub fn device_warnings(runs: &[Run], report: &serde_json::Value) -> Vec<String> 
             warnings.push(format!(
                 "at {} °C the transmission's deflection under the link's inertial torque, J·â/K, is {deflection:.2e} \
                  rad, under one count ({count:.2e} rad) of a link encoder its noise does not dither: where the counts \
-                 fall at the motion's turns (the motor's, which drives the model, most) then moves K by more than its \
+                 fall at the motion's turns (the motor's, which drives the model, most) can move K by more than its \
                  standard error holds (over the \
                  campaign's sine rigs, 19 of 36 temperatures under one count read K more than 10 % off, 3 of 277 \
                  above it; docs/calibration.md). A finer encoder, or a motion that loads the link more (faster, or \
