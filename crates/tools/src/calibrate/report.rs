@@ -161,9 +161,7 @@ fn deflection_and_count(prob: &Problem, fit: &Fit, runs: &[usize], stiffness: f6
         let (Some(y), t) = (fit.outputs.get(r), &prob.inputs[r].time) else { continue };
         inertia = inertia.max(prob.inertia(r));
         for k in 1..y.len().min(t.len()).saturating_sub(1) {
-            let (h0, h1) = (t[k] - t[k - 1], t[k + 1] - t[k]);
-            let a = 2.0 * ((y[k + 1] - y[k]) / h1 - (y[k] - y[k - 1]) / h0) / (h0 + h1);
-            if a.is_finite() {
+            if let Some(a) = super::signal::second_divided_difference(t, y, k).filter(|a| a.is_finite()) {
                 sum += a * a;
                 n += 1;
             }
@@ -366,9 +364,8 @@ pub fn device_warnings(runs: &[Run], report: &serde_json::Value) -> Vec<String> 
                 "at {} °C the transmission's deflection under the link's inertial torque, J·â/K, is {deflection:.2e} \
                  rad, under one count ({count:.2e} rad) of a link encoder its noise does not dither: where the counts \
                  fall at the motion's turns (the motor's, which drives the model, most) can move K by more than its \
-                 standard error holds (over the \
-                 campaign's sine rigs, 19 of 36 temperatures under one count read K more than 10 % off, 3 of 277 \
-                 above it; docs/calibration.md). A finer encoder, or a motion that loads the link more (faster, or \
+                 standard error holds (over the campaign's sine rigs, 19 of 36 temperatures under one count read K \
+                 more than 10 % off, 3 of 277 above it; docs/calibration.md). A finer encoder, or a motion that loads the link more (faster, or \
                  nearer its natural frequency), shows more",
                 g["temperature_c"].as_f64().unwrap_or(f64::NAN),
             ));

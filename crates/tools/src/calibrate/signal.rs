@@ -524,6 +524,14 @@ pub fn smooth_to_noise(t: &[f64], x: &[f64], cap: usize) -> (usize, Vec<f64>, f6
     (half, best, noise)
 }
 
+/// The second divided difference of `x` sampled at `t` at sample k (0 < k < len − 1): x'' on an
+/// uneven grid, from the slopes either side over the mean of their intervals. None where an
+/// interval either side is not positive.
+pub fn second_divided_difference(t: &[f64], x: &[f64], k: usize) -> Option<f64> {
+    let (h0, h1) = (t[k] - t[k - 1], t[k + 1] - t[k]);
+    (h0 > 0.0 && h1 > 0.0).then(|| ((x[k + 1] - x[k]) / h1 - (x[k] - x[k - 1]) / h0) / (0.5 * (h0 + h1)))
+}
+
 /// Noise of a sampled signal from its second differences: √(var(Δ²x)/6) (white noise of σ gives
 /// var(Δ²x) = 6σ²; a smooth signal sampled fast contributes almost nothing).
 pub fn second_difference_noise(x: &[f64]) -> f64 {

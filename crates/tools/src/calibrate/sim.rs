@@ -56,11 +56,8 @@ pub fn motor_substeps(time: &[f64], motor: &[f64], noise: f64) -> usize {
     }
     let (mut sum, mut count) = (0.0, 0usize);
     for k in 1..n - 1 {
-        let (h0, h1) = (time[k] - time[k - 1], time[k + 1] - time[k]);
-        if !(h0 > 0.0 && h1 > 0.0) {
-            continue;
-        }
-        let curvature = ((motor[k + 1] - motor[k]) / h1 - (motor[k] - motor[k - 1]) / h0) / (0.5 * (h0 + h1));
+        let Some(curvature) = super::signal::second_divided_difference(time, motor, k) else { continue };
+        let h1 = time[k + 1] - time[k];
         let chord = curvature * h1 * h1 / 8.0;
         if chord.is_finite() {
             sum += chord * chord;
