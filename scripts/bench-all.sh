@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Every benchmark in one session, so the figures in docs/performance.md are measured together: fmi2DoStep in
-# every regime (and the work budget's worst cases), the sweep, the arm co-simulation, the calibration, and the
-# MuJoCo plugin against the FMU co-simulation. Writes out/bench/<name>.txt, each headed by the date and commit.
+# every regime (and the work budget's worst cases), the sweep, the arm co-simulation, the calibration, the
+# exponential step's coefficients, the smoothing, and the MuJoCo plugin against the FMU co-simulation. Writes
+# out/bench/<name>.txt, each headed by the date and commit.
 # Run it on an idle machine: the figures are wall-clock medians.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -21,5 +22,7 @@ run dostep-budget env DOSTEP_REGIME=budget cargo bench --bench dostep
 run sweep cargo bench --bench sweep
 run arm cargo bench --bench arm
 run calibrate cargo bench --bench calibrate
+run exponential cargo bench --bench exponential
+run smoothing cargo bench --bench smoothing
 run mujoco .venv/bin/python examples/mujoco/bench_plugin.py --out "$out/mujoco"
 echo "bench-all: wrote $out/"
