@@ -363,9 +363,10 @@ pub fn device_warnings(runs: &[Run], report: &serde_json::Value) -> Vec<String> 
             warnings.push(format!(
                 "at {} °C the transmission's deflection under the link's inertial torque, J·â/K, is {deflection:.2e} \
                  rad, under one count ({count:.2e} rad) of a link encoder its noise does not dither: where the counts \
-                 fall at the motion's turns (the motor's, which drives the model, most) can move K by more than its \
-                 standard error holds (over the campaign's sine rigs, 19 of 36 temperatures under one count read K \
-                 more than 10 % off, 3 of 277 above it; docs/calibration.md). A finer encoder, or a motion that loads the link more (faster, or \
+                 fall at the motion's turns (the motor's, which drives the model, most) can move K and C by more than \
+                 their standard errors hold (over the campaign's sine rigs, 19 of 36 temperatures under one count read \
+                 K more than 10 % off, 3 of 277 above it; on fresh rigs, 7 of 18 read C more than 10 % off, 5 of 78 \
+                 above it; docs/calibration.md). A finer encoder, or a motion that loads the link more (faster, or \
                  nearer its natural frequency), shows more",
                 g["temperature_c"].as_f64().unwrap_or(f64::NAN),
             ));
