@@ -4,14 +4,16 @@
 //! routine the blocks were taken with before 2026-12-07 (nalgebra's Padé 13 on the whole 10×10
 //! augmented matrix at h/2, that alone: the former path also squared and filled the same table).
 //! In the regimes a calibration meets: the paper's bench at 1 ms without friction's slope, a
-//! sticking link's slope, a 5 kHz logger's step, a stiff light link, a drifting PCL at 60 °C.
+//! sticking link's slope, a 5 kHz logger's step, a stiff light link, a soft PCL at 60 °C.
 //! Median ns per build over EXP_BENCH_REPS repetitions (default 7) of 20 000 builds, the two
 //! alternating within each repetition.
 
 use std::hint::black_box;
 use std::time::Instant;
 
-use thermovia_model::mechanics::{linear_system_with, phi_augmented, Coefficients, Coupling, EtdStep, LINK_SPEED};
+use thermovia_model::mechanics::{
+    linear_system_with, phi_augmented, Coefficients, Coupling, EtdStep, LINEARISED_DAMPING_GRID, LINK_SPEED,
+};
 use thermovia_model::params::ZERO_CELSIUS;
 use thermovia_model::Params;
 
@@ -20,7 +22,7 @@ struct Case {
     params: Params,
     celsius: f64,
     h: f64,
-    /// The linearised friction's damping in units of the grid's J_l/(128 h).
+    /// The linearised friction's damping in units of the grid's spacing, LINEARISED_DAMPING_GRID·J_l/h.
     slope_multiple: f64,
 }
 
@@ -68,10 +70,10 @@ fn main() {
     for case in &cases {
         let p = &case.params;
         let c = Coefficients::at(p, ZERO_CELSIUS + case.celsius);
-        let damping = case.slope_multiple * p.link_inertia / (128.0 * case.h);
+        let damping = case.slope_multiple * LINEARISED_DAMPING_GRID * p.link_inertia / case.h;
         let (mut a, b) = linear_system_with(p, &c, Coupling::Engaged);
-        a[(LINK_SPEED, LINK_SPEED)] -= damping / p.link_inertia;
-        let augmented = phi_augmented(&a, &b, 1.0 / p.link_inertia, 0.5 * case.h);
+        a[(LINK_SPEED, LINK_SPEED)] -= p.per_link_inertia(damping);
+        let augmented = phi_augmented(&a, &b, p.per_link_inertia(1.0), 0.5 * case.h);
         let (mut structured, mut general) = (Vec::new(), Vec::new());
         for _ in 0..reps {
             let start = Instant::now();

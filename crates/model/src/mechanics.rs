@@ -438,11 +438,7 @@ fn phi_blocks(a: &SMatrix<f64, N_STATE, N_STATE>, b: &SMatrix<f64, N_STATE, 2>, 
     // non-finite entries to the caller's checks, as the general routine's did.
     let doublings =
         if eta.is_finite() && eta > TAYLOR_SCALED_NORM { (eta / TAYLOR_SCALED_NORM).log2().ceil() as i32 } else { 0 };
-    let hs = h * 0.5f64.powi(doublings);
-    let mut top = PhiRows::zeros();
-    top.fixed_view_mut::<N_STATE, N_STATE>(0, 0).copy_from(&(a * hs));
-    top.fixed_view_mut::<N_STATE, 2>(0, N_STATE).copy_from(&(b * hs));
-    top[(LINK_SPEED, 7)] = link * hs;
+    let top: PhiRows = phi_augmented(a, b, link, h * 0.5f64.powi(doublings)).fixed_rows::<N_STATE>(0).into_owned();
     let mut sum = PhiRows::zeros();
     let mut term = PhiRows::zeros();
     for i in 0..N_STATE {
