@@ -1357,8 +1357,7 @@ pub struct Judged {
 /// cycles (the winner is judged on every sample); an effect earns its place by BIC and by the
 /// structure it removes from the residual.
 pub struct DeviceRig<'p, 'a> {
-    /// Mutable only for [`Rig::settle`], which refits the starts of the segments after gaps.
-    prob: std::cell::RefCell<&'p mut Problem<'a>>,
+    prob: &'p Problem<'a>,
     laws: &'p LawChoice,
     screen: std::cell::RefCell<Option<(Problem<'a>, Fit, Signatures)>>,
     rows: std::cell::RefCell<Vec<LawRow>>,
@@ -1371,15 +1370,9 @@ pub struct DeviceRig<'p, 'a> {
     /// left with structure. In every search it cost 30 % more wall time on fresh seeds 651–690 (sum
     /// 794 → 1 033 s, one budget-bound rig worse) for one rig gained, 655, which needs both.
     velocity_grid: bool,
-    /// The effects the segments' starts were last fitted with ([`Rig::settle`]).
-    starts_fitted_for: std::cell::RefCell<Vec<Effect>>,
 }
 
-impl<'a> DeviceRig<'_, 'a> {
-    fn prob(&self) -> std::cell::Ref<'_, Problem<'a>> {
-        std::cell::Ref::map(self.prob.borrow(), |p| &**p)
-    }
-
+impl DeviceRig<'_, '_> {
     /// An effect `prob`'s runs cannot show, which the ranking lists unprobed and no refit brings in:
     /// a Maxwell branch on sinusoids at one frequency per temperature (`diagnose::MAXWELL_UNSEEN`), a
     /// thermal lag behind a thermocouple that holds still (the lag's refit only adds its parameter:
@@ -1395,8 +1388,7 @@ impl<'a> DeviceRig<'_, 'a> {
     /// The problem, fit and signatures to screen `m` on.
     fn with_screen<T>(&self, m: &Judged, f: impl FnOnce(&Problem, &Fit, &Signatures) -> T) -> T {
         let screen = self.screen.borrow();
-        let prob = self.prob();
-        let (p, c, s) = screened(&screen, &prob, &m.fit, &m.sig);
+        let (p, c, s) = screened(&screen, self.prob, &m.fit, &m.sig);
         f(p, c, s)
     }
 
@@ -1415,7 +1407,7 @@ impl<'a> DeviceRig<'_, 'a> {
     ) -> Option<Judged> {
         let drop: Vec<Effect> =
             drop.iter().copied().chain(added.iter().filter_map(|c| c.effect.takes_place_of())).collect();
-        let (mut spec, p) = spec_without(&m.fit, self.prob().n_groups, &drop);
+        let (mut spec, p) = spec_without(&m.fit, self.prob.n_groups, &drop);
         // the levels a candidate splits per direction come in with it where the model lacks them
         // (fresh rigs 1195, 1199 and 1201: asymmetric friction over Coulomb friction alone, its
         // viscous levels at 0 and the link's drag taken by C, +14 to +117 %)
@@ -1426,7 +1418,7 @@ impl<'a> DeviceRig<'_, 'a> {
         spec.effects.extend(added.iter().map(|c| c.effect));
         // What the runs cannot show is never refitted, alone, in a pair or in a swap (the ranking
         // lists it unprobed): its refit could only stand in for something else, or cost time for nothing.
-        if added.iter().any(|c| self.unseen(&self.prob(), c.effect)) {
+        if added.iter().any(|c| self.unseen(self.prob, c.effect)) {
             return None;
         }
         // A law chosen without the effect may be standing in for it (Coulomb friction's dissipation
@@ -1434,7 +1426,7 @@ impl<'a> DeviceRig<'_, 'a> {
         // candidate is refitted under every structure the data allow, and the lowest BIC is its refit.
         // Under every one, not only where it fails to earn its place under the current one: on rig 38
         // a Stribeck excess earned its place under the stand-in law and kept a link damping beside it.
-        let any_no_start = (0..self.prob().n_groups).any(|g| no_start(&self.prob(), g, &p));
+        let any_no_start = (0..self.prob.n_groups).any(|g| no_start(self.prob, g, &p));
         let takes_nothing_out = !drop.iter().any(|e| m.fit.spec.effects.contains(e));
         let structures: Vec<Structure> =
             if single { self.laws.on_bank((spec.law, spec.springs)) } else { vec![(spec.law, spec.springs)] };
@@ -1447,10 +1439,10 @@ impl<'a> DeviceRig<'_, 'a> {
                     // the starts Levenberg–Marquardt runs from: the best by cost, or it at each
                     // Stribeck velocity
                     let chosen = |replace| {
-                        let starts = candidate_starts(&self.prob(), &p, added, law, replace);
+                        let starts = candidate_starts(self.prob, &p, added, law, replace);
                         let with_excess = spec.effects.contains(&Effect::StribeckFriction);
                         if self.velocity_grid && with_excess && far_above_floor(current_sig) {
-                            stribeck_velocity_starts(&self.prob(), sprob, &spec, starts)
+                            stribeck_velocity_starts(self.prob, sprob, &spec, starts)
                         } else {
                             best_start(sprob, &spec, starts).map(|p0| vec![p0])
                         }
@@ -1533,7 +1525,7 @@ impl Rig for DeviceRig<'_, '_> {
     }
     fn rankable(&self, m: &Judged) -> bool {
         // a transmission dragging the link through its damper is no start either (`no_start`)
-        !(0..self.prob().n_groups).any(|g| no_start(&self.prob(), g, &m.fit.p))
+        !(0..self.prob.n_groups).any(|g| no_start(self.prob, g, &m.fit.p))
     }
     fn state(&self, m: &Judged) -> Signatures {
         self.with_screen(m, |_, _, s| s.clone())
@@ -1593,14 +1585,14 @@ impl Rig for DeviceRig<'_, '_> {
         // (fresh rig 802, unscreened: a Coulomb refit 134 000 below the baseline in BIC was lost
         // when the budget ended before its run-on's first step, and the report had no effect)
         let (spec, p, screened_sse) = (f.spec.clone(), f.p.clone(), f.sse);
-        let done = refit_or_stand(&self.prob(), spec, p, screen.is_none().then_some(f))?;
+        let done = refit_or_stand(self.prob, spec, p, screen.is_none().then_some(f))?;
         // the winner's SSE is over the screening share when there is one; done's over every sample
         let share = if screen.is_some() { " (screening share)" } else { "" };
         debug(format_args!(
             "winner {} iterations on every sample: SSE {screened_sse:.6e}{share}, then {:.6e} (every sample)",
             done.iterations, done.sse
         ));
-        let s = signatures(&self.prob(), &done);
+        let s = signatures(self.prob, &done);
         earns_its_place(&m.fit, &m.sig, &done, &s).then_some(Judged { fit: done, sig: s })
     }
     fn partly_earned(&self, m: &Judged, v: &Verdict<Evidence>) -> bool {
@@ -1617,7 +1609,7 @@ impl Rig for DeviceRig<'_, '_> {
         }
         let before = (m.fit.spec.law, m.fit.spec.springs);
         let fit = best_law(
-            &self.prob(),
+            self.prob,
             None,
             m.fit,
             &self.laws.allowed,
@@ -1627,34 +1619,8 @@ impl Rig for DeviceRig<'_, '_> {
         if (fit.spec.law, fit.spec.springs) == before {
             Judged { fit, sig: m.sig }
         } else {
-            self.judged(&self.prob(), fit)
+            self.judged(self.prob, fit)
         }
-    }
-    fn settle(&self, m: &Judged, budget: &Budget) -> Option<Judged> {
-        if *self.starts_fitted_for.borrow() == m.fit.spec.effects
-            || !self.prob().inputs.iter().any(|i| i.after_gap)
-            || !budget.allows("the starts of the segments after gaps")
-        {
-            return None;
-        }
-        *self.starts_fitted_for.borrow_mut() = m.fit.spec.effects.clone();
-        let mut prob = self.prob.borrow_mut();
-        let before = prob.initial_speeds();
-        let fit = budget.timed(|| fit_initial_speeds(&mut prob, m.fit.clone()));
-        debug(format_args!(
-            "segments' starts with {:?}: BIC {:.1} → {:.1}",
-            m.fit.spec.effects,
-            m.fit.bic(),
-            fit.bic()
-        ));
-        if fit.bic() >= m.fit.bic() - BIC_MARGIN {
-            prob.set_initial_speeds(&before);
-            return None;
-        }
-        let sig = signatures(&prob, &fit);
-        // the screening share is cut from the runs as they now start
-        *self.screen.borrow_mut() = screening_problem(&prob, &fit);
-        Some(Judged { fit, sig })
     }
     fn moved_to(&self, m: &Judged) {
         refresh_screen(&mut self.screen.borrow_mut(), &m.fit);
@@ -1662,13 +1628,13 @@ impl Rig for DeviceRig<'_, '_> {
     fn combination(&self, m: &Judged, stage: &'static str) -> Option<(CombinationAttempt, Option<Judged>)> {
         let screen = self.screen.borrow();
         // the combination's fits stop at their share of the time left, and the search goes on
-        let share = self.prob().sim.deadline().map(|end| {
+        let share = self.prob.sim.deadline().map(|end| {
             let now = std::time::Instant::now();
             now + end.saturating_duration_since(now).mul_f64(COMBINATION_SHARE)
         });
-        let (attempt, accepted) = self.prob().sim.within(share, || {
+        let (attempt, accepted) = self.prob.sim.within(share, || {
             try_combination(
-                &self.prob(),
+                self.prob,
                 &screen,
                 &m.fit,
                 &m.sig,
@@ -1680,19 +1646,19 @@ impl Rig for DeviceRig<'_, '_> {
         Some((attempt, accepted.map(|(fit, sig)| Judged { fit, sig })))
     }
     fn removal_delta_bic(&self, m: &Judged, e: Effect) -> f64 {
-        removal_cost(&m.fit, self.prob().n_groups, e)
+        removal_cost(&m.fit, self.prob.n_groups, e)
     }
     fn without(&self, m: &Judged, e: Effect) -> Option<Judged> {
-        let (spec, p) = spec_without(&m.fit, self.prob().n_groups, &[e]);
-        let fit = levenberg_marquardt(&self.prob(), spec, p, SCREEN_ITERATIONS).ok()?;
-        Some(self.judged(&self.prob(), fit))
+        let (spec, p) = spec_without(&m.fit, self.prob.n_groups, &[e]);
+        let fit = levenberg_marquardt(self.prob, spec, p, SCREEN_ITERATIONS).ok()?;
+        Some(self.judged(self.prob, fit))
     }
     fn polish(&self, m: Judged) -> Option<Judged> {
-        let fit = levenberg_marquardt(&self.prob(), m.fit.spec, m.fit.p, MAX_ITERATIONS).ok()?;
-        Some(self.judged(&self.prob(), fit))
+        let fit = levenberg_marquardt(self.prob, m.fit.spec, m.fit.p, MAX_ITERATIONS).ok()?;
+        Some(self.judged(self.prob, fit))
     }
     fn visible(&self, m: &Judged, e: Effect) -> bool {
-        visibility(&self.prob(), &m.fit, m.sig.noise_floor, e).is_none_or(|v| v > 1.0)
+        visibility(self.prob, &m.fit, m.sig.noise_floor, e).is_none_or(|v| v > 1.0)
     }
     fn absence_shows(&self, with: &Judged, without: &Judged) -> bool {
         absence_shows(with.sig.rmse, without.sig.rmse, with.sig.noise_floor)
@@ -1705,8 +1671,7 @@ impl Rig for DeviceRig<'_, '_> {
         self.absence_shown.borrow().iter().any(|(effects, b, x)| *x == e && *b == bic && *effects == m.fit.spec.effects)
     }
     fn lighter_hidden(&self, m: &Judged, e: Effect) -> bool {
-        e == Effect::Gravity
-            && gravity_beyond_a_load(&self.prob(), &m.fit).is_some_and(|moved| moved < m.sig.noise_floor)
+        e == Effect::Gravity && gravity_beyond_a_load(self.prob, &m.fit).is_some_and(|moved| moved < m.sig.noise_floor)
     }
     fn defined_over(&self, e: Effect) -> Option<Effect> {
         e.defined_over()
@@ -1714,8 +1679,8 @@ impl Rig for DeviceRig<'_, '_> {
     fn swap(&self, m: &Judged, out: Effect, c: &Ranked<Effect>) -> Option<(Judged, Verdict<Evidence>)> {
         let refit = self.screened_refit(m, &[out], &[c], true)?;
         // a swap changes the model as a combination does: the bound rule applies
-        let v = self
-            .with_screen(m, |_, current, sig| combination_verdict(&self.prob(), current, sig, &refit.fit, &refit.sig));
+        let v =
+            self.with_screen(m, |_, current, sig| combination_verdict(self.prob, current, sig, &refit.fit, &refit.sig));
         Some((refit, v))
     }
     fn lighter(&self, m: &Judged, e: Effect) -> Option<(Effect, Judged)> {
@@ -1724,22 +1689,22 @@ impl Rig for DeviceRig<'_, '_> {
         if current.spec.effects.contains(&lighter) {
             return None;
         }
-        let (mut spec, p) = spec_without(current, self.prob().n_groups, &[e]);
+        let (mut spec, p) = spec_without(current, self.prob.n_groups, &[e]);
         spec.effects.push(lighter);
         // the constant part of what the heavier effect did: gravity's torque at angle 0 is ∓ m g d sin φ,
         // asymmetric friction's Coulomb asymmetry a is a load of ∓ a; both signs are tried, and none
-        let offset = current.spec.offset_of(e, self.prob().n_groups)?;
+        let offset = current.spec.offset_of(e, self.prob.n_groups)?;
         let guess = if e == Effect::Gravity { current.p[offset + 1] } else { current.p[offset] };
         let starts = [guess, -guess, 0.0].map(|g| p.iter().copied().chain([g]).collect()).to_vec();
-        let fit = fit_from_best(&self.prob(), spec, starts, SCREEN_ITERATIONS).ok()?;
-        Some((lighter, self.judged(&self.prob(), fit)))
+        let fit = fit_from_best(self.prob, spec, starts, SCREEN_ITERATIONS).ok()?;
+        Some((lighter, self.judged(self.prob, fit)))
     }
 }
 
 /// `model` without the effects no sample shows (`stepwise::drop_below_noise`), each removal on the
 /// path and in the record; the model as it is past the budget or without effects.
 fn drop_unseen(
-    prob: &mut Problem,
+    prob: &Problem,
     laws: &LawChoice,
     model: Judged,
     budget: &Budget,
@@ -1750,14 +1715,13 @@ fn drop_unseen(
         return (model.fit, model.sig);
     }
     let rig = DeviceRig {
-        prob: std::cell::RefCell::new(prob),
+        prob,
         laws,
         screen: std::cell::RefCell::new(None),
         rows: std::cell::RefCell::new(Vec::new()),
         refitted: std::cell::RefCell::new(Vec::new()),
         absence_shown: std::cell::RefCell::new(Vec::new()),
         velocity_grid: false,
-        starts_fitted_for: std::cell::RefCell::new(model.fit.spec.effects.clone()),
     };
     let (model, pruned) = super::stepwise::drop_below_noise(&rig, model, budget);
     if !pruned.is_empty() {
@@ -1794,14 +1758,11 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget, first: O
     let baseline = fit_initial_speeds(prob, resolved);
     debug(format_args!("initial speeds: {:?}, {} simulations", t.elapsed(), sims(prob)));
     let baseline_signatures = signatures(prob, &baseline);
-    let screen = std::cell::RefCell::new(screening_problem(prob, &baseline));
     let rig = DeviceRig {
-        // the segments' starts were fitted with the baseline's effects just above
-        starts_fitted_for: std::cell::RefCell::new(baseline.spec.effects.clone()),
-        prob: std::cell::RefCell::new(prob),
+        prob,
         laws,
         // candidates are screened on the start of every run (cheaper), the winner is judged on all
-        screen,
+        screen: std::cell::RefCell::new(screening_problem(prob, &baseline)),
         rows: std::cell::RefCell::new(rows),
         refitted: std::cell::RefCell::new(Vec::new()),
         absence_shown: std::cell::RefCell::new(Vec::new()),
@@ -1846,12 +1807,10 @@ pub fn calibrate(prob: &mut Problem, laws: &LawChoice, budget: &Budget, first: O
     // truth's own parameters fit at 81x the floor, and the Stribeck excess beside the Coulomb
     // friction was never found; from the final model's starts its refit finds it).
     if current.bic() < before_restarts - BIC_MARGIN && !sig.white() && !budget.spent() {
-        let screen = std::cell::RefCell::new(screening_problem(prob, &current));
         let rig = DeviceRig {
-            starts_fitted_for: std::cell::RefCell::new(current.spec.effects.clone()),
-            prob: std::cell::RefCell::new(prob),
+            prob,
             laws,
-            screen,
+            screen: std::cell::RefCell::new(screening_problem(prob, &current)),
             rows: std::cell::RefCell::new(std::mem::take(&mut rows)),
             refitted: std::cell::RefCell::new(Vec::new()),
             absence_shown: std::cell::RefCell::new(Vec::new()),

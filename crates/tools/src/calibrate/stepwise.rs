@@ -328,12 +328,6 @@ pub trait Rig {
     }
     /// The model a round accepted, with the rig's structure re-chosen for it where it has a choice.
     fn adopt(&self, m: Self::Model, round: usize) -> Self::Model;
-    /// `m`, a step the search takes, with what the rig fits beside the effects refitted for the
-    /// step's effects where they changed since it last did (the device: the starts of the segments
-    /// after gaps); None where that is not done or does not lower the BIC by the margin.
-    fn settle(&self, _m: &Self::Model, _budget: &Budget) -> Option<Self::Model> {
-        None
-    }
     /// The search moved to `m` (the rig refreshes what it keeps of the current model).
     fn moved_to(&self, _m: &Self::Model) {}
     /// Several effects refitted at once from a model-free proposal (None: nothing new to propose).
@@ -742,7 +736,7 @@ pub fn search<R: Rig>(rig: &R, start: R::Model, budget: &Budget) -> Search<R::Ef
         |current: &mut R::Model, m: R::Model, path: &mut Vec<R::Model>, pruned: &mut Vec<Pruned<R::Effect>>| {
             let mut next = Some(m);
             while let Some(m) = next.take() {
-                *current = rig.settle(&m, budget).unwrap_or(m);
+                *current = m;
                 rig.moved_to(current);
                 path.push(current.clone());
                 if let Some((p, m)) = backward_step(rig, current, budget, true) {
@@ -1331,33 +1325,14 @@ mod tests {
         /// single refits made so far, and how many had been made when a capped one was first run on
         refits: std::cell::Cell<usize>,
         run_on_after: std::cell::Cell<Option<usize>>,
-        /// a column in the data that is no effect, fitted beside the effects in every fit once
-        /// `settle` has brought it in (the device's starts of the segments after gaps)
-        nuisance: Option<Vec<f64>>,
-        nuisance_in: std::cell::Cell<bool>,
-        /// the effects `settle` last ran for, and how many times it ran
-        settled_for: std::cell::RefCell<Vec<usize>>,
-        settles: std::cell::Cell<usize>,
     }
 
     impl Linear {
         fn design(&self, cols: &[usize]) -> DMatrix<f64> {
             DMatrix::from_fn(self.y.len(), cols.len(), |i, j| self.x[cols[j]][i])
         }
-        /// The effects' columns, and the nuisance's last once it is in.
-        fn fitted_design(&self, cols: &[usize]) -> DMatrix<f64> {
-            let d = self.design(cols);
-            match self.nuisance.as_ref().filter(|_| self.nuisance_in.get()) {
-                Some(v) => {
-                    let mut d = d.insert_column(cols.len(), 0.0);
-                    d.set_column(cols.len(), &DVector::from_column_slice(v));
-                    d
-                }
-                None => d,
-            }
-        }
         fn fit(&self, cols: Vec<usize>) -> Model {
-            let a = self.fitted_design(&cols);
+            let a = self.design(&cols);
             let y = DVector::from_column_slice(&self.y);
             let beta = if cols.is_empty() {
                 DVector::zeros(0)
@@ -1402,24 +1377,9 @@ mod tests {
         fn rankable(&self, _m: &Model) -> bool {
             !self.blind
         }
-        fn settle(&self, m: &Model, _budget: &Budget) -> Option<Model> {
-            if *self.settled_for.borrow() == m.cols || self.nuisance.is_none() {
-                return None;
-            }
-            *self.settled_for.borrow_mut() = m.cols.clone();
-            self.settles.set(self.settles.get() + 1);
-            let was_in = self.nuisance_in.replace(true);
-            let settled = self.fit(m.cols.clone());
-            if self.bic(&settled) < self.bic(m) - BIC_MARGIN {
-                Some(settled)
-            } else {
-                self.nuisance_in.set(was_in);
-                None
-            }
-        }
         fn state(&self, _m: &Model) {}
         fn rank(&self, m: &Model) -> Vec<Ranked<usize>> {
-            let design = self.fitted_design(&m.cols);
+            let design = self.design(&m.cols);
             let lin = Linearised::new(&design, &m.residual);
             let now = lin.sse;
             let mut out: Vec<Ranked<usize>> = (0..self.x.len())
@@ -1496,7 +1456,7 @@ mod tests {
                 Some((e, share)) if added.len() == 1 && added[0].effect == e => {
                     let mut p = full.p.clone();
                     *p.last_mut().unwrap() *= share;
-                    let fitted = self.fitted_design(&full.cols) * DVector::from_column_slice(&p);
+                    let fitted = self.design(&full.cols) * DVector::from_column_slice(&p);
                     let residual: Vec<f64> = self.y.iter().zip(fitted.iter()).map(|(y, f)| y - f).collect();
                     let sse = residual.iter().map(|r| r * r).sum();
                     Some(Model { cols: full.cols, residual, sse, p, capped: true })
@@ -1543,7 +1503,7 @@ mod tests {
                 return 1e6;
             }
             let i = m.cols.iter().position(|&c| c == e).unwrap();
-            removal_delta_bic(&self.fitted_design(&m.cols), &m.p, m.sse, &[i], 1)
+            removal_delta_bic(&self.design(&m.cols), &m.p, m.sse, &[i], 1)
         }
         fn without(&self, m: &Model, e: usize) -> Option<Model> {
             Some(self.fit(m.cols.iter().copied().filter(|&c| c != e).collect()))
@@ -1611,10 +1571,6 @@ mod tests {
             capped_at: None,
             refits: std::cell::Cell::new(0),
             run_on_after: std::cell::Cell::new(None),
-            nuisance: None,
-            nuisance_in: std::cell::Cell::new(false),
-            settled_for: std::cell::RefCell::new(Vec::new()),
-            settles: std::cell::Cell::new(0),
         };
         let start = r.fit(vec![]);
         (r, start)
@@ -1623,30 +1579,6 @@ mod tests {
     fn sorted(mut v: Vec<usize>) -> Vec<usize> {
         v.sort();
         v
-    }
-
-    /// What a step leaves to fit beside its effects (the device's starts of the segments after
-    /// gaps) is fitted as the step is taken, and only where the step changed the effects: every
-    /// step after it and the final model carry it, and it is not fitted again for the same effects.
-    #[test]
-    fn each_step_settles_what_it_leaves_beside_its_effects() {
-        let x: Vec<Vec<f64>> = (0..5).map(|k| normals(k + 1, N)).collect();
-        let nuisance = normals(7, N);
-        let y = |i: usize| 2.0 * x[0][i] + 0.3 * x[2][i] + 0.5 * nuisance[i];
-        let (mut r, start) = rig(x.clone(), y);
-        r.nuisance = Some(nuisance.clone());
-        let s = search(&r, start.clone(), &Budget::seconds(60.0));
-        assert_eq!(sorted(s.model.cols.clone()), vec![0, 2]);
-        assert!(r.nuisance_in.get(), "the first step brought the nuisance in");
-        assert_eq!(r.settles.get(), 2, "one settle per step that changed the effects, no more");
-        // the final model fits the data to their noise: the nuisance is in it
-        let mean_square = s.model.sse / N as f64;
-        assert!(mean_square < 1.1 * NOISE * NOISE, "mean square {mean_square:e}");
-        assert!(s.path.iter().skip(1).all(|m| m.p.len() == m.cols.len() + 1), "every step carries it");
-        // without settling, the same search leaves the nuisance in its residual
-        let (plain, start) = rig(x.clone(), y);
-        let s = search(&plain, start, &Budget::seconds(60.0));
-        assert!(s.model.sse / N as f64 > 10.0 * NOISE * NOISE, "{:e}", s.model.sse / N as f64);
     }
 
     #[test]
